@@ -1,0 +1,124 @@
+"""On-disk bake cache: one folder per bake, one sub-folder per stream, one ``.npz`` per frame.
+
+Layout::
+
+    <cache_dir>/
+        meta.json                 inputs hash, frame range, per-stream info (written last)
+        <stream>/frame_000001.npz arrays of one frame (uncompressed: fast to read while scrubbing)
+
+A bake streams frames into a fresh sibling folder and swaps it in only on success
+(:meth:`CacheWriter.commit`); :meth:`CacheWriter.abort` — on error or cancel — deletes the partial
+folder, so the previous bake stays exactly as it was. Memory does not grow with the frame count.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import uuid
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+
+META_NAME = "meta.json"
+FORMAT_VERSION = 1
+
+
+def frame_file(stream_dir: str | os.PathLike, frame: int) -> Path:
+    """Path of one frame's arrays inside a stream folder."""
+    return Path(stream_dir) / f"frame_{int(frame):06d}.npz"
+
+
+def read_frame(stream_dir: str | os.PathLike, frame: int) -> dict[str, np.ndarray] | None:
+    """Arrays of ``frame`` in ``stream_dir``, or None when that frame was not baked."""
+    path = frame_file(stream_dir, frame)
+    if not path.is_file():
+        return None
+    with np.load(path, allow_pickle=False) as data:
+        return {key: data[key] for key in data.files}
+
+
+def read_meta(cache_dir: str | os.PathLike) -> dict | None:
+    """The ``meta.json`` of a finished bake, or None when there is no finished bake there."""
+    path = Path(cache_dir) / META_NAME
+    if not path.is_file():
+        return None
+    with open(path, encoding="utf-8") as handle:
+        return json.load(handle)
+
+
+class CacheWriter:
+    """Writes a bake into a temporary folder and swaps it in atomically on :meth:`commit`.
+
+    Args:
+        cache_dir: final folder of the bake. Its parent is created when missing; it must be
+            writable, otherwise :class:`PermissionError`/:class:`OSError` names the folder.
+    """
+
+    def __init__(self, cache_dir: str | os.PathLike):
+        self.cache_dir = Path(cache_dir)
+        parent = self.cache_dir.parent
+        try:
+            parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise OSError(f'cache folder "{parent}" cannot be created: {exc.strerror}') from exc
+        if not os.access(parent, os.W_OK | os.X_OK):
+            raise PermissionError(f'cache folder "{parent}" is not writable')
+        token = uuid.uuid4().hex[:8]
+        self.partial_dir = parent / f".{self.cache_dir.name}.partial-{token}"
+        try:
+            self.partial_dir.mkdir()
+        except OSError as exc:
+            raise OSError(f'cache folder "{parent}" is not writable: {exc.strerror}') from exc
+        self._streams: set[str] = set()
+        self._closed = False
+
+    def write_frame(self, stream: str, frame: int, arrays: Mapping[str, np.ndarray]) -> Path:
+        """Write one frame of one stream (e.g. one emitter's particles)."""
+        if self._closed:
+            raise RuntimeError("cache writer already committed or aborted")
+        stream_dir = self.partial_dir / stream
+        if stream not in self._streams:
+            stream_dir.mkdir(parents=True, exist_ok=True)
+            self._streams.add(stream)
+        path = frame_file(stream_dir, frame)
+        with open(path, "wb") as handle:
+            np.savez(handle, **{k: np.ascontiguousarray(v) for k, v in arrays.items()})
+        return path
+
+    def stream_path(self, stream: str) -> Path:
+        """Where ``stream`` will live once committed."""
+        return self.cache_dir / stream
+
+    def commit(self, meta: Mapping) -> Path:
+        """Write ``meta.json`` and replace the previous bake (if any) with this one."""
+        if self._closed:
+            raise RuntimeError("cache writer already committed or aborted")
+        meta = dict(meta, format_version=FORMAT_VERSION, streams=sorted(self._streams))
+        with open(self.partial_dir / META_NAME, "w", encoding="utf-8") as handle:
+            json.dump(meta, handle, indent=1, sort_keys=True)
+        old = None
+        if self.cache_dir.exists():
+            old = self.cache_dir.parent / f".{self.cache_dir.name}.old-{uuid.uuid4().hex[:8]}"
+            os.replace(self.cache_dir, old)
+        os.replace(self.partial_dir, self.cache_dir)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+        self._closed = True
+        return self.cache_dir
+
+    def abort(self) -> None:
+        """Delete the partial bake; the previous bake (if any) is untouched."""
+        if not self._closed:
+            shutil.rmtree(self.partial_dir, ignore_errors=True)
+            self._closed = True
+
+
+def remove_cache(cache_dir: str | os.PathLike) -> bool:
+    """Delete a finished bake folder. Returns True when there was one."""
+    path = Path(cache_dir)
+    if (path / META_NAME).is_file():
+        shutil.rmtree(path)
+        return True
+    return False

@@ -1,0 +1,165 @@
+"""Particle Model (frozen, built once) and State (everything that changes during a bake)."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import PhysanimError
+from .settings import EmitterSettings
+from .sources import open_edge_count
+
+
+@dataclass(frozen=True)
+class ParticleModel:
+    """Read-only description of a particle simulation: its emitters and seed."""
+
+    emitters: tuple[EmitterSettings, ...]
+    seed: int = 0
+
+    @property
+    def emitter_count(self) -> int:
+        return len(self.emitters)
+
+    def state(self, t: float = 0.0) -> "ParticleState":
+        """A fresh State at time ``t`` [s]: no particles, one random generator per emitter."""
+        rngs = [np.random.default_rng([int(self.seed) & 0xFFFFFFFF, int(e.seed) & 0xFFFFFFFF, i])
+                for i, e in enumerate(self.emitters)]
+        return ParticleState.empty(t, rngs)
+
+
+class ParticleModelBuilder:
+    """Collects emitters; :meth:`finalize` checks them and freezes the Model.
+
+    Args:
+        seed: the scene seed; each emitter's generator derives from (scene seed, emitter seed,
+            emitter index), so adding an emitter never changes another one's particles.
+    """
+
+    def __init__(self, seed: int = 0):
+        self.seed = int(seed)
+        self._emitters: list[EmitterSettings] = []
+
+    def add_emitter(self, settings: EmitterSettings) -> int:
+        """Add an emitter and return its index."""
+        self._emitters.append(settings)
+        return len(self._emitters) - 1
+
+    def finalize(self, frame: int | None = None) -> ParticleModel:
+        """Validate emitter sources and return the frozen Model.
+
+        Args:
+            frame: scene frame named in error messages (the bake's start frame).
+        """
+        for e in self._emitters:
+            self._check_source(e, frame)
+        return ParticleModel(tuple(self._emitters), self.seed)
+
+    def _check_source(self, e: EmitterSettings, frame: int | None) -> None:
+        def fail(msg: str):
+            raise PhysanimError(msg, obj=e.name, frame=frame, kind="emitter")
+
+        if e.source == "VERTS" and e.vertex_count == 0:
+            fail("source is VERTS but the mesh has no vertices — add geometry or emit from the origin")
+        if e.source in ("FACES", "VOLUME") and len(e.triangles) == 0:
+            fail(f"source is {e.source} but the mesh has no faces "
+                 f"({e.vertex_count} vertices, 0 faces) — use VERTS or ORIGIN, or add faces")
+        if e.source == "VOLUME":
+            open_edges = open_edge_count(e.triangles)
+            if open_edges:
+                fail(f"source is VOLUME but the mesh is not closed ({open_edges} open or "
+                     "non-manifold edges) — close the mesh or emit from FACES")
+        if e.source == "DEATHS":
+            if not 0 <= e.parent < len(self._emitters):
+                fail(f"parent emitter index {e.parent} does not exist")
+            seen, p = {id(e)}, self._emitters[e.parent]
+            while p.source == "DEATHS":
+                if id(p) in seen:
+                    fail("sub-emitters form a cycle (an emitter is its own ancestor)")
+                seen.add(id(p))
+                p = self._emitters[p.parent]
+
+
+@dataclass
+class ParticleState:
+    """All particles alive at time ``t``, structure of arrays, ordered by ascending id.
+
+    Attributes:
+        particle_x: (n, 3) position [m]. particle_v: (n, 3) velocity [m/s].
+        particle_mass: (n,) [kg]. particle_age: (n,) [s]. particle_life: (n,) life span [s].
+        particle_size: (n,) base size [m]. particle_id: (n,) unique ids, never reused.
+        particle_emitter: (n,) index of the emitter that gave birth.
+        link_a, link_b: (k,) ids of particles joined by a spring; link_rest: (k,) [m];
+        link_emitter: (k,) emitter whose spring settings apply.
+        next_id: the id the next birth gets. last_born: per emitter, id of its latest birth.
+        rngs: per emitter random generators (their state is part of the simulation state).
+    """
+
+    t: float
+    particle_x: np.ndarray
+    particle_v: np.ndarray
+    particle_mass: np.ndarray
+    particle_age: np.ndarray
+    particle_life: np.ndarray
+    particle_size: np.ndarray
+    particle_id: np.ndarray
+    particle_emitter: np.ndarray
+    link_a: np.ndarray
+    link_b: np.ndarray
+    link_rest: np.ndarray
+    link_emitter: np.ndarray
+    next_id: int
+    last_born: list[int]
+    rngs: list[np.random.Generator] = field(repr=False)
+
+    @classmethod
+    def empty(cls, t: float, rngs: list[np.random.Generator]) -> "ParticleState":
+        f = np.zeros(0)
+        i = np.zeros(0, np.int64)
+        return cls(t, np.zeros((0, 3)), np.zeros((0, 3)), f, f, f, f, i, np.zeros(0, np.int32),
+                   i, i, f, np.zeros(0, np.int32), 0, [-1] * len(rngs), rngs)
+
+    @property
+    def particle_count(self) -> int:
+        return len(self.particle_id)
+
+    _PER_PARTICLE = ("particle_x", "particle_v", "particle_mass", "particle_age", "particle_life",
+                     "particle_size", "particle_id", "particle_emitter")
+
+    def keep(self, mask: np.ndarray) -> None:
+        """Drop particles where ``mask`` is False, and springs attached to them."""
+        for name in self._PER_PARTICLE:
+            setattr(self, name, getattr(self, name)[mask])
+        if len(self.link_a):
+            alive = np.isin(self.link_a, self.particle_id) & np.isin(self.link_b, self.particle_id)
+            for name in ("link_a", "link_b", "link_rest", "link_emitter"):
+                setattr(self, name, getattr(self, name)[alive])
+
+    def append(self, emitter: int, x, v, mass, age, life, size) -> np.ndarray:
+        """Add particles born by ``emitter``; returns their new ids."""
+        count = len(x)
+        ids = np.arange(self.next_id, self.next_id + count, dtype=np.int64)
+        self.next_id += count
+        self.particle_x = np.concatenate([self.particle_x, x])
+        self.particle_v = np.concatenate([self.particle_v, v])
+        self.particle_mass = np.concatenate([self.particle_mass, mass])
+        self.particle_age = np.concatenate([self.particle_age, age])
+        self.particle_life = np.concatenate([self.particle_life, life])
+        self.particle_size = np.concatenate([self.particle_size, size])
+        self.particle_id = np.concatenate([self.particle_id, ids])
+        self.particle_emitter = np.concatenate(
+            [self.particle_emitter, np.full(count, emitter, np.int32)])
+        if count:
+            self.last_born[emitter] = int(ids[-1])
+        return ids
+
+    def add_links(self, a: np.ndarray, b: np.ndarray, rest: np.ndarray, emitter: int) -> None:
+        self.link_a = np.concatenate([self.link_a, a])
+        self.link_b = np.concatenate([self.link_b, b])
+        self.link_rest = np.concatenate([self.link_rest, rest])
+        self.link_emitter = np.concatenate(
+            [self.link_emitter, np.full(len(a), emitter, np.int32)])
+
+    def index_of(self, ids: np.ndarray) -> np.ndarray:
+        """Array positions of particle ids (ids are sorted ascending, so a binary search)."""
+        return np.searchsorted(self.particle_id, ids)

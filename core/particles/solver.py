@@ -1,0 +1,239 @@
+"""The particle solver: one call advances a State by one frame interval in sub-steps.
+
+Per sub-step, in order (each a named pass below):
+    collide   find particles resting on colliders (for the contact force)
+    forces    the force list: gravity, force objects, particle springs, contact (last)
+    integrate the chosen ODE integrator on the flat state y = [x, v]
+    respond   continuous collision response on each particle's path (no tunnelling)
+    check     every value finite, or an error naming emitter, frame and particle
+    age/kill  particles whose age reaches their life span die (sub-emitters burst there)
+    emit      births of this sub-step, placed at their sub-frame time and advanced to its end
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from ..errors import SimulationError
+from ..integrators import Integrator, make_integrator
+from . import colliders as coll
+from .emit import Births, sample_births, sample_bursts
+from .forces import DampedSprings, Force, Gravity, ParticleView
+from .model import ParticleModel, ParticleState
+from .settings import ColliderFrame, EmitterFrame
+
+MAX_PARTICLES = 50_000_000  # hard limit that keeps a bake inside memory (~5 GB of state)
+
+
+@dataclass
+class FrameInputs:
+    """What the scene says about one frame interval [t0, t0 + frame_dt].
+
+    Args:
+        frame: scene frame at the interval's start (named in messages).
+        t0: start time [s]. frame_dt: interval length [s].
+        gravity: (3,) [m/s^2].
+        emitters: one :class:`EmitterFrame` per model emitter, same order.
+        colliders: analytic colliders with their motion over the interval.
+        forces: force objects (drag, wind, attractors, ...) for this interval.
+    """
+
+    frame: int
+    t0: float
+    frame_dt: float
+    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
+    emitters: Sequence[EmitterFrame] = ()
+    colliders: Sequence[ColliderFrame] = ()
+    forces: Sequence[Force] = ()
+
+
+@dataclass
+class FrameReport:
+    births: int = 0
+    deaths: int = 0
+    collisions: int = 0
+    integrator_steps: int = 0
+    alive: int = 0
+    per_emitter_births: list[int] = field(default_factory=list)
+
+
+class _ParticleOde:
+    """Witkin & Baraff's particle system seen by an integrator: dim, get/set state, derivative."""
+
+    def __init__(self, state: ParticleState, forces: list):
+        self.state = state
+        self.forces = forces
+        n = state.particle_count
+        self.dim = 6 * n
+        self._n = n
+
+    def get_state(self) -> np.ndarray:
+        return np.concatenate([self.state.particle_x.ravel(), self.state.particle_v.ravel()])
+
+    def set_state(self, y: np.ndarray) -> None:
+        n = self._n
+        self.state.particle_x = y[:3 * n].reshape(n, 3).copy()
+        self.state.particle_v = y[3 * n:].reshape(n, 3).copy()
+
+    def derivative(self, t: float, y: np.ndarray) -> np.ndarray:
+        n = self._n
+        view = ParticleView(y[:3 * n].reshape(n, 3), y[3 * n:].reshape(n, 3),
+                            self.state.particle_mass, t)
+        f = np.zeros((n, 3))  # clear the accumulator, then every force adds in
+        for force in self.forces:
+            force.apply(view, f)
+        return np.concatenate([y[3 * n:], (f / self.state.particle_mass[:, None]).ravel()])
+
+
+class ParticleSolver:
+    """Advances a :class:`ParticleState` of a :class:`ParticleModel` frame by frame.
+
+    Args:
+        model: the frozen model.
+        integrator: an integrator name of :data:`physanim.core.integrators.INTEGRATORS` or an
+            :class:`Integrator`.
+        substeps: sub-steps per frame (>= 1).
+        tolerance: error tolerance of the adaptive integrator.
+    """
+
+    def __init__(self, model: ParticleModel, integrator: str | Integrator = "SYMPLECTIC_EULER",
+                 substeps: int = 1, tolerance: float = 1e-4):
+        if int(substeps) != substeps or substeps < 1:
+            raise ValueError(f"substeps must be an integer >= 1 (got {substeps})")
+        self.model = model
+        self.integrator = (make_integrator(integrator, tolerance) if isinstance(integrator, str)
+                           else integrator)
+        self.substeps = int(substeps)
+
+    # -- the frame ------------------------------------------------------------------------------
+    def advance(self, state: ParticleState, inputs: FrameInputs) -> FrameReport:
+        """Advance ``state`` (in place) from ``inputs.t0`` to ``inputs.t0 + inputs.frame_dt``."""
+        model = self.model
+        if len(inputs.emitters) != model.emitter_count:
+            raise ValueError(f"frame {inputs.frame}: {len(inputs.emitters)} emitter inputs for "
+                             f"{model.emitter_count} emitters")
+        for e, ef in zip(model.emitters, inputs.emitters):
+            ef.validated(e.name)
+        report = FrameReport(per_emitter_births=[0] * model.emitter_count)
+        births = [Births.empty() if e.source == "DEATHS" else
+                  sample_births(state.rngs[i], e, inputs.emitters[i], inputs.frame_dt)
+                  for i, e in enumerate(model.emitters)]
+        paths = [coll.ColliderPath.of(c, inputs.frame_dt) for c in inputs.colliders]
+        h = inputs.frame_dt / self.substeps
+        g = np.asarray(inputs.gravity, dtype=np.float64)
+        rest_speed = 2.0 * float(np.linalg.norm(g)) * h + 1e-4
+        for k in range(self.substeps):
+            s0, s1 = k / self.substeps, (k + 1) / self.substeps
+            t = inputs.t0 + k * h
+            contact = coll.contacts(paths, state.particle_x, state.particle_v, s0, rest_speed, h)
+            forces = self._forces(state, inputs, g, contact)
+            x0, v0 = state.particle_x, state.particle_v
+            report.integrator_steps += self._integrate(state, forces, t, h, inputs)
+            state.particle_x, state.particle_v, hits = coll.respond(
+                paths, x0, state.particle_x, v0, state.particle_v, s0, s1, h, rest_speed)
+            report.collisions += hits
+            self._check(state, inputs, t + h)
+            deaths = self._age_kill(state, h)
+            report.deaths += sum(len(d[0]) for d in deaths)
+            self._emit(state, inputs, births, deaths, s0, s1, g, report)
+            state.t = t + h
+        report.alive = state.particle_count
+        return report
+
+    # -- passes ---------------------------------------------------------------------------------
+    def _forces(self, state, inputs, g, contact) -> list:
+        forces: list = [Gravity(tuple(g))] if np.any(g) else []
+        forces.extend(inputs.forces)
+        if len(state.link_a):
+            for e, settings in enumerate(self.model.emitters):
+                sel = state.link_emitter == e
+                if settings.link is None or not sel.any():
+                    continue
+                forces.append(DampedSprings(state.index_of(state.link_a[sel]),
+                                            state.index_of(state.link_b[sel]),
+                                            settings.link.stiffness, settings.link.damping,
+                                            state.link_rest[sel]))
+        forces.append(contact)  # last: it cancels what the others push into the surface
+        return forces
+
+    def _integrate(self, state, forces, t, h, inputs) -> int:
+        if state.particle_count == 0:
+            return 0
+        ode = _ParticleOde(state, forces)
+        try:
+            return self.integrator.step(ode, t, h).steps
+        except SimulationError as exc:
+            raise self._blame(state, inputs, str(exc)) from exc
+
+    def _check(self, state, inputs, t) -> None:
+        bad = ~(np.isfinite(state.particle_x).all(axis=1) & np.isfinite(state.particle_v).all(axis=1))
+        if bad.any():
+            raise self._blame(state, inputs, "", bad)
+
+    def _blame(self, state, inputs, detail, bad=None) -> SimulationError:
+        """An error naming the emitter, frame, particle and value that went wrong."""
+        if bad is None or not bad.any():
+            speed = np.linalg.norm(np.nan_to_num(state.particle_v, nan=np.inf), axis=1)
+            bad = speed == speed.max()
+        i = int(np.argmax(bad))
+        emitter = self.model.emitters[int(state.particle_emitter[i])].name
+        v = state.particle_v[i]
+        what = "velocity" if not np.isfinite(v).all() or np.isfinite(state.particle_x[i]).all() \
+            else "position"
+        value = v if what == "velocity" else state.particle_x[i]
+        msg = (f"particle {int(state.particle_id[i])} {what} became {np.array2string(value, precision=4)}"
+               f"{' (' + detail + ')' if detail else ''} — use more substeps, a stable integrator "
+               "(SYMPLECTIC_EULER, RK4, IMPLICIT) or weaker forces/springs")
+        return SimulationError(msg, obj=emitter, frame=inputs.frame, kind="emitter")
+
+    def _age_kill(self, state: ParticleState, h: float):
+        """Age every particle by h; remove the dead. Returns per emitter (x, v) of the dead."""
+        state.particle_age = state.particle_age + h
+        dead = state.particle_age >= state.particle_life
+        deaths = [(np.zeros((0, 3)), np.zeros((0, 3)))] * self.model.emitter_count
+        if dead.any():
+            for e in np.unique(state.particle_emitter[dead]):
+                sel = dead & (state.particle_emitter == e)
+                deaths[int(e)] = (state.particle_x[sel], state.particle_v[sel])
+            state.keep(~dead)
+        return deaths
+
+    def _emit(self, state, inputs, births, deaths, s0, s1, g, report) -> None:
+        last = s1 >= 1.0
+        for i, e in enumerate(self.model.emitters):
+            if e.source == "DEATHS":
+                b = sample_bursts(state.rngs[i], e, inputs.emitters[i], *deaths[e.parent])
+                b.u = np.full(len(b), s1)
+            else:
+                b = births[i]
+                b = b.take((b.u >= s0) & ((b.u < s1) | last))
+            if len(b) == 0:
+                continue
+            if state.particle_count + len(b) > MAX_PARTICLES:
+                raise SimulationError(
+                    f"more than {MAX_PARTICLES:,} particles alive — lower the rate or lifetime",
+                    obj=e.name, frame=inputs.frame, kind="emitter")
+            tau = (s1 - b.u) * inputs.frame_dt  # time from birth to the end of this sub-step
+            x = b.x + b.v * tau[:, None] + 0.5 * g * (tau * tau)[:, None]
+            v = b.v + g * tau[:, None]
+            previous = state.last_born[i]
+            ids = state.append(i, x, v, b.mass, tau, b.life, b.size)
+            self._link(state, e, i, previous, ids, x)
+            report.births += len(b)
+            report.per_emitter_births[i] += len(b)
+
+    @staticmethod
+    def _link(state, settings, emitter, previous, ids, x) -> None:
+        """Chain springs: each new particle is joined to the previous birth of its emitter."""
+        if settings.link is None or len(ids) == 0:
+            return
+        prev = np.concatenate([[previous], ids[:-1]])
+        ok = (prev >= 0) & np.isin(prev, state.particle_id)
+        a, b = prev[ok], ids[ok]
+        if settings.link.rest_length >= 0.0:
+            rest = np.full(len(a), settings.link.rest_length)
+        else:
+            rest = np.linalg.norm(state.particle_x[state.index_of(a)] - x[ok], axis=1)
+        state.add_links(a, b, rest, emitter)

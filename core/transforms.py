@@ -1,0 +1,146 @@
+"""Rigid-ish affine transforms: interpolation between two samples and point/normal mapping.
+
+Transforms are 4x4 affine matrices (column vectors: ``x_world = M @ [x_local, 1]``) made of
+translation, rotation and per-axis scale, as an object's world matrix is. Interpolating them
+component-wise would shrink a rotating object mid-step, so :func:`interpolate` splits each matrix
+into translation, rotation (quaternion, slerped) and scale (lerped).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def decompose(m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Split a 4x4 affine matrix into translation (3,), quaternion (4,) [w,x,y,z] and scale (3,)."""
+    m = np.asarray(m, dtype=np.float64)
+    linear = m[:3, :3]
+    scale = np.linalg.norm(linear, axis=0)
+    safe = np.where(scale > 0.0, scale, 1.0)
+    rot = linear / safe
+    if np.linalg.det(rot) < 0.0:  # mirrored: fold the reflection into the scale
+        scale[0] = -scale[0]
+        rot[:, 0] = -rot[:, 0]
+    return m[:3, 3].copy(), matrix_to_quaternion(rot), scale
+
+
+def compose(translation: np.ndarray, quat: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`decompose`."""
+    m = np.eye(4)
+    m[:3, :3] = quaternion_to_matrix(quat) * np.asarray(scale, dtype=np.float64)
+    m[:3, 3] = translation
+    return m
+
+
+def matrix_to_quaternion(r: np.ndarray) -> np.ndarray:
+    """Unit quaternion [w, x, y, z] of a 3x3 rotation matrix (Shepperd's method)."""
+    t = np.trace(r)
+    if t > 0.0:
+        s = np.sqrt(t + 1.0) * 2.0
+        q = [0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s]
+    elif r[0, 0] > r[1, 1] and r[0, 0] > r[2, 2]:
+        s = np.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2]) * 2.0
+        q = [(r[2, 1] - r[1, 2]) / s, 0.25 * s, (r[0, 1] + r[1, 0]) / s, (r[0, 2] + r[2, 0]) / s]
+    elif r[1, 1] > r[2, 2]:
+        s = np.sqrt(1.0 + r[1, 1] - r[0, 0] - r[2, 2]) * 2.0
+        q = [(r[0, 2] - r[2, 0]) / s, (r[0, 1] + r[1, 0]) / s, 0.25 * s, (r[1, 2] + r[2, 1]) / s]
+    else:
+        s = np.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1]) * 2.0
+        q = [(r[1, 0] - r[0, 1]) / s, (r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s]
+    q = np.array(q)
+    return q / np.linalg.norm(q)
+
+
+def quaternion_to_matrix(q: np.ndarray) -> np.ndarray:
+    """3x3 rotation matrix of a quaternion [w, x, y, z] (normalised first)."""
+    w, x, y, z = np.asarray(q, dtype=np.float64) / np.linalg.norm(q)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def slerp(q0: np.ndarray, q1: np.ndarray, s: np.ndarray | float) -> np.ndarray:
+    """Spherical interpolation of unit quaternions along the shorter arc; ``s`` may be an array."""
+    q0 = np.asarray(q0, dtype=np.float64)
+    q1 = np.asarray(q1, dtype=np.float64)
+    d = float(np.dot(q0, q1))
+    if d < 0.0:
+        q1, d = -q1, -d
+    s = np.asarray(s, dtype=np.float64)[..., None]
+    if d > 0.9995:  # nearly parallel: lerp is exact to rounding and avoids 0/0
+        q = q0 + s * (q1 - q0)
+    else:
+        theta = np.arccos(d)
+        q = (np.sin((1.0 - s) * theta) * q0 + np.sin(s * theta) * q1) / np.sin(theta)
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+class TransformPath:
+    """A transform moving from ``m0`` (s=0) to ``m1`` (s=1), evaluated at many s at once.
+
+    Args:
+        m0: (4, 4) world matrix at the start of the interval.
+        m1: (4, 4) world matrix at the end of the interval.
+    """
+
+    def __init__(self, m0: np.ndarray, m1: np.ndarray):
+        self.m0 = np.asarray(m0, dtype=np.float64)
+        self.m1 = np.asarray(m1, dtype=np.float64)
+        self.static = bool(np.array_equal(self.m0, self.m1))
+        self._t0, self._q0, self._s0 = decompose(self.m0)
+        self._t1, self._q1, self._s1 = decompose(self.m1)
+
+    def matrices(self, s: np.ndarray | float) -> np.ndarray:
+        """(..., 4, 4) matrices at interpolation parameters ``s`` in [0, 1]."""
+        s = np.asarray(s, dtype=np.float64)
+        if self.static:
+            return np.broadcast_to(self.m0, s.shape + (4, 4))
+        q = slerp(self._q0, self._q1, s)
+        w, x, y, z = np.moveaxis(q, -1, 0)
+        rot = np.stack([
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+        ], -2)
+        sv = s[..., None]
+        scale = self._s0 + sv * (self._s1 - self._s0)
+        trans = self._t0 + sv * (self._t1 - self._t0)
+        out = np.zeros(s.shape + (4, 4))
+        out[..., :3, :3] = rot * scale[..., None, :]
+        out[..., :3, 3] = trans
+        out[..., 3, 3] = 1.0
+        return out
+
+    def points(self, local: np.ndarray, s: np.ndarray | float) -> np.ndarray:
+        """World positions (n, 3) of local points (n, 3) at per-point parameters ``s`` (n,)."""
+        local = np.asarray(local, dtype=np.float64)
+        if self.static:
+            return local @ self.m0[:3, :3].T + self.m0[:3, 3]
+        m = self.matrices(np.broadcast_to(np.asarray(s, dtype=np.float64), local.shape[:1]))
+        return np.einsum("nij,nj->ni", m[:, :3, :3], local) + m[:, :3, 3]
+
+    def point_velocities(self, local: np.ndarray, s: np.ndarray | float, duration: float,
+                         local_velocity: np.ndarray | None = None) -> np.ndarray:
+        """d/dt of the world positions of local points at ``s`` [m/s] (central difference in s).
+
+        Args:
+            local: (n, 3) local positions.
+            s: (n,) or scalar parameters in [0, 1].
+            duration: length of the interval s = 0..1 [s].
+            local_velocity: (n, 3) velocity of the points in local space (deforming meshes) [m/s].
+        """
+        local = np.asarray(local, dtype=np.float64)
+        s = np.broadcast_to(np.asarray(s, dtype=np.float64), local.shape[:1])
+        if self.static:
+            vel = np.zeros_like(local)
+        else:
+            ds = 1e-4
+            lo = np.clip(s - ds, 0.0, 1.0)
+            hi = np.clip(s + ds, 0.0, 1.0)
+            span = (hi - lo)[:, None] * duration
+            vel = (self.points(local, hi) - self.points(local, lo)) / span
+        if local_velocity is not None:
+            m = self.matrices(s)
+            vel = vel + np.einsum("nij,nj->ni", m[:, :3, :3], local_velocity)
+        return vel
