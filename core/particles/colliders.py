@@ -249,7 +249,30 @@ def respond(colliders: list[ColliderPath], x0: np.ndarray, x1: np.ndarray, v0: n
             x[idx] = start[idx] + remaining[:, None] * v_new
             v[idx] = v_new
             hits += len(idx)
+    hits += _push_out(colliders, x, v, s_end)
     return x, v, hits
+
+
+def _push_out(colliders: list[ColliderPath], x: np.ndarray, v: np.ndarray,
+              s: np.ndarray) -> int:
+    """Last resort after the passes: a collider that swept back over a particle's remaining
+    path (fast rotation) leaves it inside; move it to the surface and drop the approaching
+    normal velocity. Modifies x and v in place; returns how many particles it moved."""
+    moved = 0
+    for col in colliders:
+        l = col.to_local(x, s)
+        inside = _inside(col.frame.shape, l)
+        if not inside.any():
+            continue
+        idx = np.nonzero(inside)[0]
+        p, n_local, _ = _closest(col.frame.shape, l[idx])
+        p_w, n_w = col.to_world(p, n_local, s[idx])
+        x[idx] = p_w + SKIN * n_w
+        rel = v[idx] - col.surface_velocity(p, s[idx])
+        un = np.einsum("ij,ij->i", rel, n_w)
+        v[idx] -= np.minimum(un, 0.0)[:, None] * n_w
+        moved += len(idx)
+    return moved
 
 
 def contacts(colliders: list[ColliderPath], x: np.ndarray, v: np.ndarray, s: float,

@@ -119,8 +119,10 @@ class Wind:
 class Attractor:
     """Pull towards (strength > 0) or push from (< 0) a point, falling off with distance.
 
-    f = strength * u / max(d, min_distance)^falloff, u the unit vector to the centre, d the
-    distance; no force beyond ``max_distance`` (0 = unlimited).
+    f = strength * r / max(d, min_distance)^(falloff + 1), r the vector to the centre and d its
+    length: the falloff law strength / d^falloff outside ``min_distance``, ramping linearly to
+    zero at the centre inside it (bounded everywhere). No force beyond ``max_distance``
+    (0 = unlimited).
     """
 
     name: str
@@ -205,7 +207,8 @@ class DampedSprings:
 @dataclass(frozen=True)
 class ContactForce:
     """Keeps resting particles on a surface: cancels the force pushing into it and adds
-    Coulomb friction opposing the sliding velocity (capped so it stops, never reverses, it).
+    Coulomb friction: static (holds the particle while the needed force is within mu |f_n|),
+    else kinetic (mu |f_n| against the motion, capped so it stops, never reverses, it).
 
     Built per sub-step by the collision pass from the particles found in resting contact.
 
@@ -229,8 +232,11 @@ class ContactForce:
         f = f - push[:, None] * self.normal
         rel = p.v[idx] - self.surface_velocity
         vt = rel - np.einsum("ij,ij->i", rel, self.normal)[:, None] * self.normal
-        speed = np.linalg.norm(vt, axis=1)
-        stop = p.mass[idx] * speed / self.h
-        mag = np.minimum(self.friction * -push, stop)
-        f = f - (mag / np.where(speed > 1e-12, speed, np.inf))[:, None] * vt
+        ft = f - np.einsum("ij,ij->i", f, self.normal)[:, None] * self.normal
+        # friction that would stop the sliding within this step (static friction) ...
+        need = -(p.mass[idx, None] * vt / self.h + ft)
+        need_mag = np.linalg.norm(need, axis=1)
+        cap = self.friction * -push  # ... limited by Coulomb's mu |f_n| (kinetic friction)
+        scale = np.minimum(1.0, cap / np.where(need_mag > 0.0, need_mag, np.inf))
+        f = f + scale[:, None] * need
         f_out[idx] = f

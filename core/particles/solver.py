@@ -165,27 +165,34 @@ class ParticleSolver:
         try:
             return self.integrator.step(ode, t, h).steps
         except SimulationError as exc:
-            raise self._blame(state, inputs, str(exc)) from exc
+            # The integrator left the state as it was: take one Euler trial step to find the
+            # particles whose values go non-finite, and name them.
+            n = state.particle_count
+            with np.errstate(all="ignore"):
+                y = ode.get_state()
+                trial = y + h * ode.derivative(t, y)
+            x, v = trial[:3 * n].reshape(n, 3), trial[3 * n:].reshape(n, 3)
+            raise self._blame(state, inputs, str(exc), x, v) from exc
 
     def _check(self, state, inputs, t) -> None:
-        bad = ~(np.isfinite(state.particle_x).all(axis=1) & np.isfinite(state.particle_v).all(axis=1))
-        if bad.any():
-            raise self._blame(state, inputs, "", bad)
+        x, v = state.particle_x, state.particle_v
+        if not (np.isfinite(x).all() and np.isfinite(v).all()):
+            raise self._blame(state, inputs, "", x, v)
 
-    def _blame(self, state, inputs, detail, bad=None) -> SimulationError:
+    def _blame(self, state, inputs, detail, x, v) -> SimulationError:
         """An error naming the emitter, frame, particle and value that went wrong."""
-        if bad is None or not bad.any():
-            speed = np.linalg.norm(np.nan_to_num(state.particle_v, nan=np.inf), axis=1)
-            bad = speed == speed.max()
+        with np.errstate(all="ignore"):
+            bad = ~(np.isfinite(x).all(axis=1) & np.isfinite(v).all(axis=1))
+            if not bad.any():  # nothing non-finite yet: blame the fastest particle
+                bad = np.linalg.norm(v, axis=1) >= np.linalg.norm(v, axis=1).max()
         i = int(np.argmax(bad))
         emitter = self.model.emitters[int(state.particle_emitter[i])].name
-        v = state.particle_v[i]
-        what = "velocity" if not np.isfinite(v).all() or np.isfinite(state.particle_x[i]).all() \
-            else "position"
-        value = v if what == "velocity" else state.particle_x[i]
-        msg = (f"particle {int(state.particle_id[i])} {what} became {np.array2string(value, precision=4)}"
-               f"{' (' + detail + ')' if detail else ''} — use more substeps, a stable integrator "
-               "(SYMPLECTIC_EULER, RK4, IMPLICIT) or weaker forces/springs")
+        what, value = ("velocity", v[i]) if not np.isfinite(v[i]).all() or np.isfinite(x[i]).all() \
+            else ("position", x[i])
+        msg = (f"particle {int(state.particle_id[i])} {what} became "
+               f"{np.array2string(value, precision=4)}{' (' + detail + ')' if detail else ''} — "
+               "use more substeps, a stable integrator (SYMPLECTIC_EULER, RK4, IMPLICIT) or "
+               "weaker forces/springs")
         return SimulationError(msg, obj=emitter, frame=inputs.frame, kind="emitter")
 
     def _age_kill(self, state: ParticleState, h: float):

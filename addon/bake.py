@@ -1,0 +1,230 @@
+"""A particle bake as a resumable job: prepare -> step (one frame each) -> finish | abort.
+
+The operator drives it synchronously (background, scripts, CLI) or from a modal timer (UI, with
+progress and ESC). Frames stream into a fresh cache folder per emitter; :meth:`BakeJob.finish`
+swaps them in and writes native results, :meth:`BakeJob.abort` deletes the partial folders so the
+previous bake stays exactly as it was.
+"""
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import time
+
+import bpy
+import numpy as np
+
+from ..core.cache import CacheWriter
+from ..core.errors import PhysanimError
+from ..core.particles import ParticleSolver, emitter_arrays
+from . import convert, extract
+
+STREAM = "points"
+BYTES_PER_PARTICLE_FRAME = 4 * (1 + 3 + 3 + 1 + 1 + 1 + 4 + 3 + 3)  # cache arrays of output.py
+BYTES_PER_PARTICLE_STATE = 8 * 16  # float64 state + integrator stages, per particle
+MEMORY_BUDGET = 16 * 2**30  # the bake refuses to start when its estimate exceeds this
+RK_STAGES = {"EULER": 1, "SYMPLECTIC_EULER": 1, "MIDPOINT": 2, "RK4": 4, "RK45": 7, "IMPLICIT": 4}
+
+
+def safe_name(name: str) -> str:
+    """A file-system safe folder name for an object name (stable and readable)."""
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("._") or "object"
+
+
+def cache_root(scene) -> str:
+    """Absolute cache folder of a scene; errors when a '//' path has no saved .blend to anchor it."""
+    raw = scene.physanim.cache_dir.strip()
+    if not raw:
+        raise PhysanimError("the cache folder is empty — set Scene > PhysAnim > Cache",
+                            obj=scene.name, kind="scene")
+    if raw.startswith("//") and not bpy.data.filepath:
+        raise PhysanimError(f'the cache folder "{raw}" is relative to the .blend file, which is not '
+                            "saved yet — save the file first or choose an absolute cache folder",
+                            obj=scene.name, kind="scene")
+    return os.path.normpath(bpy.path.abspath(raw))
+
+
+def emitter_cache_dir(scene, ob) -> str:
+    return os.path.join(cache_root(scene), safe_name(scene.name), safe_name(ob.name))
+
+
+def relative_path(path: str) -> str:
+    """'//'-relative path with forward slashes when the .blend is saved (else absolute)."""
+    if bpy.data.filepath:
+        try:
+            return bpy.path.relpath(path).replace("\\", "/")
+        except ValueError:  # other drive on Windows
+            pass
+    return path.replace("\\", "/")
+
+
+def estimate(scene, roles: extract.Roles) -> tuple[float, float]:
+    """Peak alive particles and cache bytes of a bake, from rates and lifetimes (upper bounds)."""
+    frames = max(0, scene.physanim.frame_end - scene.physanim.frame_start)
+    peak_by_name: dict[str, float] = {}
+    total_bytes = 0.0
+    for ob in roles.emitters:  # parents first is not guaranteed: resolve sub-emitters after
+        p = ob.physanim.emitter
+        if p.source == 'DEATHS':
+            continue
+        active = max(0, min(p.frame_end, scene.physanim.frame_end) - max(p.frame_start, scene.physanim.frame_start))
+        life = p.lifetime + p.lifetime_random
+        peak_by_name[ob.name] = (p.rate + p.rate_random) * min(life, active) if active else 0.0
+        total_bytes += (p.rate + p.rate_random) * active * min(life, frames) * BYTES_PER_PARTICLE_FRAME
+    for _ in range(len(roles.emitters)):
+        for ob in roles.emitters:
+            p = ob.physanim.emitter
+            if p.source == 'DEATHS' and p.parent and p.parent.name in peak_by_name:
+                parent = p.parent.physanim.emitter
+                deaths_per_frame = parent.rate + parent.rate_random
+                births = deaths_per_frame * (p.rate + p.rate_random)
+                life = p.lifetime + p.lifetime_random
+                peak_by_name[ob.name] = births * life
+                total_bytes += births * frames * min(life, frames) * BYTES_PER_PARTICLE_FRAME
+    return sum(peak_by_name.values()), total_bytes
+
+
+class BakeJob:
+    """Bake every (or the chosen) particle emitter of a scene, one frame per :meth:`step`.
+
+    Args:
+        context: Blender context. only: emitter names to bake (None = all of them).
+    """
+
+    def __init__(self, context, only: set[str] | None = None):
+        self.scene = context.scene
+        self.view_layer = context.view_layer
+        self.settings = self.scene.physanim
+        self.original_frame = self.scene.frame_current
+        self.roles = extract.gather(self.scene, only)
+        if not self.roles.emitters:
+            raise PhysanimError("nothing to bake: no object has a PhysAnim emitter enabled",
+                                obj=self.scene.name, kind="scene")
+        self.frame_start = self.settings.frame_start
+        self.frame_end = self.settings.frame_end
+        if self.frame_end < self.frame_start:
+            raise PhysanimError(f"frame end {self.frame_end} is before frame start {self.frame_start}",
+                                obj=self.scene.name, kind="scene")
+        self._check_budget()
+        self.writers: dict[str, CacheWriter] = {}
+        self.frame = self.frame_start
+        self.started = time.perf_counter()
+        self.stats = {"births": 0, "collisions": 0, "peak": 0}
+        try:
+            for ob in self.roles.emitters:
+                self.writers[ob.name] = CacheWriter(emitter_cache_dir(self.scene, ob))
+            self.hash = extract.inputs_hash(self.scene, extract.gather(self.scene))
+            self.extractor = extract.Extractor(self.scene, self.roles)
+            self.scene.frame_set(self.frame_start)
+            depsgraph = context.evaluated_depsgraph_get()
+            self.model = self.extractor.build_model(depsgraph, self.frame_start)
+            self.solver = ParticleSolver(self.model, self.settings.integrator,
+                                         self.settings.substeps, self.settings.tolerance)
+            self.state = self.model.state(convert.frame_time(self.scene, self.frame_start))
+            self.sample = self.extractor.sample(depsgraph, self.frame_start)
+            self._write_frame(self.frame_start)
+        except BaseException:
+            self.abort()
+            raise
+
+    @property
+    def total_frames(self) -> int:
+        return self.frame_end - self.frame_start
+
+    @property
+    def progress(self) -> float:
+        return (self.frame - self.frame_start) / max(1, self.total_frames)
+
+    def _check_budget(self) -> None:
+        peak, cache_bytes = estimate(self.scene, self.roles)
+        stages = RK_STAGES[self.settings.integrator]
+        memory = peak * BYTES_PER_PARTICLE_STATE * (1 + stages)
+        if memory > MEMORY_BUDGET:
+            raise PhysanimError(
+                f"an estimated {peak:,.0f} particles alive at once need about "
+                f"{memory / 2**30:.1f} GiB of memory (limit {MEMORY_BUDGET / 2**30:.0f} GiB) — "
+                "lower rates or lifetimes", obj=self.scene.name, kind="scene")
+        root = cache_root(self.scene)
+        probe = root
+        while not os.path.exists(probe) and os.path.dirname(probe) != probe:
+            probe = os.path.dirname(probe)
+        free = shutil.disk_usage(probe).free
+        if cache_bytes > free:
+            raise PhysanimError(
+                f"the cache needs an estimated {cache_bytes / 2**30:.2f} GiB but only "
+                f"{free / 2**30:.2f} GiB are free at \"{root}\" — free space or lower rates",
+                obj=self.scene.name, kind="scene")
+
+    def _write_frame(self, frame: int) -> None:
+        to_frames = convert.fps(self.scene)
+        for i, ob in enumerate(self.roles.emitters):
+            arrays = emitter_arrays(self.model, self.state, i)
+            arrays["age"] = (arrays["age"] * to_frames).astype(np.float32)
+            arrays["life"] = (arrays["life"] * to_frames).astype(np.float32)
+            self.writers[ob.name].write_frame(STREAM, frame, arrays)
+        self.stats["peak"] = max(self.stats["peak"], self.state.particle_count)
+
+    def step(self, context) -> bool:
+        """Simulate and write the next frame. Returns True when the bake has reached its end."""
+        if self.frame >= self.frame_end:
+            return True
+        nxt = self.frame + 1
+        self.scene.frame_set(nxt)
+        sample = self.extractor.sample(context.evaluated_depsgraph_get(), nxt)
+        report = self.solver.advance(self.state, self.extractor.inputs(self.sample, sample))
+        self.stats["births"] += report.births
+        self.stats["collisions"] += report.collisions
+        self.sample = sample
+        self.frame = nxt
+        self._write_frame(nxt)
+        return self.frame >= self.frame_end
+
+    def finish(self, context) -> str:
+        """Swap the new caches in and point every emitter's result at them. Returns a summary."""
+        from . import results
+
+        meta = {"hash": self.hash, "frame_start": self.frame_start, "frame_end": self.frame_end,
+                "fps": convert.fps(self.scene), "kind": "particles"}
+        for ob in self.roles.emitters:
+            path = self.writers[ob.name].commit(dict(meta, emitter=ob.name))
+            results.attach(context, self.scene, ob, relative_path(os.path.join(path, STREAM)),
+                           self.frame_start, self.frame_end)
+        self.writers.clear()
+        self.scene.frame_set(self.original_frame)
+        self.settings.bake_hash = self.hash
+        took = time.perf_counter() - self.started
+        info = (f"baked {len(self.roles.emitters)} emitter(s), frames {self.frame_start}-"
+                f"{self.frame_end}: {self.stats['births']:,} births, peak {self.stats['peak']:,} "
+                f"alive, {took:.2f} s")
+        self.settings.bake_info = info
+        return info
+
+    def abort(self) -> None:
+        """Delete partial caches and restore the frame; the previous bake is untouched."""
+        for writer in self.writers.values():
+            writer.abort()
+        self.writers.clear()
+        if self.scene.frame_current != self.original_frame:
+            self.scene.frame_set(self.original_frame)
+
+
+def run(context, only: set[str] | None = None, on_frame=None) -> str:
+    """Bake synchronously. ``on_frame(job)`` is called after each frame (progress, logging).
+
+    Returns the summary line; raises PhysanimError/OSError/ValueError after aborting, leaving
+    the previous bake intact.
+    """
+    job = BakeJob(context, only)
+    try:
+        if on_frame is not None:
+            on_frame(job)
+        while not job.step(context):
+            if on_frame is not None:
+                on_frame(job)
+        if on_frame is not None:
+            on_frame(job)
+        return job.finish(context)
+    except BaseException:
+        job.abort()
+        raise

@@ -1,0 +1,37 @@
+"""The one place where Blender's units meet the core's: frames <-> seconds, axes, matrices."""
+from __future__ import annotations
+
+import numpy as np
+
+AXES = {"X": (1.0, 0.0, 0.0), "Y": (0.0, 1.0, 0.0), "Z": (0.0, 0.0, 1.0),
+        "-X": (-1.0, 0.0, 0.0), "-Y": (0.0, -1.0, 0.0), "-Z": (0.0, 0.0, -1.0)}
+
+
+def fps(scene) -> float:
+    """Frames per second of a scene (fps / fps_base)."""
+    return scene.render.fps / scene.render.fps_base
+
+
+def frame_time(scene, frame: float) -> float:
+    """Time [s] of a frame; the core's clock starts at frame 0."""
+    return frame / fps(scene)
+
+
+def frames_to_seconds(scene, frames: float) -> float:
+    return frames / fps(scene)
+
+
+def seconds_to_frames(scene, seconds):
+    return seconds * fps(scene)
+
+
+def matrix(m) -> np.ndarray:
+    """A mathutils 4x4 Matrix as a numpy (4, 4) float64 array (row-major, column vectors)."""
+    return np.array([tuple(row) for row in m], dtype=np.float64)
+
+
+def gravity(scene) -> tuple[float, float, float]:
+    """Scene gravity [m/s^2] (Blender is Z-up; zero when the scene disables gravity)."""
+    if not scene.use_gravity:
+        return (0.0, 0.0, 0.0)
+    return tuple(float(g) for g in scene.gravity)

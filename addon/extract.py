@@ -1,0 +1,264 @@
+"""Blender scene -> core inputs: which objects play which role, the frozen Model, and the values
+of every keyframable property sampled per frame (after ``scene.frame_set``)."""
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass, field
+
+import bpy
+import numpy as np
+
+from ..core.curves import LifeCurve
+from ..core.errors import PhysanimError
+from ..core.particles import (Attractor, ColliderFrame, Drag, EmitterFrame, EmitterSettings,
+                              FrameInputs, ParticleModel, ParticleModelBuilder, SpringLink,
+                              Vortex, Wind)
+from . import convert
+
+MESH_SOURCES = ("VERTS", "FACES", "VOLUME")
+
+
+@dataclass
+class Roles:
+    """Objects taking part in a particle bake, in a stable (name) order."""
+
+    emitters: list = field(default_factory=list)
+    colliders: list = field(default_factory=list)
+    forces: list = field(default_factory=list)
+
+
+def gather(scene, only: set[str] | None = None) -> Roles:
+    """Objects of ``scene`` with a physanim role enabled.
+
+    Args:
+        only: names of emitters to bake (None = all). The parents of selected sub-emitters are
+            added, since their particles' deaths drive the sub-emitter.
+    """
+    objects = sorted(scene.objects, key=lambda o: o.name)
+    emitters = [o for o in objects if o.physanim.emitter.enabled]
+    if only is not None:
+        unknown = only - {o.name for o in emitters}
+        if unknown:
+            raise PhysanimError(f"not an emitter in scene \"{scene.name}\": {', '.join(sorted(unknown))}")
+        chosen = {o.name for o in emitters if o.name in only}
+        changed = True
+        while changed:
+            changed = False
+            for o in emitters:
+                p = o.physanim.emitter
+                if o.name in chosen and p.source == 'DEATHS' and p.parent and p.parent.name not in chosen:
+                    chosen.add(p.parent.name)
+                    changed = True
+        emitters = [o for o in emitters if o.name in chosen]
+    return Roles(emitters,
+                 [o for o in objects if o.physanim.collider.enabled],
+                 [o for o in objects if o.physanim.force.enabled])
+
+
+def _curve(stops, kind: str) -> LifeCurve:
+    ordered = sorted(stops, key=lambda s: s.position)
+    if not ordered:
+        return LifeCurve.constant(1.0, 1.0, 1.0, 1.0) if kind == "color" else LifeCurve.constant(1.0)
+    values = [tuple(s.color) if kind == "color" else (s.value,) for s in ordered]
+    return LifeCurve(tuple(s.position for s in ordered), tuple(values))
+
+
+def _mesh_arrays(ob, depsgraph, triangles: bool):
+    """Local vertex positions (n, 3) and, optionally, triangles (m, 3) of the evaluated mesh."""
+    ob_eval = ob.evaluated_get(depsgraph)
+    me = ob_eval.to_mesh()
+    try:
+        co = np.empty(len(me.vertices) * 3, np.float32)
+        me.vertices.foreach_get("co", co)
+        tris = None
+        if triangles:
+            me.calc_loop_triangles()
+            tris = np.empty(len(me.loop_triangles) * 3, np.int32)
+            me.loop_triangles.foreach_get("vertices", tris)
+            tris = tris.reshape(-1, 3).astype(np.int64)
+        return co.reshape(-1, 3).astype(np.float64), tris
+    finally:
+        ob_eval.to_mesh_clear()
+
+
+@dataclass
+class FrameSample:
+    """Per-frame values of every role object (read right after ``frame_set(frame)``)."""
+
+    frame: int
+    emitters: list
+    colliders: list
+    forces: list
+
+
+class Extractor:
+    """Turns a scene's role objects into a core Model and per-frame FrameInputs.
+
+    Args:
+        scene: the scene. roles: from :func:`gather`.
+    """
+
+    def __init__(self, scene, roles: Roles):
+        self.scene = scene
+        self.roles = roles
+        self.fps = convert.fps(scene)
+        self.index = {o.name: i for i, o in enumerate(roles.emitters)}
+        self._vertex_counts: dict[str, int] = {}
+
+    def _uses_mesh(self, ob) -> bool:
+        return ob.physanim.emitter.source in MESH_SOURCES
+
+    def build_model(self, depsgraph, frame: int) -> ParticleModel:
+        """The frozen Model: emitter topology and static settings at the bake's start frame."""
+        builder = ParticleModelBuilder(seed=self.scene.physanim.seed)
+        for ob in self.roles.emitters:
+            p = ob.physanim.emitter
+            tris, nverts = np.zeros((0, 3), np.int64), 0
+            if self._uses_mesh(ob):
+                if ob.type != 'MESH':
+                    raise PhysanimError(f"source {p.source} needs a mesh object (this is a {ob.type})",
+                                        obj=ob.name, frame=frame, kind="emitter")
+                verts, tris = _mesh_arrays(ob, depsgraph, triangles=True)
+                nverts = len(verts)
+                self._vertex_counts[ob.name] = nverts
+            parent = None
+            if p.source == 'DEATHS':
+                if p.parent is None or p.parent.name not in self.index:
+                    raise PhysanimError("source is Particle Deaths but its parent is not an emitter "
+                                        "of this scene — pick a parent emitter",
+                                        obj=ob.name, frame=frame, kind="emitter")
+                parent = self.index[p.parent.name]
+            link = None
+            if p.link:
+                link = SpringLink(p.link_stiffness, p.link_damping, p.link_rest_length)
+            builder.add_emitter(EmitterSettings(
+                name=ob.name, source=p.source, direction=p.direction,
+                axis=convert.AXES[p.axis], seed=p.seed, parent=parent, triangles=tris,
+                vertex_count=nverts, color=_curve(p.color_stops, "color"),
+                size=_curve(p.size_stops, "size"), stretch=p.stretch, link=link))
+        return builder.finalize(frame)
+
+    def sample(self, depsgraph, frame: int) -> FrameSample:
+        """Read every keyframable value at ``frame`` (the scene must already be at that frame)."""
+        emitters = []
+        for ob in self.roles.emitters:
+            p = ob.physanim.emitter
+            verts = None
+            if self._uses_mesh(ob):
+                verts, _ = _mesh_arrays(ob, depsgraph, triangles=False)
+                expected = self._vertex_counts.get(ob.name)
+                if expected is not None and len(verts) != expected:
+                    raise PhysanimError(f"the mesh changed its vertex count to {len(verts)} "
+                                        f"(was {expected}) — emitter meshes must keep their topology",
+                                        obj=ob.name, frame=frame, kind="emitter")
+            values = {k: float(getattr(p, k)) for k in (
+                "rate", "rate_random", "lifetime", "lifetime_random", "speed", "speed_random",
+                "mass", "size", "size_random", "spread", "inherit_velocity")}
+            values["active"] = p.frame_start <= frame < p.frame_end
+            emitters.append((convert.matrix(ob.matrix_world), verts, values))
+        colliders = [(convert.matrix(ob.matrix_world), ob.physanim.collider.shape,
+                      ob.physanim.collider.restitution, ob.physanim.collider.friction)
+                     for ob in self.roles.colliders]
+        forces = [(convert.matrix(ob.matrix_world),
+                   {k: getattr(ob.physanim.force, k) for k in (
+                       "type", "strength", "noise", "noise_scale", "noise_speed", "linear",
+                       "quadratic", "falloff", "min_distance", "max_distance", "seed")})
+                  for ob in self.roles.forces]
+        return FrameSample(frame, emitters, colliders, forces)
+
+    def inputs(self, a: FrameSample, b: FrameSample) -> FrameInputs:
+        """Core inputs for the interval from sample ``a`` to sample ``b`` (the next frame)."""
+        to_s = 1.0 / self.fps
+        emitters = []
+        for ob, (m0, v0, val), (m1, v1, _) in zip(self.roles.emitters, a.emitters, b.emitters):
+            emitters.append(EmitterFrame(
+                rate=val["rate"], rate_random=val["rate_random"], speed=val["speed"],
+                speed_random=val["speed_random"], lifetime=val["lifetime"] * to_s,
+                lifetime_random=val["lifetime_random"] * to_s, mass=val["mass"],
+                size=val["size"], size_random=val["size_random"], spread=val["spread"],
+                inherit_velocity=val["inherit_velocity"], active=val["active"],
+                matrix0=m0, matrix1=m1, verts0=v0, verts1=v1))
+        colliders = [ColliderFrame(ob.name, shape, m0, m1, rest, fric)
+                     for ob, (m0, shape, rest, fric), (m1, *_)
+                     in zip(self.roles.colliders, a.colliders, b.colliders)]
+        forces = [self._force(ob, m, f) for ob, (m, f) in zip(self.roles.forces, a.forces)]
+        return FrameInputs(frame=a.frame, t0=a.frame * to_s, frame_dt=(b.frame - a.frame) * to_s,
+                           gravity=convert.gravity(self.scene), emitters=emitters,
+                           colliders=colliders, forces=forces)
+
+    @staticmethod
+    def _force(ob, m: np.ndarray, f: dict):
+        z_axis = tuple(m[:3, 2])
+        origin = tuple(m[:3, 3])
+        kind = f["type"]
+        if kind == 'WIND':
+            return Wind(ob.name, z_axis, f["strength"], f["noise"], f["noise_scale"],
+                        f["noise_speed"], f["seed"])
+        if kind == 'DRAG':
+            return Drag(ob.name, f["linear"], f["quadratic"])
+        if kind == 'ATTRACTOR':
+            return Attractor(ob.name, origin, f["strength"], f["falloff"], f["min_distance"],
+                             f["max_distance"])
+        return Vortex(ob.name, origin, z_axis, f["strength"])
+
+
+# --- inputs hash (is the bake outdated?) ------------------------------------------------------
+
+def _rna_dump(pg) -> dict:
+    out = {}
+    for prop in pg.bl_rna.properties:
+        key = prop.identifier
+        if key in ("rna_type", "result", "bake_hash", "bake_info"):
+            continue
+        value = getattr(pg, key)
+        if prop.type == 'POINTER':
+            out[key] = value.name if isinstance(value, bpy.types.ID) else (
+                _rna_dump(value) if value is not None else None)
+        elif prop.type == 'COLLECTION':
+            out[key] = [_rna_dump(item) for item in value]
+        elif getattr(prop, "is_array", False):
+            out[key] = [round(float(v), 9) for v in value]
+        else:
+            out[key] = value if not isinstance(value, float) else round(value, 9)
+    return out
+
+
+def _animation_dump(id_data) -> list:
+    ad = getattr(id_data, "animation_data", None)
+    if ad is None or ad.action is None:
+        return []
+    keys = []
+    for fc in _fcurves(ad):
+        co = np.empty(len(fc.keyframe_points) * 2, np.float32)
+        fc.keyframe_points.foreach_get("co", co)
+        keys.append((fc.data_path, fc.array_index, hashlib.sha1(co.tobytes()).hexdigest()))
+    return sorted(keys)
+
+
+def _fcurves(ad):
+    from . import compat
+    return compat.action_fcurves(ad)
+
+
+def inputs_hash(scene, roles: Roles) -> str:
+    """A digest of everything a particle bake depends on; it changes when the scene does."""
+    h = hashlib.sha256()
+    settings = _rna_dump(scene.physanim)
+    settings.update(fps=convert.fps(scene), gravity=convert.gravity(scene))
+    h.update(json.dumps(settings, sort_keys=True).encode())
+    for group, role in ((roles.emitters, "emitter"), (roles.colliders, "collider"),
+                        (roles.forces, "force")):
+        for ob in group:
+            record = {"name": ob.name, "role": role,
+                      "props": _rna_dump(getattr(ob.physanim, role)),
+                      "matrix": [round(v, 7) for row in ob.matrix_basis for v in row],
+                      "parent": ob.parent.name if ob.parent else None,
+                      "anim": _animation_dump(ob)}
+            h.update(json.dumps(record, sort_keys=True).encode())
+            if ob.type == 'MESH':
+                co = np.empty(len(ob.data.vertices) * 3, np.float32)
+                ob.data.vertices.foreach_get("co", co)
+                h.update(co.tobytes())
+                h.update(str(len(ob.data.polygons)).encode())
+    return h.hexdigest()

@@ -1,0 +1,187 @@
+"""Operators: ``physanim.bake`` and ``physanim.free_bake`` (DESIGN.md), plus curve-stop editing.
+
+In the UI the bake is modal: a timer steps one frame at a time, the progress bar moves, ESC
+cancels and keeps the previous bake. In background mode (and from scripts and the CLI) it runs
+synchronously and returns {'FINISHED'} or {'CANCELLED'} with an error report.
+"""
+from __future__ import annotations
+
+import bpy
+from bpy.props import BoolProperty, EnumProperty, IntProperty
+
+from ..core.errors import PhysanimError
+from . import bake, extract, results
+
+FRAME_BUDGET_S = 0.05  # modal: simulate for at most this long per timer tick, then redraw
+
+
+def _selected_names(context) -> set[str]:
+    return {o.name for o in context.selected_objects if o.physanim.emitter.enabled}
+
+
+class PHYSANIM_OT_bake(bpy.types.Operator):
+    """Bake every PhysAnim system of the scene into its cache and native results"""
+
+    bl_idname = "physanim.bake"
+    bl_label = "Bake PhysAnim"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    only_selected: BoolProperty(name="Only Selected", default=False,
+                                description="Bake only the selected emitters (and their parents)")
+
+    _job = None
+    _timer = None
+
+    def _make_job(self, context):
+        only = _selected_names(context) if self.only_selected else None
+        if only is not None and not only:
+            raise PhysanimError("no selected object is a PhysAnim emitter", obj=context.scene.name,
+                                kind="scene")
+        return bake.BakeJob(context, only)
+
+    def execute(self, context):
+        only = _selected_names(context) if self.only_selected else None
+        wm = context.window_manager
+
+        def progress(job):
+            if job.frame == job.frame_start:
+                wm.progress_begin(0, max(1, job.total_frames))
+            wm.progress_update(job.frame - job.frame_start)
+            if bpy.app.background:
+                print(f"PhysAnim: frame {job.frame}/{job.frame_end} "
+                      f"({job.state.particle_count:,} particles)", flush=True)
+
+        try:
+            if only is not None and not only:
+                raise PhysanimError("no selected object is a PhysAnim emitter",
+                                    obj=context.scene.name, kind="scene")
+            info = bake.run(context, only, progress)
+        except (PhysanimError, OSError, ValueError) as exc:
+            self.report({'ERROR'}, str(exc))
+            return {'CANCELLED'}
+        finally:
+            wm.progress_end()
+        self.report({'INFO'}, info)
+        return {'FINISHED'}
+
+    def invoke(self, context, event):
+        if bpy.app.background:
+            return self.execute(context)
+        try:
+            self._job = self._make_job(context)
+        except (PhysanimError, OSError) as exc:
+            self.report({'ERROR'}, str(exc))
+            return {'CANCELLED'}
+        wm = context.window_manager
+        wm.progress_begin(0, max(1, self._job.total_frames))
+        self._timer = wm.event_timer_add(0.0, window=context.window)
+        wm.modal_handler_add(self)
+        return {'RUNNING_MODAL'}
+
+    def modal(self, context, event):
+        if event.type == 'ESC':
+            self._job.abort()
+            self._end(context)
+            self.report({'WARNING'}, "PhysAnim bake cancelled; the previous bake is unchanged")
+            return {'CANCELLED'}
+        if event.type != 'TIMER':
+            return {'PASS_THROUGH'}
+        import time
+
+        job = self._job
+        try:
+            deadline = time.perf_counter() + FRAME_BUDGET_S
+            done = False
+            while not done and time.perf_counter() < deadline:
+                done = job.step(context)
+            context.window_manager.progress_update(job.frame - job.frame_start)
+            context.workspace.status_text_set(
+                f"PhysAnim: baking frame {job.frame}/{job.frame_end} — "
+                f"{job.state.particle_count:,} particles (Esc to cancel)")
+            if not done:
+                return {'RUNNING_MODAL'}
+            info = job.finish(context)
+        except (PhysanimError, OSError, ValueError) as exc:
+            job.abort()
+            self._end(context)
+            self.report({'ERROR'}, str(exc))
+            return {'CANCELLED'}
+        self._end(context)
+        self.report({'INFO'}, info)
+        return {'FINISHED'}
+
+    def _end(self, context):
+        wm = context.window_manager
+        if self._timer is not None:
+            wm.event_timer_remove(self._timer)
+            self._timer = None
+        wm.progress_end()
+        context.workspace.status_text_set(None)
+
+
+class PHYSANIM_OT_free_bake(bpy.types.Operator):
+    """Delete PhysAnim bake results and caches (nothing else)"""
+
+    bl_idname = "physanim.free_bake"
+    bl_label = "Free PhysAnim Bake"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    only_selected: BoolProperty(name="Only Selected", default=False)
+
+    def execute(self, context):
+        scene = context.scene
+        only = _selected_names(context) if self.only_selected else None
+        freed = 0
+        try:
+            for ob in extract.gather(scene, only).emitters:
+                freed += results.free(scene, ob)
+        except (PhysanimError, OSError) as exc:
+            self.report({'ERROR'}, str(exc))
+            return {'CANCELLED'}
+        if only is None:
+            scene.physanim.bake_hash = ""
+            scene.physanim.bake_info = ""
+        self.report({'INFO'}, f"freed {freed} bake(s)")
+        return {'FINISHED'}
+
+
+class PHYSANIM_OT_stop_edit(bpy.types.Operator):
+    """Add or remove a stop of an emitter's color or size curve"""
+
+    bl_idname = "physanim.stop_edit"
+    bl_label = "Edit Curve Stop"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    curve: EnumProperty(items=[('COLOR', "Color", ""), ('SIZE', "Size", "")])
+    action: EnumProperty(items=[('ADD', "Add", ""), ('REMOVE', "Remove", "")])
+    index: IntProperty(default=-1)
+
+    @classmethod
+    def poll(cls, context):
+        return context.object is not None
+
+    def execute(self, context):
+        p = context.object.physanim.emitter
+        stops = p.color_stops if self.curve == 'COLOR' else p.size_stops
+        if self.action == 'ADD':
+            last = stops[len(stops) - 1] if len(stops) else None
+            new = stops.add()
+            if last is not None:
+                new.position = min(1.0, last.position + 0.1) if last.position < 1.0 else 1.0
+                new.color, new.value = last.color, last.value
+        elif 0 <= self.index < len(stops):
+            stops.remove(self.index)
+        return {'FINISHED'}
+
+
+CLASSES = (PHYSANIM_OT_bake, PHYSANIM_OT_free_bake, PHYSANIM_OT_stop_edit)
+
+
+def register() -> None:
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+
+
+def unregister() -> None:
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)

@@ -1,0 +1,226 @@
+"""Panels: object roles in the Physics tab, scene settings and Bake/Free in the Scene tab (and
+repeated under the object's roles so an animator never has to switch tabs to re-bake)."""
+from __future__ import annotations
+
+import bpy
+
+from . import extract
+
+
+def bake_status(scene) -> tuple[str, str]:
+    """(text, icon) telling whether the scene's bake matches the scene."""
+    s = scene.physanim
+    if not s.bake_hash:
+        return "Not baked", 'INFO'
+    try:
+        current = extract.inputs_hash(scene, extract.gather(scene))
+    except Exception as exc:  # noqa: BLE001 — a panel must draw whatever the scene holds
+        return f"Cannot check bake: {exc}", 'ERROR'
+    if current != s.bake_hash:
+        return "Bake is outdated: the scene changed since it was baked", 'ERROR'
+    return s.bake_info or "Baked", 'CHECKMARK'
+
+
+def draw_bake_buttons(layout, scene) -> None:
+    text, icon = bake_status(scene)
+    layout.label(text=text, icon=icon)
+    row = layout.row(align=True)
+    row.operator("physanim.bake", text="Bake", icon='PHYSICS').only_selected = False
+    row.operator("physanim.bake", text="Bake Selected").only_selected = True
+    row.operator("physanim.free_bake", text="Free", icon='TRASH').only_selected = False
+
+
+class _PhysicsPanel:
+    bl_space_type = 'PROPERTIES'
+    bl_region_type = 'WINDOW'
+    bl_context = "physics"
+
+
+class PHYSANIM_PT_object(_PhysicsPanel, bpy.types.Panel):
+    bl_label = "PhysAnim"
+
+    @classmethod
+    def poll(cls, context):
+        return context.object is not None
+
+    def draw(self, context):
+        p = context.object.physanim
+        row = self.layout.row(align=True)
+        row.prop(p.emitter, "enabled", toggle=True, icon='PARTICLES')
+        row.prop(p.collider, "enabled", toggle=True, icon='MOD_PHYSICS')
+        row.prop(p.force, "enabled", toggle=True, icon='FORCE_WIND')
+        draw_bake_buttons(self.layout.box(), context.scene)
+
+
+class PHYSANIM_PT_emitter(_PhysicsPanel, bpy.types.Panel):
+    bl_label = "Emitter"
+    bl_parent_id = "PHYSANIM_PT_object"
+
+    @classmethod
+    def poll(cls, context):
+        return context.object is not None and context.object.physanim.emitter.enabled
+
+    def draw(self, context):
+        ob = context.object
+        p = ob.physanim.emitter
+        layout = self.layout
+        layout.use_property_split = True
+        col = layout.column()
+        col.prop(p, "source")
+        if p.source == 'DEATHS':
+            col.prop(p, "parent")
+        elif p.source != 'ORIGIN' and ob.type != 'MESH':
+            col.label(text="This source needs a mesh object", icon='ERROR')
+        elif p.source in ('FACES', 'VOLUME') and ob.type == 'MESH' and not len(ob.data.polygons):
+            col.label(text="The mesh has no faces", icon='ERROR')
+        col.prop(p, "direction")
+        if p.direction == 'AXIS' or (p.direction == 'NORMAL' and p.source in ('ORIGIN', 'VOLUME')):
+            col.prop(p, "axis")
+        col.prop(p, "spread")
+        col = layout.column(align=True)
+        col.prop(p, "rate")
+        col.prop(p, "rate_random", text="Random")
+        col = layout.column(align=True)
+        col.prop(p, "frame_start", text="Frame Start")
+        col.prop(p, "frame_end", text="End")
+        col = layout.column(align=True)
+        col.prop(p, "lifetime")
+        col.prop(p, "lifetime_random", text="Random")
+        col = layout.column(align=True)
+        col.prop(p, "speed")
+        col.prop(p, "speed_random", text="Random")
+        layout.prop(p, "inherit_velocity")
+        col = layout.column(align=True)
+        col.prop(p, "mass")
+        col.prop(p, "size")
+        col.prop(p, "size_random", text="Random")
+        layout.prop(p, "seed")
+
+
+class PHYSANIM_PT_emitter_look(_PhysicsPanel, bpy.types.Panel):
+    bl_label = "Render"
+    bl_parent_id = "PHYSANIM_PT_emitter"
+
+    def draw(self, context):
+        p = context.object.physanim.emitter
+        layout = self.layout
+        layout.use_property_split = True
+        layout.prop(p, "output")
+        layout.prop(p, "instance_object")
+        layout.prop(p, "stretch")
+        if p.result is not None:
+            layout.prop(p, "result")
+        for curve, stops, field in (('COLOR', p.color_stops, "color"), ('SIZE', p.size_stops, "value")):
+            box = layout.box()
+            head = box.row()
+            head.label(text="Color over Life" if curve == 'COLOR' else "Size over Life")
+            add = head.operator("physanim.stop_edit", text="", icon='ADD')
+            add.curve, add.action = curve, 'ADD'
+            for i, stop in enumerate(stops):
+                row = box.row(align=True)
+                row.prop(stop, "position", text="")
+                row.prop(stop, field, text="")
+                rem = row.operator("physanim.stop_edit", text="", icon='REMOVE')
+                rem.curve, rem.action, rem.index = curve, 'REMOVE', i
+
+
+class PHYSANIM_PT_emitter_springs(_PhysicsPanel, bpy.types.Panel):
+    bl_label = "Spring Chain"
+    bl_parent_id = "PHYSANIM_PT_emitter"
+    bl_options = {'DEFAULT_CLOSED'}
+
+    def draw_header(self, context):
+        self.layout.prop(context.object.physanim.emitter, "link", text="")
+
+    def draw(self, context):
+        p = context.object.physanim.emitter
+        layout = self.layout
+        layout.use_property_split = True
+        layout.active = p.link
+        layout.prop(p, "link_stiffness")
+        layout.prop(p, "link_damping")
+        layout.prop(p, "link_rest_length")
+
+
+class PHYSANIM_PT_collider(_PhysicsPanel, bpy.types.Panel):
+    bl_label = "Collider"
+    bl_parent_id = "PHYSANIM_PT_object"
+
+    @classmethod
+    def poll(cls, context):
+        return context.object is not None and context.object.physanim.collider.enabled
+
+    def draw(self, context):
+        p = context.object.physanim.collider
+        layout = self.layout
+        layout.use_property_split = True
+        layout.prop(p, "shape")
+        layout.prop(p, "restitution")
+        layout.prop(p, "friction")
+
+
+class PHYSANIM_PT_force(_PhysicsPanel, bpy.types.Panel):
+    bl_label = "Force"
+    bl_parent_id = "PHYSANIM_PT_object"
+
+    @classmethod
+    def poll(cls, context):
+        return context.object is not None and context.object.physanim.force.enabled
+
+    def draw(self, context):
+        p = context.object.physanim.force
+        layout = self.layout
+        layout.use_property_split = True
+        layout.prop(p, "type")
+        if p.type == 'DRAG':
+            layout.prop(p, "linear")
+            layout.prop(p, "quadratic")
+            return
+        layout.prop(p, "strength")
+        if p.type == 'WIND':
+            layout.prop(p, "noise")
+            sub = layout.column()
+            sub.active = p.noise > 0.0
+            sub.prop(p, "noise_scale")
+            sub.prop(p, "noise_speed")
+            sub.prop(p, "seed")
+        elif p.type == 'ATTRACTOR':
+            layout.prop(p, "falloff")
+            layout.prop(p, "min_distance")
+            layout.prop(p, "max_distance")
+
+
+class PHYSANIM_PT_scene(bpy.types.Panel):
+    bl_label = "PhysAnim"
+    bl_space_type = 'PROPERTIES'
+    bl_region_type = 'WINDOW'
+    bl_context = "scene"
+
+    def draw(self, context):
+        s = context.scene.physanim
+        layout = self.layout
+        layout.use_property_split = True
+        col = layout.column(align=True)
+        col.prop(s, "frame_start", text="Frame Start")
+        col.prop(s, "frame_end", text="End")
+        layout.prop(s, "substeps")
+        layout.prop(s, "integrator")
+        if s.integrator == 'RK45':
+            layout.prop(s, "tolerance")
+        layout.prop(s, "seed")
+        layout.prop(s, "cache_dir")
+        draw_bake_buttons(layout.box(), context.scene)
+
+
+CLASSES = (PHYSANIM_PT_object, PHYSANIM_PT_emitter, PHYSANIM_PT_emitter_look,
+           PHYSANIM_PT_emitter_springs, PHYSANIM_PT_collider, PHYSANIM_PT_force, PHYSANIM_PT_scene)
+
+
+def register() -> None:
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+
+
+def unregister() -> None:
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)

@@ -1,0 +1,222 @@
+"""Blender properties: ``scene.physanim`` and ``object.physanim.<role>`` (DESIGN.md names).
+
+Every number has hard limits (``min``/``max``) that keep a bake finite; ``soft_*`` limits shape the
+sliders. Values an animator may want to change over time are plain animatable properties: the
+extract step samples them per frame.
+"""
+from __future__ import annotations
+
+import math
+
+import bpy
+from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProperty,
+                       FloatVectorProperty, IntProperty, PointerProperty, StringProperty)
+
+from ..core.integrators import INTEGRATORS
+
+INTEGRATOR_ITEMS = [
+    ('EULER', "Euler", "Explicit Euler: first order, cheapest, least stable"),
+    ('SYMPLECTIC_EULER', "Symplectic Euler", "Semi-implicit Euler: first order, keeps energy bounded"),
+    ('MIDPOINT', "Midpoint", "Explicit midpoint: second order"),
+    ('RK4', "RK4", "Classic Runge-Kutta: fourth order"),
+    ('RK45', "RK45 (adaptive)", "Dormand-Prince 5(4): adapts its step to the tolerance"),
+    ('IMPLICIT', "Implicit Euler", "Backward Euler: stable for stiff springs, damps motion"),
+]
+assert tuple(i[0] for i in INTEGRATOR_ITEMS) == INTEGRATORS
+
+SOURCE_ITEMS = [
+    ('ORIGIN', "Origin", "Emit from the object's origin"),
+    ('VERTS', "Vertices", "Emit from the mesh's vertices"),
+    ('FACES', "Faces", "Emit from the mesh's faces, evenly by area"),
+    ('VOLUME', "Volume", "Emit from inside a closed mesh"),
+    ('DEATHS', "Particle Deaths", "Burst where particles of the parent emitter die (sub-emitter)"),
+]
+DIRECTION_ITEMS = [
+    ('NORMAL', "Normal", "Along the surface normal (origin: the axis; deaths: the dying particle's velocity)"),
+    ('AXIS', "Axis", "Along an axis of the emitter object"),
+    ('RANDOM', "Random", "In every direction"),
+]
+AXIS_ITEMS = [(a, a, f"Local {a} axis") for a in ("X", "Y", "Z", "-X", "-Y", "-Z")]
+OUTPUT_ITEMS = [
+    ('POINTS', "Points", "A point cloud with attributes, instanced by Geometry Nodes (any count)"),
+    ('OBJECTS', "Objects", "One keyframed object per particle (small counts)"),
+]
+COLLIDER_SHAPE_ITEMS = [
+    ('HALF_SPACE', "Ground", "Infinite plane through the origin along local XY; below it is solid"),
+    ('PLANE', "Plane", "Two-sided square of Blender's plane primitive (local XY, -1..1)"),
+    ('SPHERE', "Sphere", "Blender's UV/ico sphere primitive (radius 1, scaled by the object)"),
+    ('BOX', "Box", "Blender's cube primitive (-1..1, scaled and rotated by the object)"),
+]
+FORCE_ITEMS = [
+    ('WIND', "Wind", "Push along the object's local Z axis, with optional gusts"),
+    ('DRAG', "Drag", "Air resistance opposing each particle's velocity"),
+    ('ATTRACTOR', "Attractor", "Pull towards (or push away from) the object's origin"),
+    ('VORTEX', "Vortex", "Swirl around the object's local Z axis"),
+]
+
+
+class PHYSANIM_PG_stop(bpy.types.PropertyGroup):
+    """One stop of a curve over a particle's life (0 = birth, 1 = death)."""
+
+    position: FloatProperty(name="Position", min=0.0, max=1.0, subtype='FACTOR',
+                            description="Fraction of the particle's life")
+    color: FloatVectorProperty(name="Color", size=4, subtype='COLOR', min=0.0, max=1.0e3,
+                               soft_max=1.0, default=(1.0, 1.0, 1.0, 1.0),
+                               description="Color and alpha (alpha 0 = fully transparent)")
+    value: FloatProperty(name="Size", min=0.0, max=1.0e3, soft_max=2.0, default=1.0,
+                         description="Size factor")
+
+
+def _on_emitter_enabled(self, context):
+    ob = self.id_data
+    if not self.enabled:
+        return
+    if not len(self.color_stops):
+        for pos, col in ((0.0, (1.0, 0.85, 0.3, 1.0)), (1.0, (0.9, 0.2, 0.05, 0.0))):
+            stop = self.color_stops.add()
+            stop.position, stop.color = pos, col
+    if not len(self.size_stops):
+        for pos, val in ((0.0, 1.0), (1.0, 0.5)):
+            stop = self.size_stops.add()
+            stop.position, stop.value = pos, val
+    if ob.type == 'MESH' and len(ob.data.polygons) and self.source == 'ORIGIN':
+        self.source = 'FACES'
+
+
+class PHYSANIM_PG_emitter(bpy.types.PropertyGroup):
+    enabled: BoolProperty(name="Emitter", update=_on_emitter_enabled,
+                          description="Emit particles from this object")
+    source: EnumProperty(name="Source", items=SOURCE_ITEMS, default='ORIGIN')
+    parent: PointerProperty(name="Parent Emitter", type=bpy.types.Object,
+                            description="Emitter whose particle deaths spawn these particles")
+    direction: EnumProperty(name="Direction", items=DIRECTION_ITEMS, default='NORMAL')
+    axis: EnumProperty(name="Axis", items=AXIS_ITEMS, default='Z')
+    rate: FloatProperty(name="Rate", min=0.0, max=1.0e6, soft_max=1000.0, default=20.0,
+                        description="Mean births per frame (per death for sub-emitters)")
+    rate_random: FloatProperty(name="Rate Random", min=0.0, max=1.0e6, soft_max=1000.0,
+                               description="Births per frame = rate + Rand()*this, Rand in [-1, 1]")
+    frame_start: IntProperty(name="Start", default=1, min=-1_000_000, max=1_000_000,
+                             description="First frame that gives births")
+    frame_end: IntProperty(name="End", default=200, min=-1_000_000, max=1_000_000,
+                           description="Births stop at this frame")
+    lifetime: FloatProperty(name="Lifetime", min=0.0, max=1.0e6, soft_max=1000.0, default=50.0,
+                            description="Life span in frames")
+    lifetime_random: FloatProperty(name="Lifetime Random", min=0.0, max=1.0e6, soft_max=1000.0,
+                                   description="Life span +- uniform random, frames")
+    speed: FloatProperty(name="Speed", min=0.0, max=1.0e5, soft_max=100.0, default=5.0,
+                         unit='VELOCITY', description="Initial speed, m/s")
+    speed_random: FloatProperty(name="Speed Random", min=0.0, max=1.0e5, soft_max=100.0,
+                                unit='VELOCITY', description="Initial speed +- uniform random")
+    spread: FloatProperty(name="Spread", min=0.0, max=math.pi, default=math.radians(15.0),
+                          subtype='ANGLE', description="Half angle of the cone of directions")
+    inherit_velocity: FloatProperty(name="Inherit Velocity", min=-100.0, max=100.0,
+                                    soft_min=0.0, soft_max=1.0, default=0.0,
+                                    description="Factor of the emitter's own velocity at the birth "
+                                                "point (1 = thrown by the moving emitter)")
+    mass: FloatProperty(name="Mass", min=1.0e-6, max=1.0e6, default=0.1, unit='MASS')
+    size: FloatProperty(name="Size", min=0.0, max=1.0e3, soft_max=1.0, default=0.05,
+                        unit='LENGTH', description="Radius of a particle's instance")
+    size_random: FloatProperty(name="Size Random", min=0.0, max=1.0e3, soft_max=1.0,
+                               unit='LENGTH')
+    seed: IntProperty(name="Seed", min=0, max=2**31 - 1)
+    color_stops: CollectionProperty(type=PHYSANIM_PG_stop)
+    size_stops: CollectionProperty(type=PHYSANIM_PG_stop)
+    stretch: FloatProperty(name="Stretch", min=0.0, max=100.0, soft_max=1.0, default=0.0,
+                           description="Shape from velocity: stretch along the velocity by "
+                                       "1 + stretch*speed (s/m); 0 keeps particles round")
+    link: BoolProperty(name="Spring Chain", description="Join each particle to the previous one "
+                                                       "with a damped spring")
+    link_stiffness: FloatProperty(name="Stiffness", min=0.0, max=1.0e7, soft_max=1000.0,
+                                  default=50.0, description="Spring constant ks, N/m")
+    link_damping: FloatProperty(name="Damping", min=0.0, max=1.0e6, soft_max=10.0, default=0.5,
+                                description="Spring damping kd, N s/m")
+    link_rest_length: FloatProperty(name="Rest Length", min=-1.0, max=1.0e4, default=-1.0,
+                                    unit='LENGTH', description="Negative: distance at birth")
+    output: EnumProperty(name="Output", items=OUTPUT_ITEMS, default='POINTS')
+    instance_object: PointerProperty(name="Instance", type=bpy.types.Object,
+                                     description="Object drawn at each particle (default: a "
+                                                 "sphere that shows the particle colors)")
+    result: PointerProperty(name="Result", type=bpy.types.Object,
+                            description="Points object made by the bake")
+
+
+class PHYSANIM_PG_collider(bpy.types.PropertyGroup):
+    enabled: BoolProperty(name="Collider", description="Particles bounce off this object")
+    shape: EnumProperty(name="Shape", items=COLLIDER_SHAPE_ITEMS, default='HALF_SPACE')
+    restitution: FloatProperty(name="Restitution", min=0.0, max=1.0, default=0.5,
+                               subtype='FACTOR', description="Normal speed kept after a bounce")
+    friction: FloatProperty(name="Friction", min=0.0, max=100.0, soft_max=2.0, default=0.3,
+                            description="Coulomb friction coefficient")
+
+
+class PHYSANIM_PG_force(bpy.types.PropertyGroup):
+    enabled: BoolProperty(name="Force", description="This object is a force field")
+    type: EnumProperty(name="Type", items=FORCE_ITEMS, default='WIND')
+    strength: FloatProperty(name="Strength", min=-1.0e6, max=1.0e6, soft_min=-100.0,
+                            soft_max=100.0, default=1.0, description="Force, N")
+    noise: FloatProperty(name="Gusts", min=0.0, max=100.0, soft_max=2.0,
+                         description="Strength of gusts relative to the steady wind")
+    noise_scale: FloatProperty(name="Gust Size", min=1.0e-3, max=1.0e4, default=2.0,
+                               unit='LENGTH', description="Size of a gust")
+    noise_speed: FloatProperty(name="Gust Frequency", min=0.0, max=1.0e3, default=0.5,
+                               description="How fast gusts change, 1/s")
+    linear: FloatProperty(name="Linear", min=0.0, max=1.0e6, soft_max=10.0, default=0.05,
+                          description="Drag proportional to speed, kg/s")
+    quadratic: FloatProperty(name="Quadratic", min=0.0, max=1.0e6, soft_max=10.0,
+                             description="Drag proportional to speed squared, kg/m")
+    falloff: FloatProperty(name="Falloff", min=0.0, max=10.0, default=2.0,
+                           description="Power of the distance in the attractor's falloff")
+    min_distance: FloatProperty(name="Min Distance", min=1.0e-4, max=1.0e4, default=0.1,
+                                unit='LENGTH')
+    max_distance: FloatProperty(name="Max Distance", min=0.0, max=1.0e6, default=0.0,
+                                unit='LENGTH', description="0 = unlimited")
+    seed: IntProperty(name="Seed", min=0, max=2**31 - 1)
+
+
+class PHYSANIM_PG_result(bpy.types.PropertyGroup):
+    """Set on the points object a bake makes: where its per-frame cache lives."""
+
+    cache: StringProperty(name="Cache", subtype='DIR_PATH',
+                          description="Folder of this result's per-frame point files")
+    emitter: StringProperty(name="Emitter")
+    fps: FloatProperty(name="FPS", default=24.0, description="Frames per second of the bake")
+
+
+class PHYSANIM_PG_object(bpy.types.PropertyGroup):
+    emitter: PointerProperty(type=PHYSANIM_PG_emitter)
+    collider: PointerProperty(type=PHYSANIM_PG_collider)
+    force: PointerProperty(type=PHYSANIM_PG_force)
+    result: PointerProperty(type=PHYSANIM_PG_result)
+
+
+class PHYSANIM_PG_scene(bpy.types.PropertyGroup):
+    frame_start: IntProperty(name="Start", default=1, min=-1_000_000, max=1_000_000)
+    frame_end: IntProperty(name="End", default=250, min=-1_000_000, max=1_000_000)
+    substeps: IntProperty(name="Substeps", default=2, min=1, max=1000, soft_max=50,
+                          description="Simulation steps per frame")
+    integrator: EnumProperty(name="Integrator", items=INTEGRATOR_ITEMS, default='SYMPLECTIC_EULER')
+    tolerance: FloatProperty(name="Tolerance", default=1.0e-4, min=1.0e-10, max=1.0,
+                             precision=6, description="Error tolerance of the adaptive RK45")
+    seed: IntProperty(name="Seed", min=0, max=2**31 - 1)
+    cache_dir: StringProperty(name="Cache", subtype='DIR_PATH', default="//physanim_cache",
+                              description="Folder for bake caches ('//' = next to the .blend)")
+    bake_hash: StringProperty(name="Bake Hash", options={'HIDDEN'})
+    bake_info: StringProperty(name="Bake Info", options={'HIDDEN'})
+
+
+CLASSES = (PHYSANIM_PG_stop, PHYSANIM_PG_emitter, PHYSANIM_PG_collider, PHYSANIM_PG_force,
+           PHYSANIM_PG_result, PHYSANIM_PG_object, PHYSANIM_PG_scene)
+
+
+def register() -> None:
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+    bpy.types.Object.physanim = PointerProperty(type=PHYSANIM_PG_object)
+    bpy.types.Scene.physanim = PointerProperty(type=PHYSANIM_PG_scene)
+
+
+def unregister() -> None:
+    del bpy.types.Scene.physanim
+    del bpy.types.Object.physanim
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)

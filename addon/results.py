@@ -1,0 +1,205 @@
+"""Native results of a particle bake: the points object per emitter, refreshed from the cache on
+every frame change by a persistent handler, and the optional keyframed-objects output.
+
+The points object carries ``physanim.result.cache`` (a '//'-relative folder of per-frame files).
+``frame_change_pre`` and ``load_post`` handlers load the current frame into its mesh, so
+scrubbing, headless animation renders and a reloaded .blend all show the right particles.
+"""
+from __future__ import annotations
+
+import os
+
+import bpy
+import numpy as np
+from bpy.app.handlers import persistent
+
+from ..core.cache import read_frame
+from ..core.errors import PhysanimError
+from . import compat, instancing, points
+
+MAX_KEYED_OBJECTS = 20_000  # the Objects output makes one Blender object per particle
+EMPTY = {"position": np.zeros((0, 3), np.float32)}
+
+
+def _collection_of(ob, scene):
+    return ob.users_collection[0] if ob.users_collection else scene.collection
+
+
+def _result_object(scene, emitter_ob):
+    p = emitter_ob.physanim.emitter
+    res = p.result
+    if res is None or res.name not in bpy.data.objects:
+        mesh = bpy.data.meshes.new(f"{emitter_ob.name}_particles")
+        res = bpy.data.objects.new(f"{emitter_ob.name}_particles", mesh)
+        _collection_of(emitter_ob, scene).objects.link(res)
+        p.result = res
+    return res
+
+
+def attach(context, scene, emitter_ob, cache_rel: str, frame_start: int, frame_end: int) -> None:
+    """Point the emitter's result object at a finished bake and build its output."""
+    p = emitter_ob.physanim.emitter
+    res = _result_object(scene, emitter_ob)
+    res.physanim.result.cache = cache_rel
+    res.physanim.result.emitter = emitter_ob.name
+    instance = p.instance_object or instancing.default_particle_object()
+    instancing.ensure_instancer(res, instance)
+    keyed = _keyed_collection(scene, emitter_ob, create=False)
+    if p.output == 'OBJECTS':
+        write_keyed_objects(scene, emitter_ob, cache_rel, frame_start, frame_end, instance)
+        res.hide_render = True  # the keyed objects render; the points stay for scripts
+    else:
+        if keyed is not None:
+            _remove_collection(keyed)
+        res.hide_render = False
+    refresh(res, scene.frame_current)
+
+
+def refresh(res, frame: int) -> None:
+    """Load ``frame`` of a result's cache into its points mesh (empty outside the bake)."""
+    folder = bpy.path.abspath(res.physanim.result.cache)
+    arrays = read_frame(folder, frame) if folder else None
+    points.write_points(res.data, arrays if arrays is not None else EMPTY)
+
+
+def refresh_scene(scene) -> None:
+    for ob in scene.objects:
+        if ob.type == 'MESH' and ob.physanim.result.cache:
+            try:
+                refresh(ob, scene.frame_current)
+            except (OSError, ValueError) as exc:  # a broken cache must not break playback
+                print(f'PhysAnim: cannot load "{ob.name}" at frame {scene.frame_current}: {exc}')
+
+
+@persistent
+def on_frame_change(scene, depsgraph=None) -> None:
+    refresh_scene(scene)
+
+
+@persistent
+def on_load_post(*_args) -> None:
+    for scene in bpy.data.scenes:
+        refresh_scene(scene)
+
+
+# --- keyframed objects output -------------------------------------------------------------------
+
+def _keyed_collection(scene, emitter_ob, create: bool):
+    name = f"{emitter_ob.name}_particle_objects"
+    coll = bpy.data.collections.get(name)
+    if coll is None and create:
+        coll = bpy.data.collections.new(name)
+        _collection_of(emitter_ob, scene).children.link(coll)
+    return coll
+
+
+def _remove_collection(coll) -> None:
+    for ob in list(coll.objects):
+        ad = ob.animation_data
+        action = ad.action if ad else None
+        bpy.data.objects.remove(ob)
+        if action is not None and action.users == 0:
+            bpy.data.actions.remove(action)
+    bpy.data.collections.remove(coll)
+
+
+def _tracks(folder: str, frame_start: int, frame_end: int):
+    """Every cached frame concatenated: (frame, id, position, size, color), sorted by id."""
+    parts = []
+    for f in range(frame_start, frame_end + 1):
+        a = read_frame(folder, f)
+        if a is None or len(a["id"]) == 0:
+            continue
+        parts.append((np.full(len(a["id"]), f, np.int64), a["id"].astype(np.int64),
+                      a["position"], a["size"], a["color"]))
+    if not parts:
+        return None
+    frames, ids, pos, size, color = (np.concatenate(c) for c in zip(*parts))
+    order = np.lexsort((frames, ids))
+    return frames[order], ids[order], pos[order], size[order], color[order]
+
+
+def write_keyed_objects(scene, emitter_ob, cache_rel: str, frame_start: int, frame_end: int,
+                        instance) -> int:
+    """One linked duplicate of ``instance`` per particle, keyed on location, scale (0 outside its
+    life) and color, written in bulk per F-curve. Returns the number of objects."""
+    folder = bpy.path.abspath(cache_rel)
+    tracks = _tracks(folder, frame_start, frame_end)
+    old = _keyed_collection(scene, emitter_ob, create=False)
+    if old is not None:
+        _remove_collection(old)
+    if tracks is None:
+        return 0
+    frames, ids, pos, size, color = tracks
+    uniq, starts = np.unique(ids, return_index=True)
+    if len(uniq) > MAX_KEYED_OBJECTS:
+        raise PhysanimError(f"{len(uniq):,} particles are too many for the Objects output "
+                            f"(limit {MAX_KEYED_OBJECTS:,}) — use the Points output",
+                            obj=emitter_ob.name, frame=frame_end, kind="emitter")
+    coll = _keyed_collection(scene, emitter_ob, create=True)
+    bounds = np.append(starts, len(ids))
+    for k, pid in enumerate(uniq):
+        lo, hi = bounds[k], bounds[k + 1]
+        ob = bpy.data.objects.new(f"{emitter_ob.name}_p{int(pid)}", instance.data)
+        coll.objects.link(ob)
+        bag = compat.channelbag_for(ob)
+        f = frames[lo:hi].astype(np.float32)
+        for axis in range(3):
+            compat.set_keys(compat.fcurve_ensure(bag, "location", axis), f, pos[lo:hi, axis])
+            compat.set_keys(compat.fcurve_ensure(bag, "color", axis), f, color[lo:hi, axis])
+        compat.set_keys(compat.fcurve_ensure(bag, "color", 3), f, color[lo:hi, 3])
+        # scale: 0 before birth and after death, stepping (CONSTANT) at both ends
+        sf = np.concatenate([[f[0] - 1.0], f, [f[-1] + 1.0]])
+        sv = np.concatenate([[0.0], size[lo:hi], [0.0]])
+        for axis in range(3):
+            fc = compat.fcurve_ensure(bag, "scale", axis)
+            compat.set_keys(fc, sf, sv, interpolation='LINEAR')
+            kp = fc.keyframe_points
+            kp[0].interpolation = 'CONSTANT'
+            kp[len(kp) - 2].interpolation = 'CONSTANT'
+    return len(uniq)
+
+
+# --- free bake ---------------------------------------------------------------------------------
+
+def free(scene, emitter_ob) -> bool:
+    """Remove what a bake made for ``emitter_ob``: result object and mesh, keyed objects and
+    their actions, the cache folder. Returns True when there was something to free."""
+    from ..core.cache import remove_cache
+
+    p = emitter_ob.physanim.emitter
+    freed = False
+    res = p.result
+    if res is not None:
+        folder = bpy.path.abspath(res.physanim.result.cache)
+        if folder:
+            remove_cache(os.path.dirname(os.path.normpath(folder)))
+        mesh = res.data
+        bpy.data.objects.remove(res)
+        if mesh is not None and mesh.users == 0:
+            bpy.data.meshes.remove(mesh)
+        p.result = None
+        freed = True
+    keyed = _keyed_collection(scene, emitter_ob, create=False)
+    if keyed is not None:
+        _remove_collection(keyed)
+        freed = True
+    instancing.remove_unused()
+    return freed
+
+
+HANDLERS = (("frame_change_pre", on_frame_change), ("load_post", on_load_post))
+
+
+def register() -> None:
+    for name, fn in HANDLERS:
+        handlers = getattr(bpy.app.handlers, name)
+        if fn not in handlers:
+            handlers.append(fn)
+
+
+def unregister() -> None:
+    for name, fn in HANDLERS:
+        handlers = getattr(bpy.app.handlers, name)
+        while fn in handlers:
+            handlers.remove(fn)

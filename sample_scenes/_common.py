@@ -1,0 +1,99 @@
+"""Shared set-up for the sample scenes: camera, light, world, ground material, render settings."""
+from __future__ import annotations
+
+import math
+
+import bpy
+import numpy as np
+from mathutils import Vector
+
+
+def look_at(ob, target) -> None:
+    direction = Vector(target) - ob.location
+    ob.rotation_euler = direction.to_track_quat('-Z', 'Y').to_euler()
+
+
+def stage(scene, camera_location, target, frame_end: int = 120) -> None:
+    """Camera, sun, world and frame range; Cycles with few samples renders previews fast."""
+    scene.frame_start, scene.frame_end = 1, frame_end
+    scene.physanim.frame_start, scene.physanim.frame_end = 1, frame_end
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    scene.collection.objects.link(cam)
+    cam.location = camera_location
+    look_at(cam, target)
+    scene.camera = cam
+    sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", 'SUN'))
+    sun.data.energy = 3.0
+    sun.rotation_euler = (math.radians(40), math.radians(10), math.radians(30))
+    scene.collection.objects.link(sun)
+    world = bpy.data.worlds.new("World")
+    world.color = (0.02, 0.025, 0.035)
+    scene.world = world
+    r = scene.render
+    r.engine = 'CYCLES'
+    scene.cycles.device = 'CPU'
+    scene.cycles.samples = 24
+    if hasattr(scene.cycles, "use_denoising"):
+        scene.cycles.use_denoising = False
+    r.resolution_x, r.resolution_y, r.resolution_percentage = 640, 360, 100
+    r.image_settings.file_format = 'PNG'
+    scene.view_settings.view_transform = 'Standard'
+
+
+def material(name: str, color, emission: float = 0.0):
+    mat = bpy.data.materials.new(name)
+    if bpy.app.version < (5, 0, 0):
+        mat.use_nodes = True
+    bsdf = next(n for n in mat.node_tree.nodes if n.type == 'BSDF_PRINCIPLED')
+    bsdf.inputs["Base Color"].default_value = (*color, 1.0)
+    if emission:
+        bsdf.inputs["Emission Color"].default_value = (*color, 1.0)
+        bsdf.inputs["Emission Strength"].default_value = emission
+    mat.diffuse_color = (*color, 1.0)
+    return mat
+
+
+def add_mesh(scene, name: str, make) -> bpy.types.Object:
+    """A mesh object built by a bmesh primitive ``make(bm)`` (no operators: works headless)."""
+    import bmesh
+
+    me = bpy.data.meshes.new(name)
+    bm = bmesh.new()
+    make(bm)
+    bm.to_mesh(me)
+    bm.free()
+    ob = bpy.data.objects.new(name, me)
+    scene.collection.objects.link(ob)
+    return ob
+
+
+def ground(scene, size: float = 20.0, color=(0.18, 0.2, 0.22)):
+    import bmesh
+
+    ob = add_mesh(scene, "Ground", lambda bm: bmesh.ops.create_grid(
+        bm, x_segments=1, y_segments=1, size=1.0))
+    ob.scale = (size, size, 1.0)
+    ob.data.materials.append(material("Ground", color))
+    ob.physanim.collider.enabled = True
+    ob.physanim.collider.shape = 'HALF_SPACE'
+    return ob
+
+
+def points(scene, emitter_name: str, frame: int) -> dict[str, np.ndarray]:
+    """Attributes of an emitter's result points at ``frame`` (read back from Blender)."""
+    scene.frame_set(frame)
+    res = bpy.data.objects[emitter_name].physanim.emitter.result
+    me = res.data
+    n = len(me.vertices)
+    out = {"position": np.empty(n * 3, np.float32)}
+    me.attributes["position"].data.foreach_get("vector", out["position"])
+    out["position"] = out["position"].reshape(n, 3)
+    for name, comp, size in (("id", "value", 1), ("age", "value", 1), ("velocity", "vector", 3),
+                             ("color", "color", 4), ("size", "value", 1)):
+        attr = me.attributes.get(name)
+        if attr is None:
+            continue
+        buf = np.empty(n * size, np.int32 if name == "id" else np.float32)
+        attr.data.foreach_get(comp, buf)
+        out[name] = buf.reshape(n, size) if size > 1 else buf
+    return out

@@ -1,0 +1,185 @@
+"""Affine transforms: decompose/compose, slerp, and the interpolated TransformPath."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from physanim.core.transforms import (
+    TransformPath, compose, decompose, matrix_to_quaternion, quaternion_to_matrix, slerp,
+)
+
+
+def _axis_angle_quat(axis, angle):
+    a = np.asarray(axis, dtype=np.float64)
+    a = a / np.linalg.norm(a)
+    return np.concatenate([[math.cos(angle / 2)], math.sin(angle / 2) * a])
+
+
+def _quat_angle(q0, q1):
+    """Rotation angle between two unit quaternions [rad]."""
+    return 2.0 * math.acos(min(1.0, abs(float(np.dot(q0, q1)))))
+
+
+def _random_trs(rng, mirror=False):
+    q = rng.normal(size=4)
+    q /= np.linalg.norm(q)
+    scale = rng.uniform(0.2, 3.0, size=3)
+    if mirror:
+        scale[rng.integers(3)] *= -1.0
+    return compose(rng.normal(size=3) * 5, q, scale), q, scale
+
+
+@pytest.mark.parametrize("mirror", [False, True])
+def test_decompose_compose_round_trip(mirror):
+    rng = np.random.default_rng(1)
+    for _ in range(50):
+        m, q, scale = _random_trs(rng, mirror)
+        t, q2, s2 = decompose(m)
+        np.testing.assert_allclose(compose(t, q2, s2), m, atol=1e-12)
+        np.testing.assert_allclose(t, m[:3, 3])
+        assert abs(np.linalg.norm(q2) - 1.0) < 1e-12
+        np.testing.assert_allclose(np.abs(s2), np.abs(scale), rtol=1e-12)
+        if not mirror:  # same rotation (q and -q are the same rotation)
+            assert abs(abs(np.dot(q, q2)) - 1.0) < 1e-12
+
+
+def test_quaternion_matrix_round_trip_all_branches():
+    # Shepperd's method branches on the largest diagonal term: cover each with 180 degree turns
+    # about x, y, z (trace -1) and a generic rotation.
+    for axis, angle in (([1, 0, 0], math.pi), ([0, 1, 0], math.pi), ([0, 0, 1], math.pi),
+                        ([1, 2, 3], 0.7), ([1, 1, 0], 3.0)):
+        q = _axis_angle_quat(axis, angle)
+        r = quaternion_to_matrix(q)
+        np.testing.assert_allclose(r @ r.T, np.eye(3), atol=1e-12)
+        q2 = matrix_to_quaternion(r)
+        assert abs(abs(np.dot(q, q2)) - 1.0) < 1e-12
+
+
+def test_slerp_endpoints_and_shortest_arc():
+    q0 = _axis_angle_quat([0, 0, 1], 0.3)
+    q1 = _axis_angle_quat([1, 1, 0], 2.0)
+    np.testing.assert_allclose(slerp(q0, q1, 0.0), q0, atol=1e-12)
+    np.testing.assert_allclose(slerp(q0, q1, 1.0), q1, atol=1e-12)
+    # -q1 is the same rotation: slerp takes the shorter arc and ends on that rotation
+    mid_a = slerp(q0, q1, 0.5)
+    mid_b = slerp(q0, -q1, 0.5)
+    assert abs(abs(np.dot(mid_a, mid_b)) - 1.0) < 1e-12
+    assert abs(abs(np.dot(slerp(q0, -q1, 1.0), q1)) - 1.0) < 1e-12
+
+
+@pytest.mark.parametrize("angle", [0.5, 2.0, 3.0])
+def test_slerp_constant_angular_speed(angle):
+    # The rotation angle from q0 grows linearly in s: s * angle (within rounding).
+    q0 = _axis_angle_quat([1, -2, 0.5], 0.4)
+    q1 = _quat_mul(_axis_angle_quat([0.3, 0.2, 1.0], angle), q0)
+    s = np.linspace(0.0, 1.0, 21)
+    qs = slerp(q0, q1, s)
+    assert qs.shape == (21, 4)
+    np.testing.assert_allclose(np.linalg.norm(qs, axis=1), 1.0, atol=1e-12)
+    angles = [_quat_angle(q0, q) for q in qs]
+    np.testing.assert_allclose(angles, s * angle, atol=1e-7)
+
+
+def test_slerp_nearly_parallel_is_stable():
+    q0 = _axis_angle_quat([0, 0, 1], 0.2)
+    q1 = _axis_angle_quat([0, 0, 1], 0.2 + 1e-9)
+    q = slerp(q0, q1, np.array([0.0, 0.5, 1.0]))
+    assert np.all(np.isfinite(q))
+    np.testing.assert_allclose(q[1], _axis_angle_quat([0, 0, 1], 0.2 + 0.5e-9), atol=1e-12)
+
+
+def _quat_mul(a, b):
+    w1, x1, y1, z1 = a
+    w2, x2, y2, z2 = b
+    return np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
+
+
+def _path_pair(rng):
+    m0, _, _ = _random_trs(rng)
+    m1, _, _ = _random_trs(rng)
+    return m0, m1
+
+
+def test_path_matrices_and_points_at_ends():
+    rng = np.random.default_rng(2)
+    m0, m1 = _path_pair(rng)
+    path = TransformPath(m0, m1)
+    assert not path.static
+    np.testing.assert_allclose(path.matrices(0.0), m0, atol=1e-12)
+    np.testing.assert_allclose(path.matrices(1.0), m1, atol=1e-12)
+    local = rng.normal(size=(10, 3))
+    np.testing.assert_allclose(path.points(local, 0.0), local @ m0[:3, :3].T + m0[:3, 3],
+                               atol=1e-12)
+    np.testing.assert_allclose(path.points(local, 1.0), local @ m1[:3, :3].T + m1[:3, 3],
+                               atol=1e-12)
+    s = rng.random(10)
+    m = path.matrices(s)
+    assert m.shape == (10, 4, 4)
+    np.testing.assert_allclose(path.points(local, s),
+                               np.einsum("nij,nj->ni", m[:, :3, :3], local) + m[:, :3, 3])
+
+
+def test_path_interpolates_scale_without_shrinking_rotation():
+    # Component-wise lerp of two rotation matrices shrinks the middle; the TRS path keeps the
+    # determinant at the lerped scale product.
+    m0 = compose([0, 0, 0], _axis_angle_quat([0, 0, 1], 0.0), [1, 1, 1])
+    m1 = compose([2, 0, 0], _axis_angle_quat([0, 0, 1], math.pi * 0.9), [3, 1, 1])
+    mid = TransformPath(m0, m1).matrices(0.5)
+    np.testing.assert_allclose(np.linalg.det(mid[:3, :3]), 2.0, rtol=1e-12)
+    np.testing.assert_allclose(mid[:3, 3], [1, 0, 0])
+    t, q, s = decompose(mid)
+    np.testing.assert_allclose(s, [2, 1, 1], rtol=1e-12)
+    assert _quat_angle(q, _axis_angle_quat([0, 0, 1], 0.0)) == pytest.approx(math.pi * 0.45)
+
+
+def test_static_path():
+    m = compose([1, 2, 3], _axis_angle_quat([1, 0, 0], 0.3), [2, 2, 2])
+    path = TransformPath(m, m.copy())
+    assert path.static
+    local = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 1.0]])
+    np.testing.assert_array_equal(path.point_velocities(local, 0.5, 0.1), 0.0)
+    np.testing.assert_allclose(path.points(local, 0.3), local @ m[:3, :3].T + m[:3, 3])
+    assert path.matrices(np.zeros(4)).shape == (4, 4, 4)
+
+
+def test_point_velocities_of_rotation_are_omega_cross_r():
+    # A rotation of `angle` about axis a through centre c over `duration`: v = w x (x - c) with
+    # w = angle / duration * a. Central difference of width 2e-4 in s: relative error
+    # ~ (w duration ds)^2 / 6 < 1e-8.
+    rng = np.random.default_rng(4)
+    axis = np.array([1.0, -1.0, 2.0]) / math.sqrt(6.0)
+    angle, duration = 1.2, 0.5
+    centre = np.array([0.5, 0.0, -1.0])
+    scale = np.array([1.5, 0.5, 2.0])
+    q1 = _axis_angle_quat(axis, angle)
+
+    # x = R(s) S l + centre: the transform turns about `centre`
+    m0 = compose(centre, [1.0, 0.0, 0.0, 0.0], scale)
+    m1 = compose(centre, q1, scale)
+    path = TransformPath(m0, m1)
+    local = rng.normal(size=(20, 3))
+    s = rng.uniform(0.05, 0.95, size=20)
+    x = path.points(local, s)
+    w = angle / duration * axis
+    v = path.point_velocities(local, s, duration)
+    np.testing.assert_allclose(v, np.cross(w, x - centre), rtol=1e-6, atol=1e-8)
+    # at s = 1 the difference is one-sided over [1 - ds, 1]: the chord is the tangent at
+    # 1 - ds/2, off by angle * ds / 2 in direction, so |error| <= |v| * angle * ds
+    x1 = path.points(local, 1.0)
+    exact = np.cross(w, x1 - centre)
+    v_end = path.point_velocities(local, np.ones(20), duration)
+    bound = np.linalg.norm(exact, axis=1).max() * angle * 1e-4
+    assert np.abs(v_end - exact).max() <= bound
+
+
+def test_point_velocities_add_local_velocity():
+    # A deforming mesh: the local velocity is mapped by the linear part at s.
+    m0 = compose([0, 0, 0], _axis_angle_quat([0, 0, 1], 0.0), [2, 2, 2])
+    m1 = compose([1, 0, 0], _axis_angle_quat([0, 0, 1], 0.0), [2, 2, 2])
+    path = TransformPath(m0, m1)
+    local = np.zeros((1, 3))
+    v = path.point_velocities(local, 0.5, 0.25, local_velocity=np.array([[0.0, 1.0, 0.0]]))
+    np.testing.assert_allclose(v, [[4.0, 2.0, 0.0]], atol=1e-9)
