@@ -38,9 +38,45 @@ def enable_extension():
     return sys.modules[MODULE]
 
 
-def disable_extension() -> None:
+def build_package(out_dir: str) -> str:
+    """Build the extension zip with Blender's own packaging tool; returns the zip's path."""
+    import subprocess
+
+    import bpy
+
+    tool = os.path.join(bpy.utils.resource_path('LOCAL'),
+                        "scripts/addons_core/bl_pkg/cli/blender_ext.py")
+    os.makedirs(out_dir, exist_ok=True)
+    done = subprocess.run([sys.executable, tool, "build", "--source-dir", str(ROOT),
+                           "--output-dir", out_dir], capture_output=True, text=True)
+    zips = [f for f in os.listdir(out_dir) if f.endswith(".zip")]
+    if done.returncode != 0 or len(zips) != 1:
+        raise RuntimeError(f"extension build failed:\n{done.stdout}\n{done.stderr}")
+    return os.path.join(out_dir, zips[0])
+
+
+def install_package(repo_module: str = "physanim_test"):
+    """Build the zip and install it into a fresh user repository with Blender's installer (as
+    Extensions > Install from Disk does); returns the enabled module."""
+    import bpy
+
+    module = f"bl_ext.{repo_module}.physanim"
+    zip_path = build_package(tempfile.mkdtemp(prefix="physanim_dist_"))
+    repos = bpy.context.preferences.extensions.repos
+    if repo_module not in {r.module for r in repos}:
+        repos.new(name=repo_module, module=repo_module,
+                  custom_directory=tempfile.mkdtemp(prefix="physanim_repo_"), source='USER')
+    # Returns {'FINISHED'} even on failure (guide §1): check the module instead.
+    bpy.ops.extensions.package_install_files(filepath=zip_path, repo=repo_module,
+                                             enable_on_install=True)
+    if module not in sys.modules:
+        raise RuntimeError(f"installing {zip_path} did not enable {module}")
+    return sys.modules[module]
+
+
+def disable_extension(module: str = MODULE) -> None:
     """Disable the extension: its unregister removes every handler it added (Blender 4.2
     crashes and 4.5 hangs at exit when Python handlers stay registered)."""
     import addon_utils
 
-    addon_utils.disable(MODULE, default_set=True)
+    addon_utils.disable(module, default_set=True)
