@@ -170,9 +170,14 @@ class BakeJob:
         if self.frame >= self.frame_end:
             return True
         nxt = self.frame + 1
+        between = []
+        substeps = self.settings.substeps
+        for k in range(1, substeps):  # sub-frame motion keys: one per sub-step boundary
+            self.scene.frame_set(self.frame, subframe=k / substeps)
+            between.append(self.extractor.sample_motion())
         self.scene.frame_set(nxt)
         sample = self.extractor.sample(context.evaluated_depsgraph_get(), nxt)
-        report = self.solver.advance(self.state, self.extractor.inputs(self.sample, sample))
+        report = self.solver.advance(self.state, self.extractor.inputs(self.sample, sample, between))
         self.stats["births"] += report.births
         self.stats["collisions"] += report.collisions
         self.sample = sample

@@ -167,21 +167,39 @@ class Extractor:
                   for ob in self.roles.forces]
         return FrameSample(frame, emitters, colliders, forces)
 
-    def inputs(self, a: FrameSample, b: FrameSample) -> FrameInputs:
-        """Core inputs for the interval from sample ``a`` to sample ``b`` (the next frame)."""
+    def sample_motion(self) -> tuple[list, list]:
+        """World matrices of emitters and colliders at the current (sub-)frame."""
+        return ([convert.matrix(ob.matrix_world) for ob in self.roles.emitters],
+                [convert.matrix(ob.matrix_world) for ob in self.roles.colliders])
+
+    def inputs(self, a: FrameSample, b: FrameSample, between: list | None = None) -> FrameInputs:
+        """Core inputs for the interval from sample ``a`` to sample ``b`` (the next frame).
+
+        Args:
+            between: :meth:`sample_motion` results at evenly spaced sub-frames strictly between
+                ``a`` and ``b``, so curved motion is followed within the frame.
+        """
         to_s = 1.0 / self.fps
+        between = between or []
+
+        def keys(kind: int, i: int, m0, m1):
+            if not between:
+                return None
+            return np.stack([m0] + [mid[kind][i] for mid in between] + [m1])
+
         emitters = []
-        for ob, (m0, v0, val), (m1, v1, _) in zip(self.roles.emitters, a.emitters, b.emitters):
+        for i, (ob, (m0, v0, val), (m1, v1, _)) in enumerate(
+                zip(self.roles.emitters, a.emitters, b.emitters)):
             emitters.append(EmitterFrame(
                 rate=val["rate"], rate_random=val["rate_random"], speed=val["speed"],
                 speed_random=val["speed_random"], lifetime=val["lifetime"] * to_s,
                 lifetime_random=val["lifetime_random"] * to_s, mass=val["mass"],
                 size=val["size"], size_random=val["size_random"], spread=val["spread"],
                 inherit_velocity=val["inherit_velocity"], active=val["active"],
-                matrix0=m0, matrix1=m1, verts0=v0, verts1=v1))
-        colliders = [ColliderFrame(ob.name, shape, m0, m1, rest, fric)
-                     for ob, (m0, shape, rest, fric), (m1, *_)
-                     in zip(self.roles.colliders, a.colliders, b.colliders)]
+                matrix0=m0, matrix1=m1, matrices=keys(0, i, m0, m1), verts0=v0, verts1=v1))
+        colliders = [ColliderFrame(ob.name, shape, m0, m1, rest, fric, keys(1, i, m0, m1))
+                     for i, (ob, (m0, shape, rest, fric), (m1, *_))
+                     in enumerate(zip(self.roles.colliders, a.colliders, b.colliders))]
         forces = [self._force(ob, m, f) for ob, (m, f) in zip(self.roles.forces, a.forces)]
         return FrameInputs(frame=a.frame, t0=a.frame * to_s, frame_dt=(b.frame - a.frame) * to_s,
                            gravity=convert.gravity(self.scene), emitters=emitters,

@@ -61,51 +61,77 @@ def quaternion_to_matrix(q: np.ndarray) -> np.ndarray:
 
 
 def slerp(q0: np.ndarray, q1: np.ndarray, s: np.ndarray | float) -> np.ndarray:
-    """Spherical interpolation of unit quaternions along the shorter arc; ``s`` may be an array."""
+    """Spherical interpolation of unit quaternions along the shorter arc.
+
+    ``q0``/``q1`` are (4,) or (..., 4) (pairwise); ``s`` broadcasts against their leading shape.
+    """
     q0 = np.asarray(q0, dtype=np.float64)
     q1 = np.asarray(q1, dtype=np.float64)
-    d = float(np.dot(q0, q1))
-    if d < 0.0:
-        q1, d = -q1, -d
+    d = np.sum(q0 * q1, axis=-1, keepdims=True)
+    q1 = np.where(d < 0.0, -q1, q1)
+    d = np.abs(d)
     s = np.asarray(s, dtype=np.float64)[..., None]
-    if d > 0.9995:  # nearly parallel: lerp is exact to rounding and avoids 0/0
-        q = q0 + s * (q1 - q0)
-    else:
-        theta = np.arccos(d)
-        q = (np.sin((1.0 - s) * theta) * q0 + np.sin(s * theta) * q1) / np.sin(theta)
+    theta = np.arccos(np.clip(d, -1.0, 1.0))
+    sin_t = np.sin(theta)
+    near = d > 0.9995  # nearly parallel: lerp is exact to rounding and avoids 0/0
+    safe = np.where(near, 1.0, sin_t)
+    w0 = np.where(near, 1.0 - s, np.sin((1.0 - s) * theta) / safe)
+    w1 = np.where(near, s, np.sin(s * theta) / safe)
+    q = w0 * q0 + w1 * q1
     return q / np.linalg.norm(q, axis=-1, keepdims=True)
 
 
 class TransformPath:
-    """A transform moving from ``m0`` (s=0) to ``m1`` (s=1), evaluated at many s at once.
+    """A transform moving through key samples over an interval s = 0..1, evaluated at many s.
+
+    Between keys, translation and scale are interpolated linearly and rotation by slerp, so a
+    rotating object keeps its shape. More keys (sub-frame samples) follow curved motion — an
+    arm's swing — more closely than the two ends of a frame can.
 
     Args:
-        m0: (4, 4) world matrix at the start of the interval.
-        m1: (4, 4) world matrix at the end of the interval.
+        m0: (4, 4) world matrix at s = 0.
+        m1: (4, 4) world matrix at s = 1.
+        samples: optional (k + 1, 4, 4) matrices at s = 0, 1/k, ..., 1 (overrides m0/m1).
     """
 
-    def __init__(self, m0: np.ndarray, m1: np.ndarray):
-        self.m0 = np.asarray(m0, dtype=np.float64)
-        self.m1 = np.asarray(m1, dtype=np.float64)
-        self.static = bool(np.array_equal(self.m0, self.m1))
-        self._t0, self._q0, self._s0 = decompose(self.m0)
-        self._t1, self._q1, self._s1 = decompose(self.m1)
+    def __init__(self, m0: np.ndarray, m1: np.ndarray, samples: np.ndarray | None = None):
+        if samples is None:
+            samples = np.stack([np.asarray(m0, np.float64), np.asarray(m1, np.float64)])
+        self.samples = np.asarray(samples, dtype=np.float64)
+        if self.samples.ndim != 3 or self.samples.shape[1:] != (4, 4) or len(self.samples) < 2:
+            raise ValueError(f"transform samples must be (k + 1, 4, 4) with k >= 1 "
+                             f"(got {self.samples.shape})")
+        self.m0 = self.samples[0]
+        self.m1 = self.samples[-1]
+        self.static = bool(np.all(self.samples == self.samples[0]))
+        parts = [decompose(m) for m in self.samples]
+        self._t = np.array([p[0] for p in parts])
+        q = np.array([p[1] for p in parts])
+        for k in range(1, len(q)):  # keep consecutive keys on the same hemisphere
+            if np.dot(q[k - 1], q[k]) < 0.0:
+                q[k] = -q[k]
+        self._q = q
+        self._s = np.array([p[2] for p in parts])
 
     def matrices(self, s: np.ndarray | float) -> np.ndarray:
         """(..., 4, 4) matrices at interpolation parameters ``s`` in [0, 1]."""
         s = np.asarray(s, dtype=np.float64)
         if self.static:
             return np.broadcast_to(self.m0, s.shape + (4, 4))
-        q = slerp(self._q0, self._q1, s)
+        keys = len(self.samples) - 1
+        x = np.clip(s, 0.0, 1.0) * keys
+        j = np.minimum(np.floor(x), keys - 1).astype(np.int64)
+        w = x - j
+        q = slerp(self._q[j], self._q[j + 1], w)
         w, x, y, z = np.moveaxis(q, -1, 0)
         rot = np.stack([
             np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
             np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
             np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
         ], -2)
-        sv = s[..., None]
-        scale = self._s0 + sv * (self._s1 - self._s0)
-        trans = self._t0 + sv * (self._t1 - self._t0)
+        wv = (np.clip(s, 0.0, 1.0) * keys - j)[..., None]
+        scale = self._s[j] + wv * (self._s[j + 1] - self._s[j])
+        trans = self._t[j] + wv * (self._t[j + 1] - self._t[j])
         out = np.zeros(s.shape + (4, 4))
         out[..., :3, :3] = rot * scale[..., None, :]
         out[..., :3, 3] = trans

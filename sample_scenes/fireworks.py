@@ -13,7 +13,7 @@ NAME = "fireworks"
 
 
 def build(scene) -> None:
-    _common.stage(scene, (0.0, -38.0, 12.0), (0.0, 0.0, 14.0), frame_end=150)
+    _common.stage(scene, (0.0, -75.0, 14.0), (0.0, 0.0, 20.0), frame_end=150)
     scene.world.color = (0.005, 0.005, 0.015)
     _common.ground(scene, size=60.0, color=(0.05, 0.05, 0.06))
     launcher = bpy.data.objects.new("Rockets", None)
@@ -26,7 +26,8 @@ def build(scene) -> None:
     r.frame_start, r.frame_end = 1, 100
     r.speed, r.speed_random = 22.0, 2.0
     r.lifetime, r.lifetime_random = 40.0, 6.0
-    r.size = 0.12
+    r.size = 0.15
+    r.mass = 1.0
     r.seed = 3
     r.color_stops[0].color = (1.0, 0.8, 0.4, 1.0)
     r.color_stops[1].color = (1.0, 0.5, 0.1, 1.0)
@@ -40,7 +41,8 @@ def build(scene) -> None:
     s.speed, s.speed_random = 7.0, 1.5
     s.inherit_velocity = 1.0
     s.lifetime, s.lifetime_random = 45.0, 12.0
-    s.size, s.size_random = 0.06, 0.02
+    s.size, s.size_random = 0.12, 0.04
+    s.mass = 0.05
     s.stretch = 0.05
     s.seed = 7
     s.color_stops.clear()
@@ -52,7 +54,7 @@ def build(scene) -> None:
     scene.collection.objects.link(air)
     air.physanim.force.enabled = True
     air.physanim.force.type = 'DRAG'
-    air.physanim.force.linear = 0.15
+    air.physanim.force.linear = 0.03
     scene.physanim.seed = 11
 
 

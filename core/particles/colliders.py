@@ -35,7 +35,7 @@ class ColliderPath:
 
     @classmethod
     def of(cls, frame: ColliderFrame, frame_dt: float) -> "ColliderPath":
-        return cls(frame, TransformPath(frame.matrix0, frame.matrix1), frame_dt)
+        return cls(frame, TransformPath(frame.matrix0, frame.matrix1, frame.matrices), frame_dt)
 
     def _matrices(self, s: np.ndarray) -> np.ndarray:
         return self.path.matrices(s)

@@ -71,7 +71,7 @@ def sample_births(rng: np.random.Generator, settings: EmitterSettings, frame: Em
     if count == 0:
         return Births.empty()
     u = np.sort(rng.random(count))
-    path = TransformPath(frame.matrix0, frame.matrix1)
+    path = TransformPath(frame.matrix0, frame.matrix1, frame.matrices)
     local_vel = None
     if settings.source == "ORIGIN":
         local = np.zeros((count, 3))

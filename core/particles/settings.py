@@ -133,6 +133,7 @@ class EmitterFrame:
         inherit_velocity: factor of the emitter's velocity at the birth point (robot-arm throw).
         active: whether this emitter gives births in this frame interval.
         matrix0, matrix1: (4, 4) world matrices at the start and end of the interval.
+        matrices: optional (k + 1, 4, 4) sub-frame samples at s = 0, 1/k, ..., 1 (curved motion).
         verts0, verts1: (n, 3) local vertex positions at start and end (None for ``ORIGIN``).
     """
 
@@ -150,6 +151,7 @@ class EmitterFrame:
     active: bool = True
     matrix0: np.ndarray = field(default_factory=lambda: np.eye(4))
     matrix1: np.ndarray = field(default_factory=lambda: np.eye(4))
+    matrices: np.ndarray | None = None
     verts0: np.ndarray | None = None
     verts1: np.ndarray | None = None
 
@@ -167,6 +169,9 @@ class EmitterFrame:
                              f"{LIMIT_BIRTHS_PER_FRAME} per frame (got {self.rate + self.rate_random})")
         _matrix(owner, "matrix0", self.matrix0)
         _matrix(owner, "matrix1", self.matrix1)
+        if self.matrices is not None:
+            for k, m in enumerate(self.matrices):
+                _matrix(owner, f"sub-frame matrix {k}", m)
         for key in ("verts0", "verts1"):
             v = getattr(self, key)
             if v is not None and not np.all(np.isfinite(v)):
@@ -187,6 +192,7 @@ class ColliderFrame:
         name: object name for messages.
         shape: one of :data:`COLLIDER_SHAPES`.
         matrix0, matrix1: (4, 4) world matrices at the interval's start and end.
+        matrices: optional (k + 1, 4, 4) sub-frame samples at s = 0, 1/k, ..., 1.
         restitution: k_r in [0, 1]: normal speed kept after a bounce.
         friction: Coulomb coefficient mu >= 0.
     """
@@ -197,6 +203,7 @@ class ColliderFrame:
     matrix1: np.ndarray
     restitution: float = 0.5
     friction: float = 0.2
+    matrices: np.ndarray | None = None
 
     def __post_init__(self):
         owner = f'collider "{self.name}"'
@@ -210,3 +217,7 @@ class ColliderFrame:
             if abs(np.linalg.det(m[:3, :3])) < 1e-12:
                 raise ValueError(f"{owner}: {key} is singular (a zero scale flattens the collider)")
             object.__setattr__(self, key, m)
+        if self.matrices is not None:
+            for k, m in enumerate(self.matrices):
+                if abs(np.linalg.det(_matrix(owner, f"sub-frame matrix {k}", m)[:3, :3])) < 1e-12:
+                    raise ValueError(f"{owner}: sub-frame matrix {k} is singular (zero scale)")
