@@ -273,3 +273,12 @@ def evaluated_instance_attributes(obj: bpy.types.Object, depsgraph: bpy.types.De
         attribute.data.foreach_get(key, buffer)
         result[name] = buffer.reshape(count, width) if width > 1 else buffer
     return result
+
+
+#: ``options`` for path properties that may hold '//'-relative paths. 4.5 added
+#: ``PATH_SUPPORTS_BLEND_RELATIVE`` and warns (RuntimeWarning) when a path property without it is
+#: given a '//' path; 4.2 has neither the option nor the warning.
+BLEND_RELATIVE_PATH_OPTIONS: set[str] = (
+    {'PATH_SUPPORTS_BLEND_RELATIVE'}
+    if "is_path_supports_blend_relative" in bpy.types.Property.bl_rna.properties else set()
+)

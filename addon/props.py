@@ -13,6 +13,7 @@ from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProp
                        FloatVectorProperty, IntProperty, PointerProperty, StringProperty)
 
 from ..core.integrators import INTEGRATORS
+from .compat import BLEND_RELATIVE_PATH_OPTIONS
 
 INTEGRATOR_ITEMS = [
     ('EULER', "Euler", "Explicit Euler: first order, cheapest, least stable"),
@@ -176,7 +177,7 @@ class PHYSANIM_PG_force(bpy.types.PropertyGroup):
 class PHYSANIM_PG_result(bpy.types.PropertyGroup):
     """Set on the points object a bake makes: where its per-frame cache lives."""
 
-    cache: StringProperty(name="Cache", subtype='DIR_PATH',
+    cache: StringProperty(name="Cache", subtype='DIR_PATH', options=BLEND_RELATIVE_PATH_OPTIONS,
                           description="Folder of this result's per-frame point files")
     emitter: StringProperty(name="Emitter")
     fps: FloatProperty(name="FPS", default=24.0, description="Frames per second of the bake")
@@ -199,6 +200,7 @@ class PHYSANIM_PG_scene(bpy.types.PropertyGroup):
                              precision=6, description="Error tolerance of the adaptive RK45")
     seed: IntProperty(name="Seed", min=0, max=2**31 - 1)
     cache_dir: StringProperty(name="Cache", subtype='DIR_PATH', default="//physanim_cache",
+                              options=BLEND_RELATIVE_PATH_OPTIONS,
                               description="Folder for bake caches ('//' = next to the .blend)")
     bake_hash: StringProperty(name="Bake Hash", options={'HIDDEN'})
     bake_info: StringProperty(name="Bake Info", options={'HIDDEN'})
