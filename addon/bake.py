@@ -16,7 +16,7 @@ import bpy
 import numpy as np
 
 from ..core.cache import CacheWriter
-from ..core.errors import PhysanimError
+from ..core.errors import PhysanimError, SimulationError
 from ..core.particles import ParticleSolver, emitter_arrays
 from . import convert, extract
 
@@ -24,6 +24,7 @@ STREAM = "points"
 BYTES_PER_PARTICLE_FRAME = 4 * (1 + 3 + 3 + 1 + 1 + 1 + 4 + 3 + 3)  # cache arrays of output.py
 BYTES_PER_PARTICLE_STATE = 8 * 16  # float64 state + integrator stages, per particle
 MEMORY_BUDGET = 16 * 2**30  # the bake refuses to start when its estimate exceeds this
+FLOAT32_MAX = float(np.finfo(np.float32).max)  # the cache stores float32
 RK_STAGES = {"EULER": 1, "SYMPLECTIC_EULER": 1, "MIDPOINT": 2, "RK4": 4, "RK45": 7, "IMPLICIT": 4}
 
 
@@ -156,7 +157,24 @@ class BakeJob:
                 f"{free / 2**30:.2f} GiB are free at \"{root}\" — free space or lower rates",
                 obj=self.scene.name, kind="scene")
 
+    def _check_cache_range(self, frame: int) -> None:
+        """Positions and velocities must fit the float32 cache: a value beyond it would be
+        written as inf (silently) although the float64 simulation is still finite."""
+        state = self.state
+        for what, values, unit in (("position", state.particle_x, "m"),
+                                   ("velocity", state.particle_v, "m/s")):
+            big = (np.abs(values) > FLOAT32_MAX).any(axis=1)
+            if big.any():
+                i = int(np.argmax(big))
+                raise SimulationError(
+                    f"particle {int(state.particle_id[i])} {what} reached "
+                    f"{np.array2string(values[i], precision=4)} {unit}, beyond the cache's float32 "
+                    f"range (±{FLOAT32_MAX:.3g}) — check the emitter's motion and the forces",
+                    obj=self.model.emitters[int(state.particle_emitter[i])].name, frame=frame,
+                    kind="emitter")
+
     def _write_frame(self, frame: int) -> None:
+        self._check_cache_range(frame)
         to_frames = convert.fps(self.scene)
         for i, ob in enumerate(self.roles.emitters):
             arrays = emitter_arrays(self.model, self.state, i)

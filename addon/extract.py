@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 from dataclasses import dataclass, field
 
 import bpy
@@ -82,6 +83,37 @@ def _mesh_arrays(ob, depsgraph, triangles: bool):
         ob_eval.to_mesh_clear()
 
 
+def _world_matrix(ob, frame: float, kind: str) -> np.ndarray:
+    """``ob``'s world matrix as numpy; an error naming object, frame and value when it is not
+    finite (a NaN key, a driver dividing by zero), before the core sees it."""
+    m = convert.matrix(ob.matrix_world)
+    if not np.isfinite(m).all():
+        location, scale = ob.matrix_world.to_translation(), ob.matrix_world.to_scale()
+        raise PhysanimError(f"its world matrix became non-finite (location "
+                            f"{tuple(round(v, 4) for v in location)}, scale "
+                            f"{tuple(round(v, 4) for v in scale)}) — check its animation, "
+                            "drivers and parents", obj=ob.name, frame=frame, kind=kind)
+    return m
+
+
+def _check_finite(ob, frame: int, kind: str, values: dict) -> None:
+    """An error naming object, frame and value when a sampled (keyed or driven) number is NaN or
+    infinite; the core would reject it without knowing the frame."""
+    for key, value in values.items():
+        if isinstance(value, float) and not math.isfinite(value):
+            raise PhysanimError(f"{key} is {value} — check its keyframes and drivers",
+                                obj=ob.name, frame=frame, kind=kind)
+
+
+def _framed(ob, frame: int, kind: str, make):
+    """Build a core input; its validation error gains the frame it happened at."""
+    try:
+        return make()
+    except ValueError as exc:
+        detail = str(exc).removeprefix(f'{kind} "{ob.name}": ')
+        raise PhysanimError(detail, obj=ob.name, frame=frame, kind=kind) from exc
+
+
 @dataclass
 class FrameSample:
     """Per-frame values of every role object (read right after ``frame_set(frame)``)."""
@@ -155,22 +187,30 @@ class Extractor:
             values = {k: float(getattr(p, k)) for k in (
                 "rate", "rate_random", "lifetime", "lifetime_random", "speed", "speed_random",
                 "mass", "size", "size_random", "spread", "inherit_velocity")}
+            _check_finite(ob, frame, "emitter", values)
             values["active"] = p.frame_start <= frame < p.frame_end
-            emitters.append((convert.matrix(ob.matrix_world), verts, values))
-        colliders = [(convert.matrix(ob.matrix_world), ob.physanim.collider.shape,
-                      ob.physanim.collider.restitution, ob.physanim.collider.friction)
-                     for ob in self.roles.colliders]
-        forces = [(convert.matrix(ob.matrix_world),
-                   {k: getattr(ob.physanim.force, k) for k in (
-                       "type", "strength", "noise", "noise_scale", "noise_speed", "linear",
-                       "quadratic", "falloff", "min_distance", "max_distance", "seed")})
-                  for ob in self.roles.forces]
+            emitters.append((_world_matrix(ob, frame, "emitter"), verts, values))
+        colliders = []
+        for ob in self.roles.colliders:
+            c = ob.physanim.collider
+            _check_finite(ob, frame, "collider",
+                          {"restitution": c.restitution, "friction": c.friction})
+            colliders.append((_world_matrix(ob, frame, "collider"), c.shape, c.restitution,
+                              c.friction))
+        forces = []
+        for ob in self.roles.forces:
+            values = {k: getattr(ob.physanim.force, k) for k in (
+                "type", "strength", "noise", "noise_scale", "noise_speed", "linear",
+                "quadratic", "falloff", "min_distance", "max_distance", "seed")}
+            _check_finite(ob, frame, "force", values)
+            forces.append((_world_matrix(ob, frame, "force"), values))
         return FrameSample(frame, emitters, colliders, forces)
 
     def sample_motion(self) -> tuple[list, list]:
         """World matrices of emitters and colliders at the current (sub-)frame."""
-        return ([convert.matrix(ob.matrix_world) for ob in self.roles.emitters],
-                [convert.matrix(ob.matrix_world) for ob in self.roles.colliders])
+        frame = self.scene.frame_current_final
+        return ([_world_matrix(ob, frame, "emitter") for ob in self.roles.emitters],
+                [_world_matrix(ob, frame, "collider") for ob in self.roles.colliders])
 
     def inputs(self, a: FrameSample, b: FrameSample, between: list | None = None) -> FrameInputs:
         """Core inputs for the interval from sample ``a`` to sample ``b`` (the next frame).
@@ -197,10 +237,12 @@ class Extractor:
                 size=val["size"], size_random=val["size_random"], spread=val["spread"],
                 inherit_velocity=val["inherit_velocity"], active=val["active"],
                 matrix0=m0, matrix1=m1, matrices=keys(0, i, m0, m1), verts0=v0, verts1=v1))
-        colliders = [ColliderFrame(ob.name, shape, m0, m1, rest, fric, keys(1, i, m0, m1))
+        colliders = [_framed(ob, a.frame, "collider", lambda: ColliderFrame(
+                         ob.name, shape, m0, m1, rest, fric, keys(1, i, m0, m1)))
                      for i, (ob, (m0, shape, rest, fric), (m1, *_))
                      in enumerate(zip(self.roles.colliders, a.colliders, b.colliders))]
-        forces = [self._force(ob, m, f) for ob, (m, f) in zip(self.roles.forces, a.forces)]
+        forces = [_framed(ob, a.frame, "force", lambda: self._force(ob, m, f))
+                  for ob, (m, f) in zip(self.roles.forces, a.forces)]
         return FrameInputs(frame=a.frame, t0=a.frame * to_s, frame_dt=(b.frame - a.frame) * to_s,
                            gravity=convert.gravity(self.scene), emitters=emitters,
                            colliders=colliders, forces=forces)

@@ -16,7 +16,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ..errors import SimulationError
+from ..errors import PhysanimError, SimulationError
 from ..integrators import Integrator, make_integrator
 from . import colliders as coll
 from .emit import Births, sample_births, sample_bursts
@@ -115,7 +115,11 @@ class ParticleSolver:
             raise ValueError(f"frame {inputs.frame}: {len(inputs.emitters)} emitter inputs for "
                              f"{model.emitter_count} emitters")
         for e, ef in zip(model.emitters, inputs.emitters):
-            ef.validated(e.name)
+            try:
+                ef.validated(e.name)
+            except ValueError as exc:
+                detail = str(exc).removeprefix(f'emitter "{e.name}": ')
+                raise PhysanimError(detail, obj=e.name, frame=inputs.frame, kind="emitter") from exc
         report = FrameReport(per_emitter_births=[0] * model.emitter_count)
         births = [Births.empty() if e.source == "DEATHS" else
                   sample_births(state.rngs[i], e, inputs.emitters[i], inputs.frame_dt)

@@ -6,7 +6,6 @@ Scenes are tiny (tens of particles, about a dozen frames) so the whole file runs
 """
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import sys
@@ -14,7 +13,6 @@ from pathlib import Path
 
 import bpy
 import numpy as np
-import pytest
 from bpy_extras.object_utils import world_to_camera_view
 from mathutils import Vector
 
@@ -194,7 +192,7 @@ def test_result_holds_exactly_the_particles_alive_at_each_frame(physanim_ext, tm
     # age in frames: +1 per frame; never reaching the (frames) lifetime
     for frame in range(1, 12):
         now, nxt = _cached(physanim_ext, a, frame), _cached(physanim_ext, a, frame + 1)
-        common, i, j = np.intersect1d(now["id"], nxt["id"], return_indices=True)
+        _, i, j = np.intersect1d(now["id"], nxt["id"], return_indices=True)
         np.testing.assert_allclose(nxt["age"][j] - now["age"][i], 1.0, atol=1e-4)
         assert (nxt["age"] < 4.0 + 1.5 + 1e-4).all()
 
@@ -320,7 +318,7 @@ def test_bake_is_deterministic_and_hashed(physanim_ext, tmp_path):
 # ---------------------------------------------------------------- keyframed emitter inputs
 
 def test_keyframed_rate_is_sampled_per_frame(physanim_ext, tmp_path):
-    scene = _setup(frame_end=12)
+    _setup(frame_end=12)
     ob = _emitter("Ramp", lifetime=100.0, lifetime_random=0.0)
     _linear_keys(ob, "physanim.emitter.rate", [(1, 0.0), (10, 90.0)])
     _save(tmp_path)
@@ -339,7 +337,7 @@ def test_keyframed_rate_is_sampled_per_frame(physanim_ext, tmp_path):
 
 
 def test_emitter_frame_range_limits_births(physanim_ext, tmp_path):
-    scene = _setup(frame_end=12)
+    _setup(frame_end=12)
     ob = _emitter("Window", rate=5.0, lifetime=100.0, lifetime_random=0.0)
     ob.physanim.emitter.frame_start, ob.physanim.emitter.frame_end = 4, 7
     _save(tmp_path)
@@ -351,7 +349,7 @@ def test_emitter_frame_range_limits_births(physanim_ext, tmp_path):
 
 
 def test_keyframed_frame_start_is_sampled_per_frame(physanim_ext, tmp_path):
-    scene = _setup(frame_end=10)
+    _setup(frame_end=10)
     ob = _emitter("Late", rate=4.0, lifetime=100.0, lifetime_random=0.0)
     ob.physanim.emitter.frame_start = 1
     ob.keyframe_insert("physanim.emitter.frame_start", frame=1)
@@ -409,7 +407,7 @@ def test_free_bake_removes_only_what_the_bake_made(physanim_ext, tmp_path):
         assert {k: getattr(ob.physanim.emitter, k) for k in settings[ob.name]} == settings[ob.name]
     assert user.animation_data.action is not None and user.data == user_mesh
     assert scene.physanim.bake_hash == ""
-    assert scene.frame_set(3) is None  # playback without results does not fail
+    scene.frame_set(3)  # playback without results does not fail
     # and the scene bakes again
     assert bpy.ops.physanim.bake() == {'FINISHED'}
     assert points_emitter.physanim.emitter.result is not None
@@ -528,5 +526,5 @@ def test_particles_ride_a_rising_animated_ground(physanim_ext, tmp_path):
         z = _cached(physanim_ext, drop, frame)["position"][:, 2]
         assert len(z) == 10
         assert z.min() >= ground_z(frame) - 2e-3, (frame, z.min(), ground_z(frame))
-        if frame >= 8:
+        if 8 <= frame <= 20:  # riding the ground (afterwards they may hop off as it stops)
             np.testing.assert_allclose(z, ground_z(frame), atol=0.03, err_msg=f"frame {frame}")

@@ -1,0 +1,160 @@
+"""The command line (`blender -b -c physanim ...`): its handler ``addon.cli.main(argv)`` is called
+directly, as Blender's ``-c`` would, and returns the exit code."""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import bmesh
+import bpy
+import pytest
+
+
+@pytest.fixture
+def cli(physanim_ext):
+    return sys.modules[f"{physanim_ext.__name__}.addon.cli"]
+
+
+def _shot(tmp_path: Path, names=("Fountain",), frame_end: int = 20) -> Path:
+    """A saved .blend with small emitters; the current file is then emptied."""
+    scene = bpy.context.scene
+    scene.physanim.frame_start, scene.physanim.frame_end = 1, frame_end
+    for i, name in enumerate(names):
+        ob = bpy.data.objects.new(name, None)
+        scene.collection.objects.link(ob)
+        ob.location.x = 2.0 * i
+        p = ob.physanim.emitter
+        p.enabled = True
+        p.rate, p.lifetime, p.speed, p.seed = 4.0, 6.0, 2.0, i
+    path = tmp_path / "shot.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    return path
+
+
+def _open(path: Path):
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    return bpy.context.scene
+
+
+def _emitter_folder(path: Path, name: str) -> Path:
+    return path.parent / "physanim_cache" / "Scene" / name
+
+
+def test_main_is_the_registered_command_handler(cli):
+    assert callable(cli.main)
+    assert len(cli._handles) == 1  # register() hooked it up as `-c physanim`
+    code = cli.main(["--help"])
+    assert isinstance(code, int) and code == 0
+
+
+def test_bake_frames_and_save(cli, tmp_path, capsys):
+    path = _shot(tmp_path)
+
+    assert cli.main(["bake", str(path), "--frames", "1-10", "--save"]) == 0
+
+    out = capsys.readouterr().out
+    for frame in range(1, 11):  # a line per frame
+        assert f"physanim: frame {frame}:" in out
+    assert "physanim: frame 11:" not in out
+    assert f"saved {path}" in out
+    scene = _open(path)
+    ob = scene.objects["Fountain"]
+    res = ob.physanim.emitter.result
+    assert res is not None and res.physanim.result.cache.startswith("//")
+    assert (scene.physanim.frame_start, scene.physanim.frame_end) == (1, 10)
+    meta = json.loads((_emitter_folder(path, "Fountain") / "meta.json").read_text())
+    assert (meta["frame_start"], meta["frame_end"]) == (1, 10)
+    assert meta["hash"] == scene.physanim.bake_hash
+    scene.frame_set(6)
+    assert len(res.data.vertices) > 0
+    assert len(res.data.attributes["id"].data) == len(res.data.vertices)
+
+
+def test_bake_without_save_leaves_the_file(cli, tmp_path):
+    path = _shot(tmp_path)
+    before = path.read_bytes()
+    assert cli.main(["bake", str(path), "--frames", "1-4"]) == 0
+    assert path.read_bytes() == before
+    assert bpy.data.objects["Fountain"].physanim.emitter.result is not None  # in memory only
+
+
+def test_bake_only_the_named_objects(cli, tmp_path):
+    path = _shot(tmp_path, names=("Left", "Middle", "Right"))
+
+    assert cli.main(["bake", str(path), "--frames", "1-6", "--objects", "Left, Right",
+                     "--save"]) == 0
+
+    scene = _open(path)
+    assert scene.objects["Left"].physanim.emitter.result is not None
+    assert scene.objects["Right"].physanim.emitter.result is not None
+    assert scene.objects["Middle"].physanim.emitter.result is None
+    assert _emitter_folder(path, "Left").is_dir() and _emitter_folder(path, "Right").is_dir()
+    assert not _emitter_folder(path, "Middle").exists()
+
+
+@pytest.mark.parametrize("frames", ["x", "1-", "5:10", "1-2-3"])
+def test_bad_frames_is_a_usage_error(cli, tmp_path, capsys, frames):
+    path = _shot(tmp_path)
+    code = cli.main(["bake", str(path), "--frames", frames, "--save"])
+    assert code != 0
+    assert frames in capsys.readouterr().out
+    assert not (tmp_path / "physanim_cache").exists()
+
+
+def test_bad_arguments_are_usage_errors(cli, tmp_path):
+    path = _shot(tmp_path)
+    assert cli.main([]) != 0
+    assert cli.main(["explode", str(path)]) != 0
+    assert cli.main(["bake", str(path), "--scene", "NoSuchScene"]) != 0
+    assert not (tmp_path / "physanim_cache").exists()
+
+
+def test_failing_bake_returns_1_and_prints_the_error(cli, tmp_path, capsys):
+    path = _shot(tmp_path)
+    scene = _open(path)
+    me = bpy.data.meshes.new("Wire")
+    bm = bmesh.new()
+    a, b = bm.verts.new((0.0, 0.0, 0.0)), bm.verts.new((1.0, 0.0, 0.0))
+    bm.edges.new((a, b))
+    bm.to_mesh(me)
+    bm.free()
+    wire = bpy.data.objects.new("Wire", me)
+    scene.collection.objects.link(wire)
+    wire.physanim.emitter.enabled = True
+    wire.physanim.emitter.source = 'FACES'
+    bpy.ops.wm.save_mainfile()
+    before = path.read_bytes()
+    capsys.readouterr()
+
+    assert cli.main(["bake", str(path), "--frames", "1-5", "--save"]) == 1
+
+    out = capsys.readouterr().out
+    assert 'physanim: error: emitter "Wire" at frame 1' in out and "no faces" in out
+    assert path.read_bytes() == before  # not saved after a failure
+    assert not (tmp_path / "physanim_cache").exists() or not any(
+        p.is_file() for p in (tmp_path / "physanim_cache").rglob("*"))
+
+
+def test_unknown_object_is_a_failure(cli, tmp_path, capsys):
+    path = _shot(tmp_path)
+    assert cli.main(["bake", str(path), "--objects", "Nope"]) == 1
+    out = capsys.readouterr().out
+    assert "error" in out and "Nope" in out
+
+
+def test_free_removes_the_bake(cli, tmp_path):
+    path = _shot(tmp_path, names=("A", "B"))
+    assert cli.main(["bake", str(path), "--frames", "1-5", "--save"]) == 0
+    assert _emitter_folder(path, "A").is_dir()
+
+    assert cli.main(["free", str(path), "--save"]) == 0
+
+    scene = _open(path)
+    for name in ("A", "B"):
+        ob = scene.objects[name]
+        assert ob.physanim.emitter.enabled and ob.physanim.emitter.result is None
+        assert not _emitter_folder(path, name).exists()
+    assert "A_particles" not in bpy.data.objects and "B_particles" not in bpy.data.objects
+    assert scene.physanim.bake_hash == ""
