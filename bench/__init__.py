@@ -1,0 +1,1 @@
+"""Benchmarks: commands that print tables (``tools/bench.sh``). Never timed assertions."""
