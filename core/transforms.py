@@ -170,3 +170,57 @@ class TransformPath:
             m = self.matrices(s)
             vel = vel + np.einsum("nij,nj->ni", m[:, :3, :3], local_velocity)
         return vel
+
+
+# --- small dense linear algebra without BLAS ---------------------------------------------------
+# numpy sends (n, 3) @ (3, 3) and 3x3/4x4 inverses to (multi-threaded) BLAS/LAPACK, whose call
+# overhead dwarfs the arithmetic here; these closed forms are plain vectorised element-wise math.
+
+def norm_rows(a: np.ndarray) -> np.ndarray:
+    """Euclidean norm of each row of (n, k) ``a``."""
+    return np.sqrt(np.einsum("ij,ij->i", a, a))
+
+
+def inverse3(a: np.ndarray) -> np.ndarray:
+    """Inverse of (..., 3, 3) matrices by the adjugate formula."""
+    a = np.asarray(a, dtype=np.float64)
+    c00 = a[..., 1, 1] * a[..., 2, 2] - a[..., 1, 2] * a[..., 2, 1]
+    c01 = a[..., 1, 2] * a[..., 2, 0] - a[..., 1, 0] * a[..., 2, 2]
+    c02 = a[..., 1, 0] * a[..., 2, 1] - a[..., 1, 1] * a[..., 2, 0]
+    det = a[..., 0, 0] * c00 + a[..., 0, 1] * c01 + a[..., 0, 2] * c02
+    adj = np.empty_like(a)
+    adj[..., 0, 0] = c00
+    adj[..., 1, 0] = c01
+    adj[..., 2, 0] = c02
+    adj[..., 0, 1] = a[..., 0, 2] * a[..., 2, 1] - a[..., 0, 1] * a[..., 2, 2]
+    adj[..., 1, 1] = a[..., 0, 0] * a[..., 2, 2] - a[..., 0, 2] * a[..., 2, 0]
+    adj[..., 2, 1] = a[..., 0, 1] * a[..., 2, 0] - a[..., 0, 0] * a[..., 2, 1]
+    adj[..., 0, 2] = a[..., 0, 1] * a[..., 1, 2] - a[..., 0, 2] * a[..., 1, 1]
+    adj[..., 1, 2] = a[..., 0, 2] * a[..., 1, 0] - a[..., 0, 0] * a[..., 1, 2]
+    adj[..., 2, 2] = a[..., 0, 0] * a[..., 1, 1] - a[..., 0, 1] * a[..., 1, 0]
+    return adj / det[..., None, None]
+
+
+def inverse_affine(m: np.ndarray) -> np.ndarray:
+    """Inverse of (..., 4, 4) affine matrices: [A t; 0 1]^-1 = [A^-1  -A^-1 t; 0 1]."""
+    m = np.asarray(m, dtype=np.float64)
+    out = np.zeros_like(m)
+    inv = inverse3(m[..., :3, :3])
+    out[..., :3, :3] = inv
+    out[..., :3, 3] = -np.einsum("...ij,...j->...i", inv, m[..., :3, 3])
+    out[..., 3, 3] = 1.0
+    return out
+
+
+def transform_points(m: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Points (n, 3) mapped by one (4, 4) affine matrix or per-point (n, 4, 4) matrices."""
+    if m.ndim == 2:
+        return (x[:, 0:1] * m[:3, 0] + x[:, 1:2] * m[:3, 1] + x[:, 2:3] * m[:3, 2]) + m[:3, 3]
+    return np.einsum("nij,nj->ni", m[:, :3, :3], x) + m[:, :3, 3]
+
+
+def transform_vectors(a: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Vectors (n, 3) mapped by one (3, 3) matrix or per-vector (n, 3, 3) matrices."""
+    if a.ndim == 2:
+        return v[:, 0:1] * a[:, 0] + v[:, 1:2] * a[:, 1] + v[:, 2:3] * a[:, 2]
+    return np.einsum("nij,nj->ni", a, v)

@@ -16,7 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..transforms import TransformPath
+from ..transforms import (TransformPath, inverse3, inverse_affine, norm_rows, transform_points,
+                          transform_vectors)
 from .forces import ContactForce
 from .settings import ColliderFrame
 
@@ -37,33 +38,33 @@ class ColliderPath:
     def of(cls, frame: ColliderFrame, frame_dt: float) -> "ColliderPath":
         return cls(frame, TransformPath(frame.matrix0, frame.matrix1, frame.matrices), frame_dt)
 
-    def _matrices(self, s: np.ndarray) -> np.ndarray:
+    def _at(self, s) -> np.ndarray:
+        """The matrix at ``s``: one (4, 4) when s is a scalar or the same for every particle
+        (the common case, far cheaper), else (n, 4, 4)."""
+        s = np.asarray(s, dtype=np.float64)
+        if self.path.static:
+            return self.path.m0
+        if s.ndim == 0 or (len(s) and s.min() == s.max()):
+            return self.path.matrices(float(s.flat[0]) if s.size else 0.0)
         return self.path.matrices(s)
 
-    def to_local(self, x: np.ndarray, s: np.ndarray) -> np.ndarray:
-        m = self._matrices(s)
-        if self.path.static:
-            inv = np.linalg.inv(self.path.m0)
-            return x @ inv[:3, :3].T + inv[:3, 3]
-        inv = np.linalg.inv(m)
-        return np.einsum("nij,nj->ni", inv[:, :3, :3], x) + inv[:, :3, 3]
+    def to_local(self, x: np.ndarray, s) -> np.ndarray:
+        return transform_points(inverse_affine(self._at(s)), x)
 
-    def to_world(self, l: np.ndarray, n_local: np.ndarray, s: np.ndarray):
+    def to_world(self, l: np.ndarray, n_local: np.ndarray, s):
         """World points and unit normals of local points/normals at parameters s."""
-        m = self._matrices(s)
-        if self.path.static:
-            lin = self.path.m0[:3, :3]
-            p = l @ lin.T + self.path.m0[:3, 3]
-            n = n_local @ np.linalg.inv(lin)  # inverse-transpose maps normals
-        else:
-            lin = m[:, :3, :3]
-            p = np.einsum("nij,nj->ni", lin, l) + m[:, :3, 3]
-            n = np.einsum("nji,nj->ni", np.linalg.inv(lin), n_local)
-        n /= np.linalg.norm(n, axis=1, keepdims=True)
+        m = self._at(s)
+        lin = m[..., :3, :3]
+        p = transform_points(m, l)
+        n = transform_vectors(np.swapaxes(inverse3(lin), -1, -2), n_local)  # inverse-transpose
+        n /= norm_rows(n)[:, None]
         return p, n
 
-    def surface_velocity(self, l: np.ndarray, s: np.ndarray) -> np.ndarray:
-        return self.path.point_velocities(l, s, self.frame_dt)
+    def surface_velocity(self, l: np.ndarray, s) -> np.ndarray:
+        if self.path.static:
+            return np.zeros_like(l)
+        return self.path.point_velocities(l, np.broadcast_to(np.asarray(s, float), len(l)),
+                                          self.frame_dt)
 
 
 # --- shape geometry in local space -------------------------------------------------------------
@@ -183,6 +184,62 @@ def reflect(u: np.ndarray, n: np.ndarray, restitution: float, friction: float,
     return ut * keep[:, None] + un_new[:, None] * n
 
 
+def _local_z(col: ColliderPath, x: np.ndarray, s) -> np.ndarray:
+    """Local z of points (the only coordinate planes need): one row of the inverse matrix."""
+    inv = inverse_affine(col._at(s))
+    if inv.ndim == 2:
+        return x[:, 0] * inv[2, 0] + x[:, 1] * inv[2, 1] + x[:, 2] * inv[2, 2] + inv[2, 3]
+    return np.einsum("nj,nj->n", inv[:, 2, :3], x) + inv[:, 2, 3]
+
+
+def _segment_candidates(col: ColliderPath, start, end, s_start, s_end) -> np.ndarray | None:
+    """Indices of segments that may hit a plane-like collider (cheap z test), or None when
+    every segment must be tested (spheres, boxes)."""
+    shape = col.frame.shape
+    if shape not in ("HALF_SPACE", "PLANE"):
+        return None
+    z1 = _local_z(col, end, s_end)
+    if shape == "HALF_SPACE":
+        return np.nonzero(z1 < 0.0)[0]
+    z0 = _local_z(col, start, s_start)
+    return np.nonzero((z0 > 0.0) & (z1 <= 0.0) | (z0 < 0.0) & (z1 >= 0.0))[0]
+
+
+def _first_hits(colliders, start, x, s_start, s_end):
+    """Earliest collider entry of each segment start -> x: (collider index or -1, t, local
+    normal, local hit point)."""
+    count = len(x)
+    best_t = np.full(count, np.inf)
+    best = np.full(count, -1)
+    normals = np.zeros((count, 3))
+    locals_ = np.zeros((count, 3))
+    for ci, col in enumerate(colliders):
+        cand = _segment_candidates(col, start, x, s_start, s_end)
+        if cand is None:
+            cand = np.arange(count)
+        if len(cand) == 0:
+            continue
+        l0 = col.to_local(start[cand], s_start[cand])
+        l1 = col.to_local(x[cand], s_end[cand])
+        hit, t, n_local = _segment_hit(col.frame.shape, l0, l1)
+        l_hit = l0 + t[:, None] * (l1 - l0)
+        # a collider that moved onto a particle: push it out to the nearest surface point
+        stuck = ~hit & _inside(col.frame.shape, l1)
+        if stuck.any():
+            p, n_in, _ = _closest(col.frame.shape, l1[stuck])
+            l_hit[stuck] = p
+            n_local[stuck] = n_in
+            t = np.where(stuck, 1.0, t)
+            hit = hit | stuck
+        better = hit & (t < best_t[cand])
+        g = cand[better]
+        best_t[g] = t[better]
+        best[g] = ci
+        normals[g] = n_local[better]
+        locals_[g] = l_hit[better]
+    return best, best_t, normals, locals_
+
+
 def respond(colliders: list[ColliderPath], x0: np.ndarray, x1: np.ndarray, v0: np.ndarray,
             v1: np.ndarray, s0: float, s1: float, h: float, rest_speed: float):
     """Continuous collision response for a sub-step [s0, s1] of the frame interval.
@@ -202,54 +259,41 @@ def respond(colliders: list[ColliderPath], x0: np.ndarray, x1: np.ndarray, v0: n
     s_end = np.full(len(x), float(s1))
     v_start = v0.copy()
     hits = 0
+    active = np.arange(len(x))  # pass 1 tests everyone; later passes only re-test the hit ones
+    touched = []
     for _ in range(PASSES):
-        best_t = np.full(len(x), np.inf)
-        best = np.full(len(x), -1)
-        normals = np.zeros_like(x)
-        locals_ = np.zeros_like(x)
-        for ci, col in enumerate(colliders):
-            l0 = col.to_local(start, s_start)
-            l1 = col.to_local(x, s_end)
-            hit, t, n_local = _segment_hit(col.frame.shape, l0, l1)
-            # a collider that moved onto a particle: push it out to the nearest surface point
-            stuck = ~hit & _inside(col.frame.shape, l1)
-            if stuck.any():
-                p, n_in, _ = _closest(col.frame.shape, l1[stuck])
-                l1s = l1.copy()
-                l1s[stuck] = p
-                n_local = n_local.copy()
-                n_local[stuck] = n_in
-                t = np.where(stuck, 1.0, t)
-                hit = hit | stuck
-                l_hit = np.where(stuck[:, None], l1s, l0 + t[:, None] * (l1 - l0))
-            else:
-                l_hit = l0 + t[:, None] * (l1 - l0)
-            better = hit & (t < best_t)
-            best_t = np.where(better, t, best_t)
-            best = np.where(better, ci, best)
-            normals[better] = n_local[better]
-            locals_[better] = l_hit[better]
+        best, best_t, normals, locals_ = _first_hits(
+            colliders, start[active], x[active], s_start[active], s_end[active])
         if not (best >= 0).any():
             break
         for ci, col in enumerate(colliders):
-            idx = np.nonzero(best == ci)[0]
-            if len(idx) == 0:
+            sub = np.nonzero(best == ci)[0]
+            if len(sub) == 0:
                 continue
-            t = best_t[idx]
+            idx = active[sub]
+            t = best_t[sub]
             s_hit = s_start[idx] + t * (s_end[idx] - s_start[idx])
-            p_w, n_w = col.to_world(locals_[idx], normals[idx], s_hit)
+            p_w, n_w = col.to_world(locals_[sub], normals[sub], s_hit)
             v_hit = v_start[idx] + t[:, None] * (v[idx] - v_start[idx])
-            v_c = col.surface_velocity(locals_[idx], s_hit)
+            v_c = col.surface_velocity(locals_[sub], s_hit)
             u = reflect(v_hit - v_c, n_w, col.frame.restitution, col.frame.friction, rest_speed)
-            v_new = u + v_c
+            # the forces keep acting for the rest of the sub-step after the impact
+            dv_after = (1.0 - t)[:, None] * (v[idx] - v_start[idx])
+            v_new = u + v_c + dv_after
             remaining = (1.0 - t) * (s_end[idx] - s_start[idx]) / max(s1 - s0, 1e-300) * h
             start[idx] = p_w + SKIN * n_w
             s_start[idx] = s_hit
             v_start[idx] = v_new
-            x[idx] = start[idx] + remaining[:, None] * v_new
+            x[idx] = start[idx] + remaining[:, None] * (v_new - 0.5 * dv_after)
             v[idx] = v_new
             hits += len(idx)
-    hits += _push_out(colliders, x, v, s_end)
+        active = active[best >= 0]
+        touched.append(active)
+    if touched:
+        moved = np.unique(np.concatenate(touched))
+        xs, vs = x[moved], v[moved]
+        hits += _push_out(colliders, xs, vs, s_end[moved])
+        x[moved], v[moved] = xs, vs
     return x, v, hits
 
 
@@ -284,22 +328,32 @@ def contacts(colliders: list[ColliderPath], x: np.ndarray, v: np.ndarray, s: flo
     normal = np.zeros((count, 3))
     surf_v = np.zeros((count, 3))
     mu = np.zeros(count)
-    sv = np.full(count, float(s))
     for col in colliders if count else ():
-        l = col.to_local(x, sv)
+        if col.frame.shape in ("HALF_SPACE", "PLANE"):
+            # cheap prefilter: world distance to the plane is local z / |grad z|
+            inv = inverse_affine(col._at(s))
+            z = _local_z(col, x, s)
+            cand = np.nonzero(np.abs(z) < CONTACT_DISTANCE * np.linalg.norm(inv[2, :3]))[0]
+        else:
+            cand = np.arange(count)
+        if len(cand) == 0:
+            continue
+        sv = np.full(len(cand), float(s))
+        l = col.to_local(x[cand], s)
         p, n_local, valid = _closest(col.frame.shape, l)
-        p_w, n_w = col.to_world(p, n_local, sv)
-        d = np.einsum("ij,ij->i", x - p_w, n_w)
-        near = valid & (d > -CONTACT_DISTANCE) & (d < CONTACT_DISTANCE) & (np.abs(d) < best_d)
+        p_w, n_w = col.to_world(p, n_local, s)
+        d = np.einsum("ij,ij->i", x[cand] - p_w, n_w)
+        near = valid & (d > -CONTACT_DISTANCE) & (d < CONTACT_DISTANCE) & (np.abs(d) < best_d[cand])
         if not near.any():
             continue
-        idx = np.nonzero(near)[0]
-        vc = col.surface_velocity(p[idx], sv[idx])
-        un = np.einsum("ij,ij->i", v[idx] - vc, n_w[idx])
+        sub = np.nonzero(near)[0]
+        vc = col.surface_velocity(p[sub], sv[sub])
+        un = np.einsum("ij,ij->i", v[cand[sub]] - vc, n_w[sub])
         ok = un < rest_speed
-        idx, vc = idx[ok], vc[ok]
-        best_d[idx] = np.abs(d[idx])
-        normal[idx] = n_w[idx]
+        sub, vc = sub[ok], vc[ok]
+        idx = cand[sub]
+        best_d[idx] = np.abs(d[sub])
+        normal[idx] = n_w[sub]
         surf_v[idx] = vc
         mu[idx] = col.frame.friction
     idx = np.nonzero(np.isfinite(best_d))[0]

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..transforms import TransformPath
+from ..transforms import TransformPath, inverse3, norm_rows, transform_vectors
 from . import sources
 from .settings import EmitterFrame, EmitterSettings
 
@@ -105,10 +105,9 @@ def sample_births(rng: np.random.Generator, settings: EmitterSettings, frame: Em
     if settings.direction == "RANDOM":
         base = sources.random_directions(rng, count)
     else:
-        m = path.matrices(u)
-        lin = m[:, :3, :3] if m.ndim == 3 else np.broadcast_to(m[:3, :3], (count, 3, 3))
-        base = np.einsum("nji,nj->ni", np.linalg.inv(lin), axis_dir)  # normals: inverse-transpose
-        base /= np.linalg.norm(base, axis=1, keepdims=True)
+        lin = path.m0[:3, :3] if path.static else path.matrices(u)[:, :3, :3]
+        base = transform_vectors(np.swapaxes(inverse3(lin), -1, -2), axis_dir)  # inverse-transpose
+        base /= norm_rows(base)[:, None]
     direction = sources.cone_directions(rng, base, frame.spread) if frame.spread > 0 else base
     return _finish(rng, settings, frame, u, x, direction, v_emitter)
 

@@ -26,9 +26,10 @@ def emitter_arrays(model: ParticleModel, state: ParticleState, emitter: int) -> 
 
     Returns a dict of contiguous arrays: ``id`` (n,) int32, ``position`` and ``velocity`` (n, 3)
     float32 [m], [m/s], ``age`` (n,) [s], ``life`` (n,) [s], ``size`` (n,) [m] (base size times
-    the size curve), ``color`` (n, 4) RGBA (color curve over the life fraction), and the instance
-    transform the renderer uses: ``instance_scale`` (n, 3) and ``instance_rotation`` (n, 3) Euler
-    — with shape-from-velocity (``stretch``) the instance is aligned to and stretched along v.
+    the size curve), ``color`` (n, 4) RGBA (color curve over the life fraction) and, with
+    shape-from-velocity (``stretch`` > 0), the instance transform the renderer uses:
+    ``instance_scale`` (n, 3) and ``instance_rotation`` (n, 3) Euler, aligning the instance with
+    v and stretching it along v. Without them the renderer scales instances by ``size``.
     """
     settings = model.emitters[emitter]
     sel = state.particle_emitter == emitter
@@ -41,14 +42,8 @@ def emitter_arrays(model: ParticleModel, state: ParticleState, emitter: int) -> 
     life = state.particle_life[sel]
     frac = np.clip(age / np.where(life > 0.0, life, np.inf), 0.0, 1.0)
     size = state.particle_size[sel] * settings.size.evaluate(frac)[:, 0]
-    scale = np.repeat(size[:, None], 3, axis=1)
-    if settings.stretch > 0.0:
-        scale[:, 2] *= 1.0 + settings.stretch * np.linalg.norm(v, axis=1)
-        rotation = velocity_alignment(v)
-    else:
-        rotation = np.zeros_like(v)
     f32 = np.float32
-    return {
+    out = {
         "id": ids.astype(np.int32),
         "position": np.ascontiguousarray(state.particle_x[sel], f32),
         "velocity": np.ascontiguousarray(v, f32),
@@ -56,6 +51,10 @@ def emitter_arrays(model: ParticleModel, state: ParticleState, emitter: int) -> 
         "life": life.astype(f32),
         "size": size.astype(f32),
         "color": np.ascontiguousarray(settings.color.evaluate(frac), f32),
-        "instance_scale": np.ascontiguousarray(scale, f32),
-        "instance_rotation": np.ascontiguousarray(rotation, f32),
     }
+    if settings.stretch > 0.0:  # round particles need no instance transform: size scales them
+        scale = np.repeat(size[:, None], 3, axis=1)
+        scale[:, 2] *= 1.0 + settings.stretch * np.linalg.norm(v, axis=1)
+        out["instance_scale"] = np.ascontiguousarray(scale, f32)
+        out["instance_rotation"] = np.ascontiguousarray(velocity_alignment(v), f32)
+    return out
