@@ -209,6 +209,8 @@ class BakeJob:
 
         meta = {"hash": self.hash, "frame_start": self.frame_start, "frame_end": self.frame_end,
                 "fps": convert.fps(self.scene), "kind": "particles"}
+        for writer in self.writers.values():  # every frame on disk before any bake is swapped in
+            writer.flush()
         for ob in self.roles.emitters:
             path = self.writers[ob.name].commit(dict(meta, emitter=ob.name))
             results.attach(context, self.scene, ob, relative_path(os.path.join(path, STREAM)),

@@ -16,6 +16,7 @@ import json
 import os
 import shutil
 import uuid
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from typing import Mapping
 
@@ -23,6 +24,7 @@ import numpy as np
 
 META_NAME = "meta.json"
 FORMAT_VERSION = 1
+WRITES_IN_FLIGHT = 2  # frames queued for the writer thread; bounds the memory a bake holds
 
 
 def frame_file(stream_dir: str | os.PathLike, frame: int) -> Path:
@@ -56,7 +58,7 @@ class CacheWriter:
             writable, otherwise :class:`PermissionError`/:class:`OSError` names the folder.
     """
 
-    def __init__(self, cache_dir: str | os.PathLike):
+    def __init__(self, cache_dir: str | os.PathLike, background: bool = True):
         self.cache_dir = Path(cache_dir)
         parent = self.cache_dir.parent
         try:
@@ -73,9 +75,17 @@ class CacheWriter:
             raise OSError(f'cache folder "{parent}" is not writable: {exc.strerror}') from exc
         self._streams: set[str] = set()
         self._closed = False
+        # Files are written by one background thread (file I/O releases the GIL), so the next
+        # frame simulates while this one goes to disk; at most WRITES_IN_FLIGHT frames wait.
+        self._pool = ThreadPoolExecutor(1, "physanim-cache") if background else None
+        self._pending: list[Future] = []
 
     def write_frame(self, stream: str, frame: int, arrays: Mapping[str, np.ndarray]) -> Path:
-        """Write one frame of one stream (e.g. one emitter's particles)."""
+        """Write one frame of one stream (e.g. one emitter's particles).
+
+        The arrays must not be modified afterwards (they may still be queued for writing).
+        Errors of earlier queued writes are raised here or by :meth:`commit`.
+        """
         if self._closed:
             raise RuntimeError("cache writer already committed or aborted")
         stream_dir = self.partial_dir / stream
@@ -83,9 +93,27 @@ class CacheWriter:
             stream_dir.mkdir(parents=True, exist_ok=True)
             self._streams.add(stream)
         path = frame_file(stream_dir, frame)
-        with open(path, "wb") as handle:
-            np.savez(handle, **{k: np.ascontiguousarray(v) for k, v in arrays.items()})
+        data = {k: np.ascontiguousarray(v) for k, v in arrays.items()}
+        if self._pool is None:
+            _save(path, data)
+            return path
+        while len(self._pending) >= WRITES_IN_FLIGHT:
+            self._pending.pop(0).result()
+        self._pending.append(self._pool.submit(_save, path, data))
         return path
+
+    def flush(self) -> None:
+        """Wait for queued writes; raises the first write error."""
+        while self._pending:
+            self._pending.pop(0).result()
+
+    def _shutdown(self) -> None:
+        if self._pool is not None:
+            for future in self._pending:
+                future.cancel()
+            self._pool.shutdown(wait=True)
+            self._pool = None
+        self._pending.clear()
 
     def stream_path(self, stream: str) -> Path:
         """Where ``stream`` will live once committed."""
@@ -95,6 +123,10 @@ class CacheWriter:
         """Write ``meta.json`` and replace the previous bake (if any) with this one."""
         if self._closed:
             raise RuntimeError("cache writer already committed or aborted")
+        try:
+            self.flush()
+        finally:
+            self._shutdown()
         meta = dict(meta, format_version=FORMAT_VERSION, streams=sorted(self._streams))
         with open(self.partial_dir / META_NAME, "w", encoding="utf-8") as handle:
             json.dump(meta, handle, indent=1, sort_keys=True)
@@ -111,8 +143,14 @@ class CacheWriter:
     def abort(self) -> None:
         """Delete the partial bake; the previous bake (if any) is untouched."""
         if not self._closed:
+            self._shutdown()
             shutil.rmtree(self.partial_dir, ignore_errors=True)
             self._closed = True
+
+
+def _save(path: Path, arrays: Mapping[str, np.ndarray]) -> None:
+    with open(path, "wb") as handle:
+        np.savez(handle, **arrays)
 
 
 def remove_cache(cache_dir: str | os.PathLike) -> bool:

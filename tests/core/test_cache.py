@@ -39,9 +39,9 @@ def test_frames_round_trip(tmp_path):
     cache = tmp_path / "bake"
     writer = CacheWriter(cache)
     written = {f: _arrays(f) for f in (1, 2, 3)}
-    for f, arrays in written.items():
-        path = writer.write_frame("Sparks", f, arrays)
-        assert path.is_file()
+    paths = [writer.write_frame("Sparks", f, arrays) for f, arrays in written.items()]
+    writer.flush()  # frames are written by a background thread; flush waits for them
+    assert all(path.is_file() for path in paths)
     assert writer.stream_path("Sparks") == cache / "Sparks"
     assert not cache.exists()  # nothing visible before commit
     writer.commit({"inputs_hash": "abc"})
@@ -163,3 +163,18 @@ def test_read_only_parent_names_the_folder(tmp_path):
     finally:
         parent.chmod(stat.S_IRWXU)
     assert os.access(parent, os.W_OK)
+
+
+def test_write_errors_of_the_background_thread_surface_at_commit(tmp_path):
+    import shutil
+
+    writer = CacheWriter(tmp_path / "bake")
+    writer.write_frame("Sparks", 1, _arrays(1))
+    writer.flush()
+    shutil.rmtree(writer.partial_dir / "Sparks")  # the next write cannot create its file
+    writer.write_frame("Sparks", 2, _arrays(2))
+    with pytest.raises(FileNotFoundError):
+        writer.commit({})
+    writer.abort()
+    assert not (tmp_path / "bake").exists()
+    assert not any(p.name.startswith(".bake.partial") for p in tmp_path.iterdir())
