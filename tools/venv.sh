@@ -23,4 +23,19 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   "$venv/bin/python" -m pip install --quiet $want >&2
   echo "$want" > "$stamp"
 fi
+# The bpy wheel links against X11/GL/EGL system libraries; a bare machine may lack them.
+if ! "$venv/bin/python" -c "import bpy" >/dev/null 2>&1; then
+  libs="libx11-6 libxrender1 libxi6 libxxf86vm1 libxfixes3 libxkbcommon0 libsm6 libice6 libgl1
+        libgomp1 libegl1 libegl-mesa0 libgl1-mesa-dri libxext6 libxcursor1 libxinerama1 libxrandr2"
+  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+    echo "tools/venv.sh: installing the system libraries bpy needs" >&2
+    apt-get update -qq >&2 && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $libs >&2
+  fi
+  if ! err="$("$venv/bin/python" -c "import bpy" 2>&1)"; then
+    echo "tools/venv.sh: 'import bpy' fails in $venv:" >&2
+    echo "$err" | tail -n 3 >&2
+    echo "install these system packages (Debian names): $libs" >&2
+    exit 1
+  fi
+fi
 echo "$venv"
