@@ -7,6 +7,7 @@ previous bake stays exactly as it was.
 """
 from __future__ import annotations
 
+import hashlib
 import os
 import re
 import shutil
@@ -29,8 +30,10 @@ RK_STAGES = {"EULER": 1, "SYMPLECTIC_EULER": 1, "MIDPOINT": 2, "RK4": 4, "RK45":
 
 
 def safe_name(name: str) -> str:
-    """A file-system safe folder name for an object name (stable and readable)."""
-    return re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("._") or "object"
+    """A file-system safe, readable and unique folder name for an object or scene name: the
+    readable part may collide ("Fire 1", "Fire_1"), so a hash of the exact name follows it."""
+    readable = re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("._") or "object"
+    return f"{readable[:48]}-{hashlib.sha1(name.encode('utf-8')).hexdigest()[:8]}"
 
 
 def cache_root(scene) -> str:
@@ -73,16 +76,19 @@ def estimate(scene, roles: extract.Roles) -> tuple[float, float]:
         life = p.lifetime + p.lifetime_random
         peak_by_name[ob.name] = (p.rate + p.rate_random) * min(life, active) if active else 0.0
         total_bytes += (p.rate + p.rate_random) * active * min(life, frames) * BYTES_PER_PARTICLE_FRAME
-    for _ in range(len(roles.emitters)):
+    births_per_frame = {ob.name: ob.physanim.emitter.rate + ob.physanim.emitter.rate_random
+                        for ob in roles.emitters if ob.physanim.emitter.source != 'DEATHS'}
+    for _ in range(len(roles.emitters)):  # resolve chains of sub-emitters, parents first
         for ob in roles.emitters:
             p = ob.physanim.emitter
-            if p.source == 'DEATHS' and p.parent and p.parent.name in peak_by_name:
-                parent = p.parent.physanim.emitter
-                deaths_per_frame = parent.rate + parent.rate_random
-                births = deaths_per_frame * (p.rate + p.rate_random)
+            if (p.source == 'DEATHS' and p.parent and p.parent.name in births_per_frame
+                    and ob.name not in births_per_frame):
+                # at most every parent birth dies within the bake and bursts rate + r children
+                births_per_frame[ob.name] = births_per_frame[p.parent.name] * (p.rate + p.rate_random)
                 life = p.lifetime + p.lifetime_random
-                peak_by_name[ob.name] = births * life
-                total_bytes += births * frames * min(life, frames) * BYTES_PER_PARTICLE_FRAME
+                peak_by_name[ob.name] = births_per_frame[ob.name] * min(life, frames)
+                total_bytes += (births_per_frame[ob.name] * frames * min(life, frames)
+                                * BYTES_PER_PARTICLE_FRAME)
     return sum(peak_by_name.values()), total_bytes
 
 
@@ -112,10 +118,16 @@ class BakeJob:
         self.frame = self.frame_start
         self.started = time.perf_counter()
         self.stats = {"births": 0, "collisions": 0, "peak": 0}
+        self.births = {ob.name: 0 for ob in self.roles.emitters}
+        from . import results
+
+        results.suspend_refresh(self.scene)  # our own frame changes must not reload old bakes
         try:
             for ob in self.roles.emitters:
                 self.writers[ob.name] = CacheWriter(emitter_cache_dir(self.scene, ob))
-            self.hash = extract.inputs_hash(self.scene, extract.gather(self.scene))
+            all_roles = extract.gather(self.scene)
+            self.hashes = {ob.name: extract.emitter_hash(self.scene, ob, all_roles)
+                           for ob in self.roles.emitters}
             self.extractor = extract.Extractor(self.scene, self.roles)
             self.scene.frame_set(self.frame_start)
             depsgraph = context.evaluated_depsgraph_get()
@@ -124,6 +136,8 @@ class BakeJob:
                                          self.settings.substeps, self.settings.tolerance)
             self.state = self.model.state(convert.frame_time(self.scene, self.frame_start))
             self.sample = self.extractor.sample(depsgraph, self.frame_start)
+            self.objects_limit = {ob.name for ob in self.roles.emitters
+                                  if ob.physanim.emitter.output == 'OBJECTS'}
             self._write_frame(self.frame_start)
         except BaseException:
             self.abort()
@@ -194,30 +208,48 @@ class BakeJob:
             self.scene.frame_set(self.frame, subframe=k / substeps)
             between.append(self.extractor.sample_motion())
         self.scene.frame_set(nxt)
-        sample = self.extractor.sample(context.evaluated_depsgraph_get(), nxt)
+        sample = self.extractor.sample(self.view_layer.depsgraph, nxt)
         report = self.solver.advance(self.state, self.extractor.inputs(self.sample, sample, between))
         self.stats["births"] += report.births
         self.stats["collisions"] += report.collisions
+        self._count_births(report, nxt)
         self.sample = sample
         self.frame = nxt
         self._write_frame(nxt)
         return self.frame >= self.frame_end
 
+    def _count_births(self, report, frame: int) -> None:
+        """Fail early (before anything is replaced) when the Objects output would get too many
+        particles: each particle becomes an object."""
+        from .results import MAX_KEYED_OBJECTS
+
+        for i, ob in enumerate(self.roles.emitters):
+            self.births[ob.name] += report.per_emitter_births[i]
+            if ob.name in self.objects_limit and self.births[ob.name] > MAX_KEYED_OBJECTS:
+                raise PhysanimError(
+                    f"{self.births[ob.name]:,} particles are too many for the Objects output "
+                    f"(limit {MAX_KEYED_OBJECTS:,}) — use the Points output or a lower rate",
+                    obj=ob.name, frame=frame, kind="emitter")
+
     def finish(self, context) -> str:
         """Swap the new caches in and point every emitter's result at them. Returns a summary."""
         from . import results
 
-        meta = {"hash": self.hash, "frame_start": self.frame_start, "frame_end": self.frame_end,
+        meta = {"frame_start": self.frame_start, "frame_end": self.frame_end,
                 "fps": convert.fps(self.scene), "kind": "particles"}
         for writer in self.writers.values():  # every frame on disk before any bake is swapped in
             writer.flush()
-        for ob in self.roles.emitters:
-            path = self.writers[ob.name].commit(dict(meta, emitter=ob.name))
-            results.attach(context, self.scene, ob, relative_path(os.path.join(path, STREAM)),
-                           self.frame_start, self.frame_end)
+        paths = {ob.name: self.writers[ob.name].commit(dict(meta, emitter=ob.name,
+                                                            hash=self.hashes[ob.name]))
+                 for ob in self.roles.emitters}
         self.writers.clear()
+        results.resume_refresh(self.scene)
+        for ob in self.roles.emitters:
+            results.attach(context, self.scene, ob,
+                           relative_path(os.path.join(paths[ob.name], STREAM)),
+                           self.frame_start, self.frame_end, self.hashes[ob.name])
         self.scene.frame_set(self.original_frame)
-        self.settings.bake_hash = self.hash
+        self.settings.bake_hash = extract.scene_hash(list(self.hashes.values()))
         took = time.perf_counter() - self.started
         info = (f"baked {len(self.roles.emitters)} emitter(s), frames {self.frame_start}-"
                 f"{self.frame_end}: {self.stats['births']:,} births, peak {self.stats['peak']:,} "
@@ -227,9 +259,12 @@ class BakeJob:
 
     def abort(self) -> None:
         """Delete partial caches and restore the frame; the previous bake is untouched."""
+        from . import results
+
         for writer in self.writers.values():
             writer.abort()
         self.writers.clear()
+        results.resume_refresh(self.scene)
         if self.scene.frame_current != self.original_frame:
             self.scene.frame_set(self.original_frame)
 

@@ -85,13 +85,16 @@ def _mesh_arrays(ob, depsgraph, triangles: bool):
 
 def _world_matrix(ob, frame: float, kind: str) -> np.ndarray:
     """``ob``'s world matrix as numpy; an error naming object, frame and value when it is not
-    finite (a NaN key, a driver dividing by zero), before the core sees it."""
+    finite (a NaN key, a driver dividing by zero) or, for colliders, flattened by a zero scale —
+    before the core sees it."""
     m = convert.matrix(ob.matrix_world)
-    if not np.isfinite(m).all():
+    finite = np.isfinite(m).all()
+    if not finite or (kind == "collider" and abs(np.linalg.det(m[:3, :3])) < 1e-12):
         location, scale = ob.matrix_world.to_translation(), ob.matrix_world.to_scale()
-        raise PhysanimError(f"its world matrix became non-finite (location "
+        what = "became non-finite" if not finite else "has a zero scale (a flat collider)"
+        raise PhysanimError(f"its world matrix {what}: location "
                             f"{tuple(round(v, 4) for v in location)}, scale "
-                            f"{tuple(round(v, 4) for v in scale)}) — check its animation, "
+                            f"{tuple(round(v, 4) for v in scale)} — check its animation, "
                             "drivers and parents", obj=ob.name, frame=frame, kind=kind)
     return m
 
@@ -264,19 +267,34 @@ class Extractor:
 
 
 # --- inputs hash (is the bake outdated?) ------------------------------------------------------
+# A digest of what a bake depends on that does not change with the current frame: property
+# values that are not animated, and the keyframes/drivers of those that are.
 
-def _rna_dump(pg) -> dict:
+def _animated_paths(id_data) -> set[str]:
+    ad = getattr(id_data, "animation_data", None)
+    if ad is None:
+        return set()
+    paths = {fc.data_path for fc in ad.drivers}
+    if ad.action is not None:
+        paths |= {fc.data_path for fc in _fcurves(ad)}
+    return paths
+
+
+def _rna_dump(pg, prefix: str = "", animated: frozenset = frozenset()) -> dict:
     out = {}
     for prop in pg.bl_rna.properties:
         key = prop.identifier
         if key in ("rna_type", "result", "bake_hash", "bake_info"):
             continue
+        path = f"{prefix}{key}"
+        if path in animated:
+            continue  # its keys are hashed instead: the current value depends on the frame
         value = getattr(pg, key)
         if prop.type == 'POINTER':
             out[key] = value.name if isinstance(value, bpy.types.ID) else (
-                _rna_dump(value) if value is not None else None)
+                _rna_dump(value, path + ".", animated) if value is not None else None)
         elif prop.type == 'COLLECTION':
-            out[key] = [_rna_dump(item) for item in value]
+            out[key] = [_rna_dump(item, f"{path}[{i}].", animated) for i, item in enumerate(value)]
         elif getattr(prop, "is_array", False):
             out[key] = [round(float(v), 9) for v in value]
         else:
@@ -286,13 +304,16 @@ def _rna_dump(pg) -> dict:
 
 def _animation_dump(id_data) -> list:
     ad = getattr(id_data, "animation_data", None)
-    if ad is None or ad.action is None:
+    if ad is None:
         return []
     keys = []
-    for fc in _fcurves(ad):
+    curves = list(_fcurves(ad)) if ad.action is not None else []
+    for fc in curves:
         co = np.empty(len(fc.keyframe_points) * 2, np.float32)
         fc.keyframe_points.foreach_get("co", co)
         keys.append((fc.data_path, fc.array_index, hashlib.sha1(co.tobytes()).hexdigest()))
+    for fc in ad.drivers:
+        keys.append((fc.data_path, fc.array_index, fc.driver.expression))
     return sorted(keys)
 
 
@@ -301,24 +322,51 @@ def _fcurves(ad):
     return compat.action_fcurves(ad)
 
 
-def inputs_hash(scene, roles: Roles) -> str:
-    """A digest of everything a particle bake depends on; it changes when the scene does."""
+def _object_record(ob, role: str | None) -> dict:
+    """Everything about one object a bake reads, independent of the current frame."""
+    animated = frozenset(_animated_paths(ob))
+    record = {"name": ob.name, "type": ob.type, "anim": _animation_dump(ob),
+              "parent": _object_record(ob.parent, None) if ob.parent else None,
+              "parent_type": ob.parent_type, "parent_bone": ob.parent_bone,
+              "constraints": [(c.type, c.name, round(c.influence, 7), c.mute)
+                              for c in ob.constraints],
+              "modifiers": [(m.type, m.name, m.show_render, m.show_viewport)
+                            for m in ob.modifiers if m.type != 'NODES' or m.name != "physanim_instances"]}
+    for channel in ("location", "rotation_euler", "rotation_quaternion", "rotation_axis_angle",
+                    "scale", "delta_location", "delta_rotation_euler", "delta_scale"):
+        if channel not in animated:
+            record[channel] = [round(float(v), 7) for v in getattr(ob, channel)]
+    record["rotation_mode"] = ob.rotation_mode
+    if role is not None:
+        record["props"] = _rna_dump(getattr(ob.physanim, role), f"physanim.{role}.", animated)
+    if ob.type == 'MESH' and role is not None:
+        co = np.empty(len(ob.data.vertices) * 3, np.float32)
+        ob.data.vertices.foreach_get("co", co)
+        record["mesh"] = (hashlib.sha1(co.tobytes()).hexdigest(), len(ob.data.polygons),
+                          _animation_dump(ob.data.shape_keys) if ob.data.shape_keys else [])
+    return record
+
+
+def emitter_hash(scene, emitter, roles: Roles | None = None) -> str:
+    """Digest of everything the bake of ``emitter`` depends on: scene settings, every collider
+    and force, the emitter (with its parent chain) and, for sub-emitters, their parent emitter."""
+    roles = roles if roles is not None else gather(scene)
     h = hashlib.sha256()
     settings = _rna_dump(scene.physanim)
-    settings.update(fps=convert.fps(scene), gravity=convert.gravity(scene))
+    settings.update(fps=convert.fps(scene), gravity=convert.gravity(scene),
+                    anim=_animation_dump(scene))
     h.update(json.dumps(settings, sort_keys=True).encode())
-    for group, role in ((roles.emitters, "emitter"), (roles.colliders, "collider"),
-                        (roles.forces, "force")):
-        for ob in group:
-            record = {"name": ob.name, "role": role,
-                      "props": _rna_dump(getattr(ob.physanim, role)),
-                      "matrix": [round(v, 7) for row in ob.matrix_basis for v in row],
-                      "parent": ob.parent.name if ob.parent else None,
-                      "anim": _animation_dump(ob)}
-            h.update(json.dumps(record, sort_keys=True).encode())
-            if ob.type == 'MESH':
-                co = np.empty(len(ob.data.vertices) * 3, np.float32)
-                ob.data.vertices.foreach_get("co", co)
-                h.update(co.tobytes())
-                h.update(str(len(ob.data.polygons)).encode())
+    chain, ob = [], emitter
+    while ob is not None and ob.name not in {o.name for o in chain}:
+        chain.append(ob)
+        p = ob.physanim.emitter
+        ob = p.parent if p.source == 'DEATHS' else None
+    records = [_object_record(o, "emitter") for o in chain]
+    records += [_object_record(o, "collider") for o in roles.colliders]
+    records += [_object_record(o, "force") for o in roles.forces]
+    h.update(json.dumps(records, sort_keys=True).encode())
     return h.hexdigest()
+
+
+def scene_hash(hashes: list[str]) -> str:
+    return hashlib.sha256("".join(sorted(hashes)).encode()).hexdigest()

@@ -10,7 +10,7 @@ import bpy
 from bpy.props import BoolProperty, EnumProperty, IntProperty
 
 from ..core.errors import PhysanimError
-from . import bake, extract, results
+from . import bake, results
 
 FRAME_BUDGET_S = 0.05  # modal: simulate for at most this long per timer tick, then redraw
 
@@ -129,16 +129,30 @@ class PHYSANIM_OT_free_bake(bpy.types.Operator):
     only_selected: BoolProperty(name="Only Selected", default=False)
 
     def execute(self, context):
+        from ..core.cache import remove_cache
+
         scene = context.scene
-        only = _selected_names(context) if self.only_selected else None
+        chosen = {o.name for o in context.selected_objects} if self.only_selected else None
         freed = 0
         try:
-            for ob in extract.gather(scene, only).emitters:
-                freed += results.free(scene, ob)
+            for res in results.result_objects(scene):
+                if chosen is None or res.physanim.result.emitter in chosen or res.name in chosen:
+                    results.free_result(scene, res)
+                    freed += 1
+            # leftovers of results the user deleted by hand: keyed objects and cache folders
+            for ob in scene.objects:
+                if chosen is not None and ob.name not in chosen:
+                    continue
+                keyed = results.keyed_collection(scene, ob, create=False)
+                if keyed is not None:
+                    results.remove_collection(keyed)
+                    freed += 1
+                if ob.physanim.emitter.enabled and bpy.data.filepath:
+                    freed += remove_cache(bake.emitter_cache_dir(scene, ob))
         except (PhysanimError, OSError) as exc:
             self.report({'ERROR'}, str(exc))
             return {'CANCELLED'}
-        if only is None:
+        if not results.result_objects(scene):
             scene.physanim.bake_hash = ""
             scene.physanim.bake_info = ""
         self.report({'INFO'}, f"freed {freed} bake(s)")

@@ -8,17 +8,25 @@ from . import extract
 
 
 def bake_status(scene) -> tuple[str, str]:
-    """(text, icon) telling whether the scene's bake matches the scene."""
-    s = scene.physanim
-    if not s.bake_hash:
-        return "Not baked", 'INFO'
+    """(text, icon) telling whether each emitter's bake matches the scene as it is now."""
     try:
-        current = extract.inputs_hash(scene, extract.gather(scene))
+        roles = extract.gather(scene)
+        missing, outdated = [], []
+        for ob in roles.emitters:
+            res = ob.physanim.emitter.result
+            if res is None or not res.physanim.result.cache:
+                missing.append(ob.name)
+            elif res.physanim.result.hash != extract.emitter_hash(scene, ob, roles):
+                outdated.append(ob.name)
     except Exception as exc:  # noqa: BLE001 — a panel must draw whatever the scene holds
         return f"Cannot check bake: {exc}", 'ERROR'
-    if current != s.bake_hash:
-        return "Bake is outdated: the scene changed since it was baked", 'ERROR'
-    return s.bake_info or "Baked", 'CHECKMARK'
+    if outdated:
+        return f"Bake is outdated (the scene changed): {', '.join(outdated)}", 'ERROR'
+    if missing and len(missing) == len(roles.emitters):
+        return "Not baked", 'INFO'
+    if missing:
+        return f"Not baked: {', '.join(missing)}", 'INFO'
+    return scene.physanim.bake_info or "Baked", 'CHECKMARK'
 
 
 def draw_bake_buttons(layout, scene) -> None:

@@ -179,8 +179,9 @@ class PHYSANIM_PG_result(bpy.types.PropertyGroup):
 
     cache: StringProperty(name="Cache", subtype='DIR_PATH', options=BLEND_RELATIVE_PATH_OPTIONS,
                           description="Folder of this result's per-frame point files")
-    emitter: StringProperty(name="Emitter")
-    fps: FloatProperty(name="FPS", default=24.0, description="Frames per second of the bake")
+    emitter: StringProperty(name="Emitter", description="Name of the emitter that made this result")
+    hash: StringProperty(name="Inputs Hash", options={'HIDDEN'},
+                         description="Digest of the inputs of the bake (outdated detection)")
 
 
 class PHYSANIM_PG_object(bpy.types.PropertyGroup):

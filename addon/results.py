@@ -19,6 +19,25 @@ from . import compat, instancing, points
 
 MAX_KEYED_OBJECTS = 20_000  # the Objects output makes one Blender object per particle
 EMPTY = {"position": np.zeros((0, 3), np.float32)}
+KEYED_TAG = "physanim_keyed_objects"  # custom property naming the emitter of a keyed collection
+
+# Scenes being baked right now: their frame changes are the bake's own sampling, so results are
+# not reloaded (that would read the previous bake on every sample). UI state, not sim state.
+_baking: set[str] = set()
+
+
+def suspend_refresh(scene) -> None:
+    _baking.add(scene.name)
+
+
+def resume_refresh(scene) -> None:
+    _baking.discard(scene.name)
+
+
+def cache_folder(res) -> str:
+    """Absolute folder of a result's cache ('//' resolves against the result's own .blend)."""
+    path = res.physanim.result.cache
+    return bpy.path.abspath(path, library=res.library) if path else ""
 
 
 def _collection_of(ob, scene):
@@ -36,28 +55,30 @@ def _result_object(scene, emitter_ob):
     return res
 
 
-def attach(context, scene, emitter_ob, cache_rel: str, frame_start: int, frame_end: int) -> None:
+def attach(context, scene, emitter_ob, cache_rel: str, frame_start: int, frame_end: int,
+           inputs_hash: str = "") -> None:
     """Point the emitter's result object at a finished bake and build its output."""
     p = emitter_ob.physanim.emitter
     res = _result_object(scene, emitter_ob)
     res.physanim.result.cache = cache_rel
     res.physanim.result.emitter = emitter_ob.name
+    res.physanim.result.hash = inputs_hash
     instance = p.instance_object or instancing.default_particle_object()
     instancing.ensure_instancer(res, instance)
-    keyed = _keyed_collection(scene, emitter_ob, create=False)
+    keyed = keyed_collection(scene, emitter_ob, create=False)
     if p.output == 'OBJECTS':
         write_keyed_objects(scene, emitter_ob, cache_rel, frame_start, frame_end, instance)
         res.hide_render = True  # the keyed objects render; the points stay for scripts
     else:
         if keyed is not None:
-            _remove_collection(keyed)
+            remove_collection(keyed)
         res.hide_render = False
     refresh(res, scene.frame_current)
 
 
 def refresh(res, frame: int) -> None:
     """Load ``frame`` of a result's cache into its points mesh (empty outside the bake)."""
-    folder = bpy.path.abspath(res.physanim.result.cache)
+    folder = cache_folder(res)
     arrays = read_frame(folder, frame) if folder else None
     points.write_points(res.data, arrays if arrays is not None else EMPTY)
 
@@ -73,7 +94,8 @@ def refresh_scene(scene) -> None:
 
 @persistent
 def on_frame_change(scene, depsgraph=None) -> None:
-    refresh_scene(scene)
+    if scene.name not in _baking:
+        refresh_scene(scene)
 
 
 @persistent
@@ -84,16 +106,22 @@ def on_load_post(*_args) -> None:
 
 # --- keyframed objects output -------------------------------------------------------------------
 
-def _keyed_collection(scene, emitter_ob, create: bool):
-    name = f"{emitter_ob.name}_particle_objects"
-    coll = bpy.data.collections.get(name)
-    if coll is None and create:
-        coll = bpy.data.collections.new(name)
-        _collection_of(emitter_ob, scene).children.link(coll)
+def keyed_collection(scene, emitter_ob, create: bool):
+    """The collection of keyed particle objects a bake made for ``emitter_ob`` — found by its
+    tag, never by name, so a user's collection of the same name is never touched."""
+    name = emitter_ob.name if emitter_ob is not None else None
+    for coll in bpy.data.collections:
+        if coll.get(KEYED_TAG) == name and coll.library is None:
+            return coll
+    if not create:
+        return None
+    coll = bpy.data.collections.new(f"{emitter_ob.name}_particle_objects")
+    coll[KEYED_TAG] = emitter_ob.name
+    _collection_of(emitter_ob, scene).children.link(coll)
     return coll
 
 
-def _remove_collection(coll) -> None:
+def remove_collection(coll) -> None:
     for ob in list(coll.objects):
         ad = ob.animation_data
         action = ad.action if ad else None
@@ -123,11 +151,10 @@ def write_keyed_objects(scene, emitter_ob, cache_rel: str, frame_start: int, fra
                         instance) -> int:
     """One linked duplicate of ``instance`` per particle, keyed on location, scale (0 outside its
     life) and color, written in bulk per F-curve. Returns the number of objects."""
-    folder = bpy.path.abspath(cache_rel)
-    tracks = _tracks(folder, frame_start, frame_end)
-    old = _keyed_collection(scene, emitter_ob, create=False)
+    tracks = _tracks(bpy.path.abspath(cache_rel), frame_start, frame_end)
+    old = keyed_collection(scene, emitter_ob, create=False)
     if old is not None:
-        _remove_collection(old)
+        remove_collection(old)
     if tracks is None:
         return 0
     frames, ids, pos, size, color = tracks
@@ -136,7 +163,7 @@ def write_keyed_objects(scene, emitter_ob, cache_rel: str, frame_start: int, fra
         raise PhysanimError(f"{len(uniq):,} particles are too many for the Objects output "
                             f"(limit {MAX_KEYED_OBJECTS:,}) — use the Points output",
                             obj=emitter_ob.name, frame=frame_end, kind="emitter")
-    coll = _keyed_collection(scene, emitter_ob, create=True)
+    coll = keyed_collection(scene, emitter_ob, create=True)
     bounds = np.append(starts, len(ids))
     for k, pid in enumerate(uniq):
         lo, hi = bounds[k], bounds[k + 1]
@@ -162,30 +189,32 @@ def write_keyed_objects(scene, emitter_ob, cache_rel: str, frame_start: int, fra
 
 # --- free bake ---------------------------------------------------------------------------------
 
-def free(scene, emitter_ob) -> bool:
-    """Remove what a bake made for ``emitter_ob``: result object and mesh, keyed objects and
-    their actions, the cache folder. Returns True when there was something to free."""
+def result_objects(scene) -> list:
+    """Every bake result in ``scene`` (whether or not its emitter still exists or is enabled)."""
+    return [ob for ob in scene.objects if ob.type == 'MESH' and ob.physanim.result.cache]
+
+
+def free_result(scene, res) -> None:
+    """Remove one result: its cache folder, its keyed objects and actions, the object and mesh."""
     from ..core.cache import remove_cache
 
-    p = emitter_ob.physanim.emitter
-    freed = False
-    res = p.result
-    if res is not None:
-        folder = bpy.path.abspath(res.physanim.result.cache)
-        if folder:
-            remove_cache(os.path.dirname(os.path.normpath(folder)))
-        mesh = res.data
-        bpy.data.objects.remove(res)
-        if mesh is not None and mesh.users == 0:
-            bpy.data.meshes.remove(mesh)
-        p.result = None
-        freed = True
-    keyed = _keyed_collection(scene, emitter_ob, create=False)
+    folder = cache_folder(res)
+    if folder:
+        remove_cache(os.path.dirname(os.path.normpath(folder)))
+    emitter_name = res.physanim.result.emitter
+    emitter = bpy.data.objects.get(emitter_name)
+    keyed = keyed_collection(scene, emitter, create=False) if emitter is not None else None
+    if keyed is None:
+        keyed = next((c for c in bpy.data.collections if c.get(KEYED_TAG) == emitter_name), None)
     if keyed is not None:
-        _remove_collection(keyed)
-        freed = True
+        remove_collection(keyed)
+    if emitter is not None and emitter.physanim.emitter.result == res:
+        emitter.physanim.emitter.result = None
+    mesh = res.data
+    bpy.data.objects.remove(res)
+    if mesh is not None and mesh.users == 0:
+        bpy.data.meshes.remove(mesh)
     instancing.remove_unused()
-    return freed
 
 
 HANDLERS = (("frame_change_pre", on_frame_change), ("load_post", on_load_post))

@@ -295,7 +295,7 @@ def test_bake_is_deterministic_and_hashed(physanim_ext, tmp_path):
     assert len(first) > 20
     meta = json.loads((_stream(a).parent / "meta.json").read_text())
     assert len(scene.physanim.bake_hash) >= 32
-    assert meta["hash"] == scene.physanim.bake_hash
+    assert len(meta["hash"]) >= 32 and meta["hash"] == a.physanim.emitter.result.physanim.result.hash
     assert panels.bake_status(scene)[1] == 'CHECKMARK'
 
     assert bpy.ops.physanim.bake() == {'FINISHED'}
@@ -306,7 +306,7 @@ def test_bake_is_deterministic_and_hashed(physanim_ext, tmp_path):
 
     a.physanim.emitter.rate = 5.5
     text, icon = panels.bake_status(scene)
-    assert icon == 'ERROR' and "outdated" in text
+    assert icon == 'ERROR' and "outdated" in text and text.endswith(": A")
     a.physanim.emitter.rate = 5.0
     assert panels.bake_status(scene)[1] == 'CHECKMARK'
     scene.physanim.seed = 1  # a new seed changes the cache (the comparison above has teeth)
@@ -528,3 +528,38 @@ def test_particles_ride_a_rising_animated_ground(physanim_ext, tmp_path):
         assert z.min() >= ground_z(frame) - 2e-3, (frame, z.min(), ground_z(frame))
         if 8 <= frame <= 20:  # riding the ground (afterwards they may hop off as it stops)
             np.testing.assert_allclose(z, ground_z(frame), atol=0.03, err_msg=f"frame {frame}")
+
+
+def test_bake_status_ignores_scrubbing_but_sees_animation_and_parent_edits(physanim_ext, tmp_path):
+    """The outdated check must not depend on the current frame, and must see keyframe edits of
+    an emitter's animated parent; an only-selected bake leaves the others' status alone."""
+    scene = _setup(frame_end=6)
+    parent = bpy.data.objects.new("Rig", None)
+    scene.collection.objects.link(parent)
+    for frame, x in ((1, 0.0), (6, 3.0)):
+        parent.location.x = x
+        parent.keyframe_insert("location", index=0, frame=frame)
+    a = _emitter("A", rate=4.0)
+    a.parent = parent
+    for frame, rate in ((1, 4.0), (6, 8.0)):
+        a.physanim.emitter.rate = rate
+        a.keyframe_insert("physanim.emitter.rate", frame=frame)
+    b = _emitter("B", location=(2.0, 0.0, 0.0), rate=2.0)
+    _save(tmp_path)
+    panels = _addon(physanim_ext, "panels")
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    for frame in (1, 3, 6):
+        scene.frame_set(frame)
+        assert panels.bake_status(scene)[1] == 'CHECKMARK', f"frame {frame}"
+    compat = _addon(physanim_ext, "compat")
+    curve = compat.action_fcurves(parent.animation_data)[0]
+    curve.keyframe_points[1].co.y = 5.0
+    text, icon = panels.bake_status(scene)
+    assert icon == 'ERROR' and text.endswith(": A")
+    for ob in scene.objects:
+        ob.select_set(ob == a)
+    assert bpy.ops.physanim.bake(only_selected=True) == {'FINISHED'}
+    assert panels.bake_status(scene)[1] == 'CHECKMARK'
+    b.physanim.emitter.rate = 3.0
+    text, icon = panels.bake_status(scene)
+    assert icon == 'ERROR' and text.endswith(": B")

@@ -39,7 +39,12 @@ def _open(path: Path):
 
 
 def _emitter_folder(path: Path, name: str) -> Path:
-    return path.parent / "physanim_cache" / "Scene" / name
+    """The bake folder of emitter ``name``: '<readable name>-<hash of the exact name>'."""
+    import hashlib
+
+    def folder(n: str) -> str:
+        return f"{n}-{hashlib.sha1(n.encode()).hexdigest()[:8]}"
+    return path.parent / "physanim_cache" / folder("Scene") / folder(name)
 
 
 def test_main_is_the_registered_command_handler(cli):
@@ -66,7 +71,8 @@ def test_bake_frames_and_save(cli, tmp_path, capsys):
     assert (scene.physanim.frame_start, scene.physanim.frame_end) == (1, 10)
     meta = json.loads((_emitter_folder(path, "Fountain") / "meta.json").read_text())
     assert (meta["frame_start"], meta["frame_end"]) == (1, 10)
-    assert meta["hash"] == scene.physanim.bake_hash
+    emitter = bpy.data.objects["Fountain"]
+    assert meta["hash"] == emitter.physanim.emitter.result.physanim.result.hash
     scene.frame_set(6)
     assert len(res.data.vertices) > 0
     assert len(res.data.attributes["id"].data) == len(res.data.vertices)
