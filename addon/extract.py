@@ -108,10 +108,10 @@ def _check_finite(ob, frame: int, kind: str, values: dict) -> None:
                                 obj=ob.name, frame=frame, kind=kind)
 
 
-def _framed(ob, frame: int, kind: str, make):
-    """Build a core input; its validation error gains the frame it happened at."""
+def _framed(ob, frame: int, kind: str, make, *args):
+    """Build a core input with ``make(*args)``; its validation error gains the frame."""
     try:
-        return make()
+        return make(*args)
     except ValueError as exc:
         detail = str(exc).removeprefix(f'{kind} "{ob.name}": ')
         raise PhysanimError(detail, obj=ob.name, frame=frame, kind=kind) from exc
@@ -231,8 +231,7 @@ class Extractor:
             return np.stack([m0] + [mid[kind][i] for mid in between] + [m1])
 
         emitters = []
-        for i, (ob, (m0, v0, val), (m1, v1, _)) in enumerate(
-                zip(self.roles.emitters, a.emitters, b.emitters)):
+        for i, ((m0, v0, val), (m1, v1, _)) in enumerate(zip(a.emitters, b.emitters)):
             emitters.append(EmitterFrame(
                 rate=val["rate"], rate_random=val["rate_random"], speed=val["speed"],
                 speed_random=val["speed_random"], lifetime=val["lifetime"] * to_s,
@@ -240,11 +239,11 @@ class Extractor:
                 size=val["size"], size_random=val["size_random"], spread=val["spread"],
                 inherit_velocity=val["inherit_velocity"], active=val["active"],
                 matrix0=m0, matrix1=m1, matrices=keys(0, i, m0, m1), verts0=v0, verts1=v1))
-        colliders = [_framed(ob, a.frame, "collider", lambda: ColliderFrame(
-                         ob.name, shape, m0, m1, rest, fric, keys(1, i, m0, m1)))
+        colliders = [_framed(ob, a.frame, "collider", ColliderFrame,
+                             ob.name, shape, m0, m1, rest, fric, keys(1, i, m0, m1))
                      for i, (ob, (m0, shape, rest, fric), (m1, *_))
                      in enumerate(zip(self.roles.colliders, a.colliders, b.colliders))]
-        forces = [_framed(ob, a.frame, "force", lambda: self._force(ob, m, f))
+        forces = [_framed(ob, a.frame, "force", self._force, ob, m, f)
                   for ob, (m, f) in zip(self.roles.forces, a.forces)]
         return FrameInputs(frame=a.frame, t0=a.frame * to_s, frame_dt=(b.frame - a.frame) * to_s,
                            gravity=convert.gravity(self.scene), emitters=emitters,

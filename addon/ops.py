@@ -6,6 +6,8 @@ synchronously and returns {'FINISHED'} or {'CANCELLED'} with an error report.
 """
 from __future__ import annotations
 
+import time
+
 import bpy
 from bpy.props import BoolProperty, EnumProperty, IntProperty
 
@@ -69,7 +71,7 @@ class PHYSANIM_OT_bake(bpy.types.Operator):
             return self.execute(context)
         try:
             self._job = self._make_job(context)
-        except (PhysanimError, OSError) as exc:
+        except (PhysanimError, OSError, ValueError) as exc:
             self.report({'ERROR'}, str(exc))
             return {'CANCELLED'}
         wm = context.window_manager
@@ -80,14 +82,13 @@ class PHYSANIM_OT_bake(bpy.types.Operator):
 
     def modal(self, context, event):
         if event.type == 'ESC':
-            self._job.abort()
-            self._end(context)
+            self.cancel(context)
             self.report({'WARNING'}, "PhysAnim bake cancelled; the previous bake is unchanged")
             return {'CANCELLED'}
         if event.type != 'TIMER':
-            return {'PASS_THROUGH'}
-        import time
-
+            # Swallow other input while baking: an undo, delete or scene switch mid-bake would
+            # pull data from under the job. The UI still redraws between timer ticks.
+            return {'RUNNING_MODAL'}
         job = self._job
         try:
             deadline = time.perf_counter() + FRAME_BUDGET_S
@@ -101,14 +102,21 @@ class PHYSANIM_OT_bake(bpy.types.Operator):
             if not done:
                 return {'RUNNING_MODAL'}
             info = job.finish(context)
-        except (PhysanimError, OSError, ValueError) as exc:
-            job.abort()
-            self._end(context)
+        except Exception as exc:  # noqa: BLE001 — any failure must clean up and keep the old bake
+            self.cancel(context)
             self.report({'ERROR'}, str(exc))
             return {'CANCELLED'}
         self._end(context)
         self.report({'INFO'}, info)
         return {'FINISHED'}
+
+    def cancel(self, context):
+        """Esc, an error, or Blender cancelling the operator (e.g. loading a file): drop the
+        partial bake and leave the previous one as it was."""
+        if self._job is not None:
+            self._job.abort()
+            self._job = None
+        self._end(context)
 
     def _end(self, context):
         wm = context.window_manager
@@ -116,7 +124,8 @@ class PHYSANIM_OT_bake(bpy.types.Operator):
             wm.event_timer_remove(self._timer)
             self._timer = None
         wm.progress_end()
-        context.workspace.status_text_set(None)
+        if context.workspace is not None:
+            context.workspace.status_text_set(None)
 
 
 class PHYSANIM_OT_free_bake(bpy.types.Operator):

@@ -165,7 +165,7 @@ def _bake_fails(*parts: str) -> str:
 
 def _keys(ob, data_path: str, index: int, keys, interpolation='LINEAR') -> None:
     """Key ``ob.<data_path>[index]`` at (frame, value) pairs (values may be NaN or inf)."""
-    for frame, value in keys:
+    for frame, _value in keys:
         ob.keyframe_insert(data_path, index=index, frame=frame)
     curve = _fcurve(ob, data_path, index)
     for point, (frame, value) in zip(curve.keyframe_points, keys):
@@ -221,7 +221,7 @@ def test_diverging_simulation_fails_naming_emitter_frame_and_value(physanim_ext,
     must stop with a message, never write inf/NaN (or clamp) into the cache."""
     scene = _scene()
     scene.physanim.integrator = 'EULER'
-    ob = _emitter("Spray", mass=1e-6)
+    _emitter("Spray", mass=1e-6)
     air = bpy.data.objects.new("Air", None)
     scene.collection.objects.link(air)
     air.physanim.force.enabled = True

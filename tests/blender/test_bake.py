@@ -80,7 +80,7 @@ def _result_points(ob) -> dict[str, np.ndarray]:
     if n:
         mesh.attributes["position"].data.foreach_get("vector", out["position"])
     out["position"] = out["position"].reshape(n, 3)
-    for name, data_type in ATTRIBUTE_TYPES.items():
+    for name in ATTRIBUTE_TYPES:
         attribute = mesh.attributes.get(name)
         if attribute is None:
             continue
