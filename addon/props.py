@@ -15,6 +15,10 @@ from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProp
 from ..core.integrators import INTEGRATORS
 from .compat import BLEND_RELATIVE_PATH_OPTIONS
 
+# Read once per bake (topology, seeds, shapes of curves, solver settings): not keyframable, so
+# no one keys them expecting an effect. Everything else is sampled per frame by the extract step.
+STATIC: set[str] = set()
+
 INTEGRATOR_ITEMS = [
     ('EULER', "Euler", "Explicit Euler: first order, cheapest, least stable"),
     ('SYMPLECTIC_EULER', "Symplectic Euler", "Semi-implicit Euler: first order, keeps energy bounded"),
@@ -60,12 +64,12 @@ class PHYSANIM_PG_stop(bpy.types.PropertyGroup):
     """One stop of a curve over a particle's life (0 = birth, 1 = death)."""
 
     position: FloatProperty(name="Position", min=0.0, max=1.0, subtype='FACTOR',
-                            description="Fraction of the particle's life")
+                            description="Fraction of the particle's life", options=STATIC)
     color: FloatVectorProperty(name="Color", size=4, subtype='COLOR', min=0.0, max=1.0e3,
                                soft_max=1.0, default=(1.0, 1.0, 1.0, 1.0),
-                               description="Color and alpha (alpha 0 = fully transparent)")
+                               description="Color and alpha (alpha 0 = fully transparent)", options=STATIC)
     value: FloatProperty(name="Size", min=0.0, max=1.0e3, soft_max=2.0, default=1.0,
-                         description="Size factor")
+                         description="Size factor", options=STATIC)
 
 
 def _on_emitter_enabled(self, context):
@@ -87,11 +91,11 @@ def _on_emitter_enabled(self, context):
 class PHYSANIM_PG_emitter(bpy.types.PropertyGroup):
     enabled: BoolProperty(name="Emitter", update=_on_emitter_enabled,
                           description="Emit particles from this object")
-    source: EnumProperty(name="Source", items=SOURCE_ITEMS, default='ORIGIN')
+    source: EnumProperty(name="Source", items=SOURCE_ITEMS, default='ORIGIN', options=STATIC)
     parent: PointerProperty(name="Parent Emitter", type=bpy.types.Object,
                             description="Emitter whose particle deaths spawn these particles")
-    direction: EnumProperty(name="Direction", items=DIRECTION_ITEMS, default='NORMAL')
-    axis: EnumProperty(name="Axis", items=AXIS_ITEMS, default='Z')
+    direction: EnumProperty(name="Direction", items=DIRECTION_ITEMS, default='NORMAL', options=STATIC)
+    axis: EnumProperty(name="Axis", items=AXIS_ITEMS, default='Z', options=STATIC)
     rate: FloatProperty(name="Rate", min=0.0, max=1.0e6, soft_max=1000.0, default=20.0,
                         description="Mean births per frame (per death for sub-emitters)")
     rate_random: FloatProperty(name="Rate Random", min=0.0, max=1.0e6, soft_max=1000.0,
@@ -119,21 +123,21 @@ class PHYSANIM_PG_emitter(bpy.types.PropertyGroup):
                         unit='LENGTH', description="Radius of a particle's instance")
     size_random: FloatProperty(name="Size Random", min=0.0, max=1.0e3, soft_max=1.0,
                                unit='LENGTH')
-    seed: IntProperty(name="Seed", min=0, max=2**31 - 1)
+    seed: IntProperty(name="Seed", min=0, max=2**31 - 1, options=STATIC)
     color_stops: CollectionProperty(type=PHYSANIM_PG_stop)
     size_stops: CollectionProperty(type=PHYSANIM_PG_stop)
     stretch: FloatProperty(name="Stretch", min=0.0, max=100.0, soft_max=1.0, default=0.0,
                            description="Shape from velocity: stretch along the velocity by "
-                                       "1 + stretch*speed (s/m); 0 keeps particles round")
+                                       "1 + stretch*speed (s/m); 0 keeps particles round", options=STATIC)
     link: BoolProperty(name="Spring Chain", description="Join each particle to the previous one "
-                                                       "with a damped spring")
+                                                       "with a damped spring", options=STATIC)
     link_stiffness: FloatProperty(name="Stiffness", min=0.0, max=1.0e7, soft_max=1000.0,
-                                  default=50.0, description="Spring constant ks, N/m")
+                                  default=50.0, description="Spring constant ks, N/m", options=STATIC)
     link_damping: FloatProperty(name="Damping", min=0.0, max=1.0e6, soft_max=10.0, default=0.5,
-                                description="Spring damping kd, N s/m")
+                                description="Spring damping kd, N s/m", options=STATIC)
     link_rest_length: FloatProperty(name="Rest Length", min=-1.0, max=1.0e4, default=-1.0,
-                                    unit='LENGTH', description="Negative: distance at birth")
-    output: EnumProperty(name="Output", items=OUTPUT_ITEMS, default='POINTS')
+                                    unit='LENGTH', description="Negative: distance at birth", options=STATIC)
+    output: EnumProperty(name="Output", items=OUTPUT_ITEMS, default='POINTS', options=STATIC)
     instance_object: PointerProperty(name="Instance", type=bpy.types.Object,
                                      description="Object drawn at each particle (default: a "
                                                  "sphere that shows the particle colors)")
@@ -143,7 +147,7 @@ class PHYSANIM_PG_emitter(bpy.types.PropertyGroup):
 
 class PHYSANIM_PG_collider(bpy.types.PropertyGroup):
     enabled: BoolProperty(name="Collider", description="Particles bounce off this object")
-    shape: EnumProperty(name="Shape", items=COLLIDER_SHAPE_ITEMS, default='HALF_SPACE')
+    shape: EnumProperty(name="Shape", items=COLLIDER_SHAPE_ITEMS, default='HALF_SPACE', options=STATIC)
     restitution: FloatProperty(name="Restitution", min=0.0, max=1.0, default=0.5,
                                subtype='FACTOR', description="Normal speed kept after a bounce")
     friction: FloatProperty(name="Friction", min=0.0, max=100.0, soft_max=2.0, default=0.3,
@@ -152,7 +156,7 @@ class PHYSANIM_PG_collider(bpy.types.PropertyGroup):
 
 class PHYSANIM_PG_force(bpy.types.PropertyGroup):
     enabled: BoolProperty(name="Force", description="This object is a force field")
-    type: EnumProperty(name="Type", items=FORCE_ITEMS, default='WIND')
+    type: EnumProperty(name="Type", items=FORCE_ITEMS, default='WIND', options=STATIC)
     strength: FloatProperty(name="Strength", min=-1.0e6, max=1.0e6, soft_min=-100.0,
                             soft_max=100.0, default=1.0, description="Force, N")
     noise: FloatProperty(name="Gusts", min=0.0, max=100.0, soft_max=2.0,
@@ -192,14 +196,15 @@ class PHYSANIM_PG_object(bpy.types.PropertyGroup):
 
 
 class PHYSANIM_PG_scene(bpy.types.PropertyGroup):
-    frame_start: IntProperty(name="Start", default=1, min=-1_000_000, max=1_000_000)
-    frame_end: IntProperty(name="End", default=250, min=-1_000_000, max=1_000_000)
+    frame_start: IntProperty(name="Start", default=1, min=-1_000_000, max=1_000_000, options=STATIC)
+    frame_end: IntProperty(name="End", default=250, min=-1_000_000, max=1_000_000, options=STATIC)
     substeps: IntProperty(name="Substeps", default=2, min=1, max=1000, soft_max=50,
-                          description="Simulation steps per frame")
-    integrator: EnumProperty(name="Integrator", items=INTEGRATOR_ITEMS, default='SYMPLECTIC_EULER')
+                          description="Simulation steps per frame", options=STATIC)
+    integrator: EnumProperty(name="Integrator", items=INTEGRATOR_ITEMS, default='SYMPLECTIC_EULER',
+                             options=STATIC)
     tolerance: FloatProperty(name="Tolerance", default=1.0e-4, min=1.0e-10, max=1.0,
-                             precision=6, description="Error tolerance of the adaptive RK45")
-    seed: IntProperty(name="Seed", min=0, max=2**31 - 1)
+                             precision=6, description="Error tolerance of the adaptive RK45", options=STATIC)
+    seed: IntProperty(name="Seed", min=0, max=2**31 - 1, options=STATIC)
     cache_dir: StringProperty(name="Cache", subtype='DIR_PATH', default="//physanim_cache",
                               options=BLEND_RELATIVE_PATH_OPTIONS,
                               description="Folder for bake caches ('//' = next to the .blend)")

@@ -35,3 +35,25 @@ def test_disabling_removes_every_handler(physanim_ext):
     finally:
         addon_utils.enable(physanim_ext.__name__, default_set=True, handle_error=None)
     assert ours()
+
+
+def test_per_frame_properties_are_keyframable_and_static_ones_are_not(physanim_ext):
+    """Everything the extract step samples per frame can be keyed; what a bake reads once
+    (topology, seeds, curve stops, solver settings) cannot, so no key silently does nothing."""
+    ob = bpy.data.objects.new("E", None)
+    bpy.context.scene.collection.objects.link(ob)
+    ob.physanim.emitter.enabled = True
+    for path in ("rate", "rate_random", "lifetime", "speed", "spread", "inherit_velocity", "mass",
+                 "size", "frame_start", "frame_end"):
+        assert ob.keyframe_insert(f"physanim.emitter.{path}", frame=1), path
+    for path in ("physanim.collider.restitution", "physanim.collider.friction",
+                 "physanim.force.strength", "physanim.force.noise"):
+        assert ob.keyframe_insert(path, frame=1), path
+    emitter_rna = type(ob.physanim.emitter).bl_rna.properties
+    for name in ("source", "direction", "seed", "stretch", "link_stiffness", "output"):
+        assert not emitter_rna[name].is_animatable, name
+    stop_rna = type(ob.physanim.emitter.color_stops[0]).bl_rna.properties
+    assert not stop_rna["color"].is_animatable and not stop_rna["position"].is_animatable
+    scene_rna = type(bpy.context.scene.physanim).bl_rna.properties
+    for name in ("frame_start", "frame_end", "substeps", "integrator", "tolerance", "seed"):
+        assert not scene_rna[name].is_animatable, name
