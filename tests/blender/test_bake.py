@@ -563,3 +563,29 @@ def test_bake_status_ignores_scrubbing_but_sees_animation_and_parent_edits(physa
     b.physanim.emitter.rate = 3.0
     text, icon = panels.bake_status(scene)
     assert icon == 'ERROR' and text.endswith(": B")
+
+
+def test_free_bake_finds_results_of_disabled_emitters_and_spares_user_collections(
+        physanim_ext, tmp_path):
+    scene = _setup(frame_end=4)
+    a = _emitter("A", rate=3.0)
+    a.physanim.emitter.output = 'OBJECTS'
+    b = _emitter("B", rate=3.0)
+    mine = bpy.data.collections.new("B_particle_objects")  # the name a bake would derive
+    scene.collection.children.link(mine)
+    precious = bpy.data.objects.new("Precious", None)
+    mine.objects.link(precious)
+    _save(tmp_path)
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    assert "Precious" in bpy.data.objects and "B_particle_objects" in bpy.data.collections
+    keyed = [c for c in bpy.data.collections if c.get("physanim_keyed_objects") == "A"]
+    assert len(keyed) == 1 and len(keyed[0].objects) > 0
+    folders = [_stream(a).parent, _stream(b).parent]
+    assert all(f.is_dir() for f in folders)
+    a.physanim.emitter.enabled = False  # switched off after baking: its bake must still go
+    assert bpy.ops.physanim.free_bake() == {'FINISHED'}
+    assert not any(f.exists() for f in folders)
+    assert not [c for c in bpy.data.collections if c.get("physanim_keyed_objects")]
+    assert a.physanim.emitter.result is None and b.physanim.emitter.result is None
+    assert "Precious" in bpy.data.objects and "B_particle_objects" in bpy.data.collections
+    assert scene.physanim.bake_hash == ""
