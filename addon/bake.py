@@ -191,7 +191,7 @@ class BakeJob:
         self._check_cache_range(frame)
         to_frames = convert.fps(self.scene)
         for i, ob in enumerate(self.roles.emitters):
-            arrays = emitter_arrays(self.model, self.state, i)
+            arrays = emitter_arrays(self.model, self.state, i, frame=frame)
             arrays["age"] = (arrays["age"] * to_frames).astype(np.float32)
             arrays["life"] = (arrays["life"] * to_frames).astype(np.float32)
             self.writers[ob.name].write_frame(STREAM, frame, arrays)

@@ -191,6 +191,12 @@ class Extractor:
                 "rate", "rate_random", "lifetime", "lifetime_random", "speed", "speed_random",
                 "mass", "size", "size_random", "spread", "inherit_velocity")}
             _check_finite(ob, frame, "emitter", values)
+            for key, unit in (("lifetime", "frames"), ("size", "m")):
+                if values[f"{key}_random"] > values[key]:
+                    raise PhysanimError(
+                        f"{key}_random {values[key + '_random']:g} {unit} is larger than {key} "
+                        f"{values[key]:g} {unit}: values would become negative — lower "
+                        f"{key}_random or raise {key}", obj=ob.name, frame=frame, kind="emitter")
             values["active"] = p.frame_start <= frame < p.frame_end
             emitters.append((_world_matrix(ob, frame, "emitter"), verts, values))
         colliders = []

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import PhysanimError
 from .model import ParticleModel, ParticleState
 
 
@@ -21,8 +22,11 @@ def velocity_alignment(v: np.ndarray) -> np.ndarray:
     return out
 
 
-def emitter_arrays(model: ParticleModel, state: ParticleState, emitter: int) -> dict[str, np.ndarray]:
+def emitter_arrays(model: ParticleModel, state: ParticleState, emitter: int,
+                   frame: int | None = None) -> dict[str, np.ndarray]:
     """Arrays of the particles of ``emitter`` alive in ``state``.
+
+    ``frame`` is the scene frame being written, named in error messages.
 
     Returns a dict of contiguous arrays: ``id`` (n,) int32, ``position`` and ``velocity`` (n, 3)
     float32 [m], [m/s], ``age`` (n,) [s], ``life`` (n,) [s], ``size`` (n,) [m] (base size times
@@ -35,8 +39,10 @@ def emitter_arrays(model: ParticleModel, state: ParticleState, emitter: int) -> 
     sel = state.particle_emitter == emitter
     ids = state.particle_id[sel]
     if len(ids) and ids[-1] > np.iinfo(np.int32).max:
-        raise OverflowError(f'emitter "{settings.name}": particle ids exceed the INT attribute '
-                            "range (2^31 births in one bake)")
+        raise PhysanimError(f"particle id {int(ids[-1]):,} exceeds the cache's 32-bit id range "
+                            f"({np.iinfo(np.int32).max:,}): the bake has had more than 2^31 "
+                            "births — lower the rates or bake fewer frames",
+                            obj=settings.name, frame=frame, kind="emitter")
     v = state.particle_v[sel]
     age = state.particle_age[sel]
     life = state.particle_life[sel]

@@ -71,7 +71,8 @@ class EmitterSettings:
         direction: ``NORMAL`` (surface normal; local ``axis`` at the origin; the dying particle's
             velocity for ``DEATHS``), ``AXIS`` (local ``axis``) or ``RANDOM`` (uniform sphere).
         axis: local direction for ``AXIS`` and the origin's normal.
-        seed: this emitter's seed, combined with the scene seed.
+        seed: this emitter's seed, combined with the scene seed and a hash of ``name`` (not the
+            emitter's index, so other emitters never change this one's particles).
         triangles: (m, 3) vertex indices of the source mesh's triangles (``FACES``/``VOLUME``).
         vertex_count: number of vertices of the source mesh.
         color: RGBA over life fraction (alpha = 1 - transparency).
@@ -126,9 +127,12 @@ class EmitterFrame:
 
     Args:
         rate: mean births per frame (per death for ``DEATHS``). rate_random: r.
-        speed, speed_random: initial speed [m/s] +- uniform random.
-        lifetime, lifetime_random: life span [s] +- uniform random.
-        mass: [kg]. size: base size [m] (+- ``size_random`` [m]).
+        speed, speed_random: initial speed [m/s] +- uniform random. ``speed_random`` may exceed
+            ``speed`` on purpose: a negative draw launches the particle backwards (against its
+            direction), which is how a symmetric spray along an axis is made.
+        lifetime, lifetime_random: life span [s] +- uniform random; ``lifetime_random`` must not
+            exceed ``lifetime`` (a life span cannot be negative).
+        mass: [kg]. size: base size [m] +- ``size_random`` [m], which must not exceed ``size``.
         spread: cone half-angle around the direction [rad].
         inherit_velocity: factor of the emitter's velocity at the birth point (robot-arm throw).
         active: whether this emitter gives births in this frame interval.
@@ -162,6 +166,16 @@ class EmitterFrame:
                       lifetime_random=self.lifetime_random, size=self.size,
                       size_random=self.size_random, spread=self.spread)
         _finite(owner, inherit_velocity=self.inherit_velocity)
+        # +- random must not cross zero: a negative life span or size has no meaning, and
+        # clamping it would silently change the distribution the user asked for.
+        if self.lifetime_random > self.lifetime:
+            raise ValueError(f"{owner}: lifetime_random {self.lifetime_random:g} s is larger than "
+                             f"lifetime {self.lifetime:g} s: life spans would become negative — "
+                             "lower lifetime_random or raise lifetime")
+        if self.size_random > self.size:
+            raise ValueError(f"{owner}: size_random {self.size_random:g} is larger than size "
+                             f"{self.size:g}: sizes would become negative — lower size_random or "
+                             "raise size")
         if not (self.mass > 0.0 and math.isfinite(self.mass)):
             raise ValueError(f"{owner}: mass must be > 0 (got {self.mass})")
         if self.rate + self.rate_random > LIMIT_BIRTHS_PER_FRAME:

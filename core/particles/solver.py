@@ -7,7 +7,9 @@ Per sub-step, in order (each a named pass below):
     respond   continuous collision response on each particle's path (no tunnelling)
     check     every value finite, or an error naming emitter, frame and particle
     age/kill  particles whose age reaches their life span die (sub-emitters burst there)
-    emit      births of this sub-step, placed at their sub-frame time and advanced to its end
+    emit      births of this sub-step, placed at their sub-frame time and advanced to its end;
+              a birth whose life span ends before the sub-step does never enters the State and
+              dies at its death point, where its sub-emitters burst in this same sub-step
 """
 from __future__ import annotations
 
@@ -51,8 +53,19 @@ class FrameInputs:
 
 @dataclass
 class FrameReport:
+    """What happened during one frame.
+
+    Attributes:
+        births: all births (what the rates asked for). per_emitter_births: the same per emitter.
+        deaths: particles that reached their life span, ``born_dead`` included.
+        born_dead: births whose whole life span fit inside their birth sub-step: they never
+            enter the State (no id, never cached), but their sub-emitters burst where they die.
+        Particles alive at the end = alive at the start + births - deaths.
+    """
+
     births: int = 0
     deaths: int = 0
+    born_dead: int = 0
     collisions: int = 0
     integrator_steps: int = 0
     alive: int = 0
@@ -121,9 +134,7 @@ class ParticleSolver:
                 detail = str(exc).removeprefix(f'emitter "{e.name}": ')
                 raise PhysanimError(detail, obj=e.name, frame=inputs.frame, kind="emitter") from exc
         report = FrameReport(per_emitter_births=[0] * model.emitter_count)
-        births = [Births.empty() if e.source == "DEATHS" else
-                  sample_births(state.rngs[i], e, inputs.emitters[i], inputs.frame_dt)
-                  for i, e in enumerate(model.emitters)]
+        births = [self._sample(state, inputs, i) for i in range(model.emitter_count)]
         paths = [coll.ColliderPath.of(c, inputs.frame_dt) for c in inputs.colliders]
         h = inputs.frame_dt / self.substeps
         g = np.asarray(inputs.gravity, dtype=np.float64)
@@ -147,6 +158,18 @@ class ParticleSolver:
         return report
 
     # -- passes ---------------------------------------------------------------------------------
+    def _sample(self, state, inputs, i) -> Births:
+        """This frame's births of mesh/origin emitter ``i`` (sub-emitters burst in ``_emit``)."""
+        e = self.model.emitters[i]
+        if e.source == "DEATHS":
+            return Births.empty()
+        try:
+            return sample_births(state.rngs[i], e, inputs.emitters[i], inputs.frame_dt)
+        except PhysanimError:
+            raise
+        except ValueError as exc:  # e.g. a volume that encloses nothing: name emitter and frame
+            raise PhysanimError(str(exc), obj=e.name, frame=inputs.frame, kind="emitter") from exc
+
     def _forces(self, state, inputs, g, contact) -> list:
         forces: list = [Gravity(tuple(g))] if np.any(g) else []
         forces.extend(inputs.forces)
@@ -211,9 +234,25 @@ class ParticleSolver:
             state.keep(~dead)
         return deaths
 
+    def _emit_order(self) -> list[int]:
+        """Mesh/origin emitters first, then sub-emitters by depth (parents before children), so
+        every emitter's deaths of a sub-step — including births that die at once — are known
+        before its sub-emitters burst. ``finalize`` rejected cycles, so depths are finite."""
+        emitters = self.model.emitters
+
+        def depth(i: int) -> int:
+            d = 0
+            while emitters[i].source == "DEATHS":
+                i, d = emitters[i].parent, d + 1
+            return d
+
+        return sorted(range(len(emitters)), key=lambda i: (depth(i), i))
+
     def _emit(self, state, inputs, births, deaths, s0, s1, g, report) -> None:
         last = s1 >= 1.0
-        for i, e in enumerate(self.model.emitters):
+        deaths = list(deaths)  # born-dead particles are added to their emitter's deaths below
+        for i in self._emit_order():
+            e = self.model.emitters[i]
             if e.source == "DEATHS":
                 b = sample_bursts(state.rngs[i], e, inputs.emitters[i], *deaths[e.parent])
                 b.u = np.full(len(b), s1)
@@ -222,11 +261,27 @@ class ParticleSolver:
                 b = b.take((b.u >= s0) & ((b.u < s1) | last))
             if len(b) == 0:
                 continue
+            tau = (s1 - b.u) * inputs.frame_dt  # time from birth to the end of this sub-step
+            # Same rule as _age_kill (age >= life dies): these die inside this sub-step, at the
+            # point of their ballistic flight where age == life; they never enter the State.
+            gone = tau >= b.life
+            if gone.any():
+                life = b.life[gone][:, None]
+                dx = b.x[gone] + b.v[gone] * life + 0.5 * g * life * life
+                dv = b.v[gone] + g * life
+                deaths[i] = (np.concatenate([deaths[i][0], dx]), np.concatenate([deaths[i][1], dv]))
+                n_gone = int(gone.sum())
+                report.born_dead += n_gone
+                report.deaths += n_gone
+                report.births += n_gone
+                report.per_emitter_births[i] += n_gone
+                b, tau = b.take(~gone), tau[~gone]
+                if len(b) == 0:
+                    continue
             if state.particle_count + len(b) > MAX_PARTICLES:
                 raise SimulationError(
                     f"more than {MAX_PARTICLES:,} particles alive — lower the rate or lifetime",
                     obj=e.name, frame=inputs.frame, kind="emitter")
-            tau = (s1 - b.u) * inputs.frame_dt  # time from birth to the end of this sub-step
             x = b.x + b.v * tau[:, None] + 0.5 * g * (tau * tau)[:, None]
             v = b.v + g * tau[:, None]
             previous = state.last_born[i]

@@ -42,8 +42,16 @@ def open_edge_count(tris: np.ndarray) -> int:
     return int(np.count_nonzero(counts != 2))
 
 
+def enclosed_volume(verts: np.ndarray, tris: np.ndarray) -> float:
+    """Signed volume [m^3] of a closed triangle mesh (divergence theorem); negative if the mesh
+    is inside-out (normals pointing inwards)."""
+    a, b, c = verts[tris[:, 0]], verts[tris[:, 1]], verts[tris[:, 2]]
+    return float(np.einsum("ij,ij->", a, np.cross(b, c)) / 6.0)
+
+
 def winding_number(points: np.ndarray, verts: np.ndarray, tris: np.ndarray) -> np.ndarray:
-    """Generalised winding number (k,) of points w.r.t. a closed triangle mesh (1 inside, 0 out).
+    """Generalised winding number (k,) of points w.r.t. a closed triangle mesh (1 inside, 0 out;
+    -1 inside an inside-out mesh).
 
     Sums the signed solid angle of every triangle (Van Oosterom & Strackee), batched to bound
     memory at :data:`WINDING_CHUNK` point-triangle pairs.
@@ -85,8 +93,18 @@ def sample_faces(rng: np.random.Generator, count: int, verts: np.ndarray, tris: 
 
 def sample_volume(rng: np.random.Generator, count: int, verts: np.ndarray, tris: np.ndarray,
                   max_rounds: int = 64) -> np.ndarray:
-    """``count`` points uniformly inside a closed mesh, by rejection in its bounding box."""
+    """``count`` points uniformly inside a closed mesh, by rejection in its bounding box.
+
+    Either winding works: an inside-out mesh (flipped normals) has winding number -1 inside.
+
+    Raises:
+        ValueError: the mesh encloses (almost) no volume, e.g. it is flat.
+    """
     lo, hi = verts.min(axis=0), verts.max(axis=0)
+    # A mesh flat in an axis plane gives a box of zero thickness: every candidate would lie on
+    # the surface, where the winding number is undefined — so say so before sampling.
+    if np.min(hi - lo) <= 1e-12 * max(float(np.max(hi - lo)), 1e-300):
+        raise ValueError(_no_volume(verts, tris))
     found: list[np.ndarray] = []
     have = 0
     for _ in range(max_rounds):
@@ -94,13 +112,22 @@ def sample_volume(rng: np.random.Generator, count: int, verts: np.ndarray, tris:
             break
         batch = max(64, 2 * (count - have))
         cand = lo + rng.random((batch, 3)) * (hi - lo)
-        inside = cand[winding_number(cand, verts, tris) > 0.5]
+        inside = cand[np.abs(winding_number(cand, verts, tris)) > 0.5]
         found.append(inside)
         have += len(inside)
     if have < count:
-        raise ValueError("could not place particles inside the mesh volume: it encloses almost "
-                         "no volume (flat or inside-out mesh?)")
+        raise ValueError(_no_volume(verts, tris, f"only {have} of {count} particles could be "
+                                                 f"placed inside it in {max_rounds} tries"))
     return np.concatenate(found)[:count]
+
+
+def _no_volume(verts: np.ndarray, tris: np.ndarray, detail: str = "") -> str:
+    extent = float(np.max(verts.max(axis=0) - verts.min(axis=0)))
+    volume = abs(enclosed_volume(verts, tris))
+    what = "it is flat" if volume <= 1e-9 * extent ** 3 else "it fills almost none of its bounds"
+    return (f"source is VOLUME but the mesh encloses no volume ({what}: volume {volume:.3g} "
+            f"in a bounding box {extent:.3g} across, object space{'; ' + detail if detail else ''})"
+            " — give the mesh thickness or emit from FACES")
 
 
 def cone_directions(rng: np.random.Generator, axis: np.ndarray, half_angle: float) -> np.ndarray:

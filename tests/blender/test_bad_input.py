@@ -372,3 +372,17 @@ def test_collider_keyed_to_zero_scale_names_object_and_frame(tmp_path):
     with pytest.raises(RuntimeError, match=r'collider "Squashed" at frame 6: .*zero scale.*'
                                            r'scale \(1\.0, 1\.0, 0\.0\)'):
         bpy.ops.physanim.bake()
+
+
+def test_lifetime_random_beyond_lifetime_is_named_in_frames(tmp_path):
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "life.blend"))
+    scene = bpy.context.scene
+    scene.physanim.frame_start, scene.physanim.frame_end = 1, 5
+    ob = bpy.data.objects.new("Short", None)
+    scene.collection.objects.link(ob)
+    p = ob.physanim.emitter
+    p.enabled = True
+    p.lifetime, p.lifetime_random = 10.0, 12.0
+    with pytest.raises(RuntimeError, match=r'emitter "Short" at frame 1: lifetime_random 12 frames '
+                                           r'is larger than lifetime 10 frames'):
+        bpy.ops.physanim.bake()

@@ -334,6 +334,104 @@ def test_particles_die_when_age_reaches_life():
     assert history[0].alive == rate
 
 
+@pytest.mark.parametrize("child_first", [False, True])
+def test_births_shorter_than_a_substep_never_enter_the_state(child_first):
+    # Life L = 0.2 frames, one sub-step per frame: a birth at sub-frame u would be tau = (1 - u)
+    # frames old at the sub-step's end, so with tau >= L (u <= 0.8) it dies inside its birth
+    # sub-step. It must not be cached older than its life span; it dies where its flight reaches
+    # age L: x = (0, 0, s L - g L^2 / 2), v = (0, 0, s - g L), and its sub-emitter (speed 0,
+    # inherit 1) bursts there in the same sub-step, so the children are exactly at that point —
+    # also when the sub-emitter comes before its parent in the emitter list.
+    life, speed, g, rate = 0.2 * DT, 3.0, 9.81, 400
+    p, c = (1, 0) if child_first else (0, 1)
+    flash_settings = EmitterSettings("Flash", direction="AXIS", seed=1)
+    spark_settings = EmitterSettings("Spark", source="DEATHS", parent=p, seed=2)
+    model = _model(*((spark_settings, flash_settings) if child_first else
+                     (flash_settings, spark_settings)))
+    state = model.state()
+    flash = EmitterFrame(rate=rate, speed=speed, lifetime=life)
+    spark = EmitterFrame(rate=1, speed=0.0, inherit_velocity=1.0, lifetime=100.0)
+    frames = [spark, flash] if child_first else [flash, spark]
+    report = ParticleSolver(model).advance(state, _inputs(0, frames, (0.0, 0.0, -g)))
+    parents = state.particle_emitter == p
+    assert np.all(state.particle_age[parents] < state.particle_life[parents])
+    assert report.per_emitter_births[p] == rate
+    assert report.born_dead == rate - int(parents.sum()) == report.deaths
+    assert abs(report.born_dead - 0.8 * rate) <= 5 * math.sqrt(rate * 0.8 * 0.2)
+    children = state.particle_emitter == c
+    assert int(children.sum()) == report.born_dead == report.per_emitter_births[c]
+    np.testing.assert_array_equal(state.particle_age[children], 0.0)
+    np.testing.assert_allclose(state.particle_x[children],
+                               np.broadcast_to([0, 0, speed * life - 0.5 * g * life * life],
+                                               (report.born_dead, 3)), atol=1e-12)
+    np.testing.assert_allclose(state.particle_v[children],
+                               np.broadcast_to([0, 0, speed - g * life], (report.born_dead, 3)),
+                               atol=1e-12)
+
+
+def test_short_lived_particles_over_many_substeps():
+    # Same emitter, 3 sub-steps of h = 1/3 frame, no gravity (every flight is exact): after
+    # every frame no particle is as old as its life span; each child flies at the parent's
+    # speed along z, so z / s - child age is the parent's age at death: exactly L for births
+    # that died at once, in [L, L + h) for those that died one sub-step later. Every parent
+    # death gave exactly one child (nothing is lost or late).
+    life, speed, h = 0.2 * DT, 3.0, DT / 3
+    model = _model(EmitterSettings("Flash", direction="AXIS", seed=1),
+                   EmitterSettings("Spark", source="DEATHS", parent=0, seed=2))
+    state = model.state()
+    solver = ParticleSolver(model, substeps=3)
+    flash = EmitterFrame(rate=50, speed=speed, lifetime=life)
+    spark = EmitterFrame(rate=1, speed=0.0, inherit_velocity=1.0, lifetime=100.0)
+    deaths = born_dead = 0
+    for f in range(10):
+        report = solver.advance(state, _inputs(f, [flash, spark]))
+        deaths += report.deaths
+        born_dead += report.born_dead
+        assert np.all(state.particle_age < state.particle_life)
+    children = state.particle_emitter == 1
+    assert int(children.sum()) == deaths
+    death_age = state.particle_x[children, 2] / speed - state.particle_age[children]
+    assert np.all((death_age >= life - 1e-12) & (death_age < life + h))
+    assert np.count_nonzero(np.abs(death_age - life) <= 1e-12) >= born_dead > 0
+
+
+def test_random_larger_than_value_is_rejected_for_life_and_size():
+    model = _model(EmitterSettings("Spray"))
+    solver = ParticleSolver(model)
+    cases = [
+        (EmitterFrame(lifetime=0.3, lifetime_random=0.5),
+         ("lifetime_random 0.5 s is larger than lifetime 0.3 s: life spans would become "
+          "negative — lower lifetime_random")),
+        (EmitterFrame(size=0.05, size_random=0.08),
+         ("size_random 0.08 is larger than size 0.05: sizes would become negative — lower "
+          "size_random")),
+    ]
+    for ef, expected in cases:
+        with pytest.raises(PhysanimError) as info:
+            solver.advance(model.state(), _inputs(7, [ef]))
+        err = info.value
+        assert (err.obj, err.frame, err.kind) == ("Spray", 7, "emitter")
+        assert str(err).startswith('emitter "Spray" at frame 7: ' + expected)
+    # equal is fine: the extremes reach zero, never below
+    state = model.state()
+    solver.advance(state, _inputs(0, [EmitterFrame(rate=500, lifetime=1.0, lifetime_random=1.0,
+                                                  size=0.05, size_random=0.05)]))
+    assert np.all(state.particle_life >= 0.0) and np.all(state.particle_size >= 0.0)
+
+
+def test_speed_random_larger_than_speed_flips_direction():
+    # speed 1 +- 3: a third of the draws are negative and fly against the axis (by design).
+    n = 3000
+    model = _model(EmitterSettings("Both Ways", direction="AXIS", seed=5))
+    state = model.state()
+    ParticleSolver(model).advance(state, _inputs(0, [EmitterFrame(rate=n, speed=1.0,
+                                                                  speed_random=3.0)]))
+    vz = state.particle_v[:, 2]
+    np.testing.assert_array_equal(state.particle_v[:, :2], 0.0)
+    assert vz.min() < -1.9 and vz.max() > 3.9
+    assert abs(np.count_nonzero(vz < 0) - n / 3) <= 5 * math.sqrt(n * 2 / 9)
+
+
 def test_steady_state_with_random_rate_and_life():
     # Mean alive count = mean rate * mean life in frames (Little's law): 10 * 12 = 120; with
     # independent frames the fluctuation is ~ sqrt(120), averaged over 100 frames well inside 5%.
@@ -384,10 +482,22 @@ def test_different_seed_differs():
 
 
 def test_second_emitter_does_not_change_the_first():
+    # The new emitter is inserted *before* the existing one, so the Fountain's index shifts from
+    # 0 to 1: its generator must depend on its name and seeds, not on its position.
     first = EmitterSettings("Fountain", direction="RANDOM", seed=21)
     alone = _run([first])
-    both = _run([first, EmitterSettings("Other", direction="RANDOM", seed=99)])
-    assert np.count_nonzero(both.particle_emitter == 1) > 100
+    both = _run([EmitterSettings("Other", direction="RANDOM", seed=99), first])
+    renamed = _run([EmitterSettings("Renamed", direction="RANDOM", seed=99), first])
+    assert np.count_nonzero(both.particle_emitter == 0) > 100
     ref = _arrays(alone)
-    for name, value in _arrays(both, emitter=0).items():
-        np.testing.assert_array_equal(value, ref[name], err_msg=name)
+    for state in (both, renamed):
+        for name, value in _arrays(state, emitter=1).items():
+            np.testing.assert_array_equal(value, ref[name], err_msg=name)
+
+
+def test_renaming_an_emitter_reseeds_it():
+    # The name is part of the seed: same seeds, different name, different particles.
+    a = _run([EmitterSettings("Fountain", direction="RANDOM", seed=21)])
+    b = _run([EmitterSettings("Fountain.001", direction="RANDOM", seed=21)])
+    n = min(a.particle_count, b.particle_count)
+    assert not np.array_equal(a.particle_x[:n], b.particle_x[:n])

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from physanim.core.curves import LifeCurve
+from physanim.core.errors import PhysanimError
 from physanim.core.particles import (
     EmitterFrame, EmitterSettings, FrameInputs, ParticleModelBuilder, ParticleSolver,
     emitter_arrays,
@@ -117,10 +118,25 @@ def test_stretch_aligns_instances_with_velocity():
                                rtol=1e-6)
 
 
-def test_ids_beyond_int32_raise():
+def test_ids_beyond_int32_raise_naming_emitter_and_frame():
     model = _model(EmitterSettings("Huge"))
     state = model.state()
     state.next_id = 2 ** 31
     _place(state, np.zeros((1, 3)), np.zeros((1, 3)))
-    with pytest.raises(OverflowError, match='"Huge"'):
+    with pytest.raises(PhysanimError) as info:
+        emitter_arrays(model, state, 0, frame=412)
+    err = info.value
+    assert (err.obj, err.frame, err.kind) == ("Huge", 412, "emitter")
+    message = str(err)
+    assert message.startswith('emitter "Huge" at frame 412: ')
+    assert "2,147,483,648" in message and "lower the rates" in message
+    with pytest.raises(PhysanimError, match='^emitter "Huge": '):  # frame is optional
         emitter_arrays(model, state, 0)
+
+
+def test_ids_at_int32_limit_are_fine():
+    model = _model(EmitterSettings("Big"))
+    state = model.state()
+    state.next_id = 2 ** 31 - 1
+    _place(state, np.zeros((1, 3)), np.zeros((1, 3)))
+    assert emitter_arrays(model, state, 0, frame=1)["id"][0] == 2 ** 31 - 1
