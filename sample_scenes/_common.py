@@ -85,15 +85,13 @@ def points(scene, emitter_name: str, frame: int) -> dict[str, np.ndarray]:
     res = bpy.data.objects[emitter_name].physanim.emitter.result
     me = res.data
     n = len(me.vertices)
-    out = {"position": np.empty(n * 3, np.float32)}
-    me.attributes["position"].data.foreach_get("vector", out["position"])
-    out["position"] = out["position"].reshape(n, 3)
-    for name, comp, size in (("id", "value", 1), ("age", "value", 1), ("velocity", "vector", 3),
-                             ("color", "color", 4), ("size", "value", 1)):
+    out = {}
+    for name, comp, size in (("position", "vector", 3), ("id", "value", 1), ("age", "value", 1),
+                             ("velocity", "vector", 3), ("color", "color", 4),
+                             ("size", "value", 1)):
+        buf = np.zeros(n * size, np.int32 if name == "id" else np.float32)
         attr = me.attributes.get(name)
-        if attr is None:
-            continue
-        buf = np.empty(n * size, np.int32 if name == "id" else np.float32)
-        attr.data.foreach_get(comp, buf)
+        if n and attr is not None:  # an empty mesh has no attributes at all
+            attr.data.foreach_get(comp, buf)
         out[name] = buf.reshape(n, size) if size > 1 else buf
     return out

@@ -59,25 +59,43 @@ def build(scene) -> None:
 
 
 def check(scene) -> list[str]:
+    """Sparks are born where a rocket dies, carry its velocity, and burst high in the sky."""
     problems = []
-    first_spark = None
-    for frame in range(1, scene.physanim.frame_end + 1, 5):
-        sp = _common.points(scene, "Sparks", frame)
-        if len(sp["id"]) and first_spark is None:
-            first_spark = frame
-            rockets_before = _common.points(scene, "Rockets", frame - 5)
-            # sparks are born where a rocket died: near a rocket's last known position/path
-            d = np.linalg.norm(sp["position"][:, None, :] - rockets_before["position"][None], axis=2)
-            if len(rockets_before["id"]) and d.min(axis=1).max() > 25.0:
-                problems.append("sparks appeared far from every rocket")
-    if first_spark is None:
+    fps = scene.render.fps / scene.render.fps_base
+    rocket_speed = 24.0  # speed + speed_random
+    spark_speed = 8.5
+    bursts = 0
+    previous = _common.points(scene, "Rockets", 1)
+    for frame in range(2, scene.physanim.frame_end + 1):
+        sparks = _common.points(scene, "Sparks", frame)
+        newborn = sparks["age"] < 1.0
+        rockets = previous
+        previous = _common.points(scene, "Rockets", frame)
+        if not newborn.any():
+            continue
+        bursts += 1
+        if frame < 30:
+            problems.append(f"sparks appeared at frame {frame}, before any rocket could die")
+        gone = ~np.isin(rockets["id"], previous["id"])  # rockets that died this frame
+        if not gone.any():
+            problems.append(f"frame {frame}: sparks were born but no rocket died")
+            continue
+        # a spark is within one frame of flight of a dying rocket's last position
+        reach = (rocket_speed + spark_speed) / fps + 0.5
+        d = np.linalg.norm(sparks["position"][newborn, None, :]
+                           - rockets["position"][None, gone, :], axis=2).min(axis=1)
+        if d.max() > reach:
+            problems.append(f"frame {frame}: a newborn spark is {d.max():.1f} m from every dying "
+                            f"rocket (reach {reach:.1f} m)")
+        if rockets["position"][gone, 2].min() < 5.0:
+            problems.append(f"frame {frame}: a rocket burst near the ground")
+        if gone.sum() == 1:  # one burst: its sparks inherit the rocket's velocity on average
+            mean_v = sparks["velocity"][newborn].mean(axis=0)
+            rocket_v = rockets["velocity"][gone][0]
+            spread = spark_speed / np.sqrt(newborn.sum()) * 3 + 9.81 / fps * 2
+            if np.linalg.norm(mean_v - rocket_v) > spread + 1.0:
+                problems.append(f"frame {frame}: sparks' mean velocity {mean_v.round(1)} is not "
+                                f"the rocket's {rocket_v.round(1)}")
+    if bursts == 0:
         problems.append("no sparks: rockets never burst")
-        return problems
-    if first_spark < 30:
-        problems.append(f"sparks appeared at frame {first_spark}, before any rocket could die")
-    sp = _common.points(scene, "Sparks", first_spark + 10)
-    if len(sp["id"]) < 100:
-        problems.append(f"only {len(sp['id'])} sparks 10 frames after the first burst")
-    if sp["position"][:, 2].max() < 5.0:
-        problems.append("bursts happen near the ground instead of in the sky")
     return problems
