@@ -19,7 +19,7 @@ import numpy as np
 from ..core.cache import CacheWriter
 from ..core.errors import PhysanimError, SimulationError
 from ..core.particles import ParticleSolver, emitter_arrays
-from . import convert, extract
+from . import convert, extract, springs
 
 STREAM = "points"
 BYTES_PER_PARTICLE_FRAME = 4 * (1 + 3 + 3 + 1 + 1 + 1 + 4 + 3 + 3)  # cache arrays of output.py
@@ -51,6 +51,12 @@ def cache_root(scene) -> str:
 
 def emitter_cache_dir(scene, ob) -> str:
     return os.path.join(cache_root(scene), safe_name(scene.name), safe_name(ob.name))
+
+
+def spring_cache_dir(scene, ob) -> str:
+    """Spring meshes bake into their own sub-folder: an object may also be an emitter."""
+    return os.path.join(cache_root(scene), safe_name(scene.name), "spring_meshes",
+                        safe_name(ob.name))
 
 
 def relative_path(path: str) -> str:
@@ -105,9 +111,9 @@ class BakeJob:
         self.settings = self.scene.physanim
         self.original_frame = self.scene.frame_current
         self.roles = extract.gather(self.scene, only)
-        if not self.roles.emitters:
-            raise PhysanimError("nothing to bake: no object has a PhysAnim emitter enabled",
-                                obj=self.scene.name, kind="scene")
+        if not self.roles.emitters and not self.roles.spring_meshes:
+            raise PhysanimError("nothing to bake: no object has a PhysAnim emitter or spring "
+                                "mesh enabled", obj=self.scene.name, kind="scene")
         self.frame_start = self.settings.frame_start
         self.frame_end = self.settings.frame_end
         if self.frame_end < self.frame_start:
@@ -119,18 +125,32 @@ class BakeJob:
         self.started = time.perf_counter()
         self.stats = {"births": 0, "collisions": 0, "peak": 0}
         self.births = {ob.name: 0 for ob in self.roles.emitters}
+        self.meshes: list[springs.SpringMeshBake] = []
+        self.mesh_writers: dict[str, CacheWriter] = {}
         from . import results
 
         results.suspend_refresh(self.scene)  # our own frame changes must not reload old bakes
+        # the bake reads each spring mesh without its previous cache playing on top
+        self.suspended = {ob.name: springs.suspend_modifier(ob) for ob in self.roles.spring_meshes}
         try:
             for ob in self.roles.emitters:
                 self.writers[ob.name] = CacheWriter(emitter_cache_dir(self.scene, ob))
+            for ob in self.roles.spring_meshes:
+                self.mesh_writers[ob.name] = CacheWriter(spring_cache_dir(self.scene, ob))
             all_roles = extract.gather(self.scene)
             self.hashes = {ob.name: extract.emitter_hash(self.scene, ob, all_roles)
                            for ob in self.roles.emitters}
+            self.mesh_hashes = {ob.name: extract.inputs_hash(self.scene, ob, "spring_mesh",
+                                                             all_roles)
+                                for ob in self.roles.spring_meshes}
             self.extractor = extract.Extractor(self.scene, self.roles)
             self.scene.frame_set(self.frame_start)
             depsgraph = context.evaluated_depsgraph_get()
+            for ob in self.roles.spring_meshes:
+                bake = springs.SpringMeshBake(self.scene, ob, self.mesh_writers[ob.name],
+                                              self.frame_start)
+                self.meshes.append(bake)
+                bake.prepare(depsgraph, self.frame_start)
             self.model = self.extractor.build_model(depsgraph, self.frame_start)
             self.solver = ParticleSolver(self.model, self.settings.integrator,
                                          self.settings.substeps, self.settings.tolerance)
@@ -209,7 +229,11 @@ class BakeJob:
             between.append(self.extractor.sample_motion())
         self.scene.frame_set(nxt)
         sample = self.extractor.sample(self.view_layer.depsgraph, nxt)
-        report = self.solver.advance(self.state, self.extractor.inputs(self.sample, sample, between))
+        inputs = self.extractor.inputs(self.sample, sample, between)
+        report = self.solver.advance(self.state, inputs)
+        for mesh in self.meshes:
+            mesh.advance(mesh.read(self.view_layer.depsgraph, nxt), inputs.colliders,
+                         inputs.forces, inputs.t0, inputs.frame_dt, inputs.gravity)
         self.stats["births"] += report.births
         self.stats["collisions"] += report.collisions
         self._count_births(report, nxt)
@@ -237,21 +261,33 @@ class BakeJob:
 
         meta = {"frame_start": self.frame_start, "frame_end": self.frame_end,
                 "fps": convert.fps(self.scene), "kind": "particles"}
-        for writer in self.writers.values():  # every frame on disk before any bake is swapped in
-            writer.flush()
+        for mesh in self.meshes:
+            mesh.close()
+        for writer in [*self.writers.values(), *self.mesh_writers.values()]:
+            writer.flush()  # every frame on disk before any bake is swapped in
         paths = {ob.name: self.writers[ob.name].commit(dict(meta, emitter=ob.name,
                                                             hash=self.hashes[ob.name]))
                  for ob in self.roles.emitters}
+        mesh_paths = {ob.name: self.mesh_writers[ob.name].commit(
+            dict(meta, kind="spring_mesh", object=ob.name, hash=self.mesh_hashes[ob.name]))
+            for ob in self.roles.spring_meshes}
         self.writers.clear()
+        self.mesh_writers.clear()
         results.resume_refresh(self.scene)
         for ob in self.roles.emitters:
             results.attach(context, self.scene, ob,
                            relative_path(os.path.join(paths[ob.name], STREAM)),
                            self.frame_start, self.frame_end, self.hashes[ob.name])
+        for ob in self.roles.spring_meshes:
+            springs.attach(ob, relative_path(os.path.join(mesh_paths[ob.name], springs.CACHE_FILE)),
+                           self.frame_start, self.mesh_hashes[ob.name])
+        self.suspended.clear()
         self.scene.frame_set(self.original_frame)
-        self.settings.bake_hash = extract.scene_hash(list(self.hashes.values()))
+        self.settings.bake_hash = extract.scene_hash(
+            [*self.hashes.values(), *self.mesh_hashes.values()])
         took = time.perf_counter() - self.started
-        info = (f"baked {len(self.roles.emitters)} emitter(s), frames {self.frame_start}-"
+        meshes = f", {len(self.meshes)} spring mesh(es)" if self.meshes else ""
+        info = (f"baked {len(self.roles.emitters)} emitter(s){meshes}, frames {self.frame_start}-"
                 f"{self.frame_end}: {self.stats['births']:,} births, peak {self.stats['peak']:,} "
                 f"alive, {took:.2f} s")
         self.settings.bake_info = info
@@ -261,9 +297,15 @@ class BakeJob:
         """Delete partial caches and restore the frame; the previous bake is untouched."""
         from . import results
 
-        for writer in self.writers.values():
+        for mesh in self.meshes:
+            mesh.close()
+        for writer in [*self.writers.values(), *getattr(self, "mesh_writers", {}).values()]:
             writer.abort()
         self.writers.clear()
+        self.mesh_writers.clear()
+        for ob in self.roles.spring_meshes:
+            springs.restore_modifier(ob, self.suspended.get(ob.name))
+        self.suspended.clear()
         results.resume_refresh(self.scene)
         if self.scene.frame_current != self.original_frame:
             self.scene.frame_set(self.original_frame)

@@ -22,26 +22,30 @@ MESH_SOURCES = ("VERTS", "FACES", "VOLUME")
 
 @dataclass
 class Roles:
-    """Objects taking part in a particle bake, in a stable (name) order."""
+    """Objects taking part in a bake, in a stable (name) order."""
 
     emitters: list = field(default_factory=list)
     colliders: list = field(default_factory=list)
     forces: list = field(default_factory=list)
+    spring_meshes: list = field(default_factory=list)
 
 
 def gather(scene, only: set[str] | None = None) -> Roles:
     """Objects of ``scene`` with a physanim role enabled.
 
     Args:
-        only: names of emitters to bake (None = all). The parents of selected sub-emitters are
-            added, since their particles' deaths drive the sub-emitter.
+        only: names of emitters and spring meshes to bake (None = all). The parents of selected
+            sub-emitters are added, since their particles' deaths drive the sub-emitter.
     """
     objects = sorted(scene.objects, key=lambda o: o.name)
     emitters = [o for o in objects if o.physanim.emitter.enabled]
+    meshes = [o for o in objects if o.physanim.spring_mesh.enabled]
     if only is not None:
-        unknown = only - {o.name for o in emitters}
+        unknown = only - {o.name for o in emitters} - {o.name for o in meshes}
         if unknown:
-            raise PhysanimError(f"not an emitter in scene \"{scene.name}\": {', '.join(sorted(unknown))}")
+            raise PhysanimError(f"not an emitter or spring mesh in scene \"{scene.name}\": "
+                                f"{', '.join(sorted(unknown))}")
+        meshes = [o for o in meshes if o.name in only]
         chosen = {o.name for o in emitters if o.name in only}
         changed = True
         while changed:
@@ -54,7 +58,7 @@ def gather(scene, only: set[str] | None = None) -> Roles:
         emitters = [o for o in emitters if o.name in chosen]
     return Roles(emitters,
                  [o for o in objects if o.physanim.collider.enabled],
-                 [o for o in objects if o.physanim.force.enabled])
+                 [o for o in objects if o.physanim.force.enabled], meshes)
 
 
 def _curve(stops, kind: str) -> LifeCurve:
@@ -289,7 +293,7 @@ def _rna_dump(pg, prefix: str = "", animated: frozenset = frozenset()) -> dict:
     out = {}
     for prop in pg.bl_rna.properties:
         key = prop.identifier
-        if key in ("rna_type", "result", "bake_hash", "bake_info"):
+        if key in ("rna_type", "result", "bake_hash", "bake_info", "enabled"):
             continue
         path = f"{prefix}{key}"
         if path in animated:
@@ -327,6 +331,12 @@ def _fcurves(ad):
     return compat.action_fcurves(ad)
 
 
+def _made_by_bake(modifier) -> bool:
+    """The bake's own output modifiers are not inputs of the bake."""
+    return ((modifier.type == 'NODES' and modifier.name == "physanim_instances")
+            or (modifier.type == 'MESH_CACHE' and modifier.name == "physanim"))
+
+
 def _object_record(ob, role: str | None) -> dict:
     """Everything about one object a bake reads, independent of the current frame."""
     animated = frozenset(_animated_paths(ob))
@@ -336,7 +346,7 @@ def _object_record(ob, role: str | None) -> dict:
               "constraints": [(c.type, c.name, round(c.influence, 7), c.mute)
                               for c in ob.constraints],
               "modifiers": [(m.type, m.name, m.show_render, m.show_viewport)
-                            for m in ob.modifiers if m.type != 'NODES' or m.name != "physanim_instances"]}
+                            for m in ob.modifiers if not _made_by_bake(m)]}
     for channel in ("location", "rotation_euler", "rotation_quaternion", "rotation_axis_angle",
                     "scale", "delta_location", "delta_rotation_euler", "delta_scale"):
         if channel not in animated:
@@ -352,25 +362,37 @@ def _object_record(ob, role: str | None) -> dict:
     return record
 
 
-def emitter_hash(scene, emitter, roles: Roles | None = None) -> str:
-    """Digest of everything the bake of ``emitter`` depends on: scene settings, every collider
-    and force, the emitter (with its parent chain) and, for sub-emitters, their parent emitter."""
+def inputs_hash(scene, ob, role: str, roles: Roles | None = None) -> str:
+    """Digest of everything the bake of ``ob`` in ``role`` ("emitter" or "spring_mesh") depends
+    on: scene settings, every collider and force, the object (with its parent chain), for
+    sub-emitters their parent emitter, for spring meshes their virtual-spring targets."""
     roles = roles if roles is not None else gather(scene)
     h = hashlib.sha256()
     settings = _rna_dump(scene.physanim)
     settings.update(fps=convert.fps(scene), gravity=convert.gravity(scene),
-                    anim=_animation_dump(scene))
+                    anim=_animation_dump(scene), role=role)
     h.update(json.dumps(settings, sort_keys=True).encode())
-    chain, ob = [], emitter
-    while ob is not None and ob.name not in {o.name for o in chain}:
-        chain.append(ob)
-        p = ob.physanim.emitter
-        ob = p.parent if p.source == 'DEATHS' else None
-    records = [_object_record(o, "emitter") for o in chain]
+    records = []
+    if role == "emitter":
+        chain, current = [], ob
+        while current is not None and current.name not in {o.name for o in chain}:
+            chain.append(current)
+            p = current.physanim.emitter
+            current = p.parent if p.source == 'DEATHS' else None
+        records += [_object_record(o, "emitter") for o in chain]
+    else:
+        records.append(_object_record(ob, role))
+        targets = {v.target.name: v.target for v in ob.physanim.spring_mesh.virtual_springs
+                   if v.target is not None}
+        records += [_object_record(targets[name], None) for name in sorted(targets)]
     records += [_object_record(o, "collider") for o in roles.colliders]
     records += [_object_record(o, "force") for o in roles.forces]
     h.update(json.dumps(records, sort_keys=True).encode())
     return h.hexdigest()
+
+
+def emitter_hash(scene, emitter, roles: Roles | None = None) -> str:
+    return inputs_hash(scene, emitter, "emitter", roles)
 
 
 def scene_hash(hashes: list[str]) -> str:

@@ -12,13 +12,14 @@ import bpy
 from bpy.props import BoolProperty, EnumProperty, IntProperty
 
 from ..core.errors import PhysanimError
-from . import bake, results
+from . import bake, results, springs
 
 FRAME_BUDGET_S = 0.05  # modal: simulate for at most this long per timer tick, then redraw
 
 
 def _selected_names(context) -> set[str]:
-    return {o.name for o in context.selected_objects if o.physanim.emitter.enabled}
+    return {o.name for o in context.selected_objects
+            if o.physanim.emitter.enabled or o.physanim.spring_mesh.enabled}
 
 
 class PHYSANIM_OT_bake(bpy.types.Operator):
@@ -148,6 +149,14 @@ class PHYSANIM_OT_free_bake(bpy.types.Operator):
                 if chosen is None or res.physanim.result.emitter in chosen or res.name in chosen:
                     results.free_result(scene, res)
                     freed += 1
+            for ob in scene.objects:  # spring meshes: the cache modifier and its folder
+                if chosen is not None and ob.name not in chosen:
+                    continue
+                folder = springs.cache_folder_of(ob)
+                if springs.free(ob):
+                    freed += 1
+                    if folder:
+                        remove_cache(folder)
             # leftovers of results the user deleted by hand: keyed objects and cache folders
             for ob in scene.objects:
                 if chosen is not None and ob.name not in chosen:
@@ -158,10 +167,13 @@ class PHYSANIM_OT_free_bake(bpy.types.Operator):
                     freed += 1
                 if ob.physanim.emitter.enabled and bpy.data.filepath:
                     freed += remove_cache(bake.emitter_cache_dir(scene, ob))
+                if ob.physanim.spring_mesh.enabled and bpy.data.filepath:
+                    freed += remove_cache(bake.spring_cache_dir(scene, ob))
         except (PhysanimError, OSError) as exc:
             self.report({'ERROR'}, str(exc))
             return {'CANCELLED'}
-        if not results.result_objects(scene):
+        if not results.result_objects(scene) and not any(
+                springs.cache_modifier(o) for o in scene.objects if o.type == 'MESH'):
             scene.physanim.bake_hash = ""
             scene.physanim.bake_info = ""
         self.report({'INFO'}, f"freed {freed} bake(s)")
@@ -197,7 +209,31 @@ class PHYSANIM_OT_stop_edit(bpy.types.Operator):
         return {'FINISHED'}
 
 
-CLASSES = (PHYSANIM_OT_bake, PHYSANIM_OT_free_bake, PHYSANIM_OT_stop_edit)
+class PHYSANIM_OT_virtual_edit(bpy.types.Operator):
+    """Add or remove a group of virtual springs of a spring mesh"""
+
+    bl_idname = "physanim.virtual_edit"
+    bl_label = "Edit Virtual Springs"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    action: EnumProperty(items=[('ADD', "Add", ""), ('REMOVE', "Remove", "")])
+    index: IntProperty(default=-1)
+
+    @classmethod
+    def poll(cls, context):
+        return context.object is not None and context.object.type == 'MESH'
+
+    def execute(self, context):
+        groups = context.object.physanim.spring_mesh.virtual_springs
+        if self.action == 'ADD':
+            groups.add()
+        elif 0 <= self.index < len(groups):
+            groups.remove(self.index)
+        return {'FINISHED'}
+
+
+CLASSES = (PHYSANIM_OT_bake, PHYSANIM_OT_free_bake, PHYSANIM_OT_stop_edit,
+           PHYSANIM_OT_virtual_edit)
 
 
 def register() -> None:

@@ -8,7 +8,9 @@ from . import extract
 
 
 def bake_status(scene) -> tuple[str, str]:
-    """(text, icon) telling whether each emitter's bake matches the scene as it is now."""
+    """(text, icon) telling whether each emitter's and spring mesh's bake matches the scene."""
+    from . import springs
+
     try:
         roles = extract.gather(scene)
         missing, outdated = [], []
@@ -18,11 +20,18 @@ def bake_status(scene) -> tuple[str, str]:
                 missing.append(ob.name)
             elif res.physanim.result.hash != extract.emitter_hash(scene, ob, roles):
                 outdated.append(ob.name)
+        for ob in roles.spring_meshes:
+            if springs.cache_modifier(ob) is None:
+                missing.append(ob.name)
+            elif ob.physanim.spring_mesh.bake_hash != extract.inputs_hash(
+                    scene, ob, "spring_mesh", roles):
+                outdated.append(ob.name)
     except Exception as exc:  # noqa: BLE001 — a panel must draw whatever the scene holds
         return f"Cannot check bake: {exc}", 'ERROR'
     if outdated:
         return f"Bake is outdated (the scene changed): {', '.join(outdated)}", 'ERROR'
-    if missing and len(missing) == len(roles.emitters):
+    everything = len(roles.emitters) + len(roles.spring_meshes)
+    if missing and len(missing) == everything:
         return "Not baked", 'INFO'
     if missing:
         return f"Not baked: {', '.join(missing)}", 'INFO'
@@ -57,6 +66,8 @@ class PHYSANIM_PT_object(_PhysicsPanel, bpy.types.Panel):
         row.prop(p.emitter, "enabled", toggle=True, icon='PARTICLES')
         row.prop(p.collider, "enabled", toggle=True, icon='MOD_PHYSICS')
         row.prop(p.force, "enabled", toggle=True, icon='FORCE_WIND')
+        if context.object.type == 'MESH':
+            row.prop(p.spring_mesh, "enabled", toggle=True, icon='MOD_CLOTH')
         draw_bake_buttons(self.layout.box(), context.scene)
 
 
@@ -198,6 +209,74 @@ class PHYSANIM_PT_force(_PhysicsPanel, bpy.types.Panel):
             layout.prop(p, "max_distance")
 
 
+class PHYSANIM_PT_spring_mesh(_PhysicsPanel, bpy.types.Panel):
+    bl_label = "Spring Mesh"
+    bl_parent_id = "PHYSANIM_PT_object"
+
+    @classmethod
+    def poll(cls, context):
+        ob = context.object
+        return ob is not None and ob.type == 'MESH' and ob.physanim.spring_mesh.enabled
+
+    def draw(self, context):
+        ob = context.object
+        p = ob.physanim.spring_mesh
+        layout = self.layout
+        layout.use_property_split = True
+        col = layout.column()
+        col.prop(p, "mass")
+        col.prop(p, "mass_mode")
+        col.prop(p, "drag")
+        col = layout.column(align=True)
+        col.prop(p, "stiffness", text="Edge Stiffness")
+        col.prop(p, "damping", text="Damping")
+        faces = len(ob.data.polygons) > 0
+        col = layout.column(align=True)
+        col.active = faces
+        col.prop(p, "shear_stiffness")
+        col.prop(p, "shear_damping", text="Damping")
+        col = layout.column(align=True)
+        col.active = faces
+        col.prop(p, "bend_mode")
+        if p.bend_mode != 'NONE':
+            col.prop(p, "bend_stiffness", text="Stiffness")
+            col.prop(p, "bend_damping", text="Damping")
+        if not faces:
+            layout.label(text="No faces: only edge springs (no shear or bending)", icon='INFO')
+        layout.prop_search(p, "pin_group", ob, "vertex_groups")
+        if p.pin_group:
+            layout.prop(p, "pin_stiffness")
+        layout.prop(p, "integrator")
+        layout.prop(p, "substeps")
+
+
+class PHYSANIM_PT_spring_virtual(_PhysicsPanel, bpy.types.Panel):
+    bl_label = "Virtual Springs"
+    bl_parent_id = "PHYSANIM_PT_spring_mesh"
+    bl_options = {'DEFAULT_CLOSED'}
+
+    def draw(self, context):
+        ob = context.object
+        p = ob.physanim.spring_mesh
+        layout = self.layout
+        add = layout.operator("physanim.virtual_edit", text="Add Virtual Springs", icon='ADD')
+        add.action = 'ADD'
+        for i, group in enumerate(p.virtual_springs):
+            box = layout.box()
+            head = box.row()
+            head.prop(group, "mode", text="")
+            rem = head.operator("physanim.virtual_edit", text="", icon='X')
+            rem.action, rem.index = 'REMOVE', i
+            box.use_property_split = True
+            box.prop_search(group, "vertex_group", ob, "vertex_groups")
+            if group.mode != 'PIN':
+                box.prop(group, "target")
+            if group.mode == 'DISTANCE':
+                box.prop(group, "rest_length")
+            box.prop(group, "stiffness")
+            box.prop(group, "damping")
+
+
 class PHYSANIM_PT_scene(bpy.types.Panel):
     bl_label = "PhysAnim"
     bl_space_type = 'PROPERTIES'
@@ -221,7 +300,8 @@ class PHYSANIM_PT_scene(bpy.types.Panel):
 
 
 CLASSES = (PHYSANIM_PT_object, PHYSANIM_PT_emitter, PHYSANIM_PT_emitter_look,
-           PHYSANIM_PT_emitter_springs, PHYSANIM_PT_collider, PHYSANIM_PT_force, PHYSANIM_PT_scene)
+           PHYSANIM_PT_emitter_springs, PHYSANIM_PT_collider, PHYSANIM_PT_force,
+           PHYSANIM_PT_spring_mesh, PHYSANIM_PT_spring_virtual, PHYSANIM_PT_scene)
 
 
 def register() -> None:

@@ -158,7 +158,7 @@ class PHYSANIM_PG_force(bpy.types.PropertyGroup):
     enabled: BoolProperty(name="Force", description="This object is a force field")
     type: EnumProperty(name="Type", items=FORCE_ITEMS, default='WIND', options=STATIC)
     strength: FloatProperty(name="Strength", min=-1.0e6, max=1.0e6, soft_min=-100.0,
-                            soft_max=100.0, default=1.0, description="Force, N")
+                            soft_max=100.0, default=1.0, description="Force: N per particle; wind on spring-mesh faces: N/m² of facing area")
     noise: FloatProperty(name="Gusts", min=0.0, max=100.0, soft_max=2.0,
                          description="Strength of gusts relative to the steady wind")
     noise_scale: FloatProperty(name="Gust Size", min=1.0e-3, max=1.0e4, default=2.0,
@@ -178,6 +178,77 @@ class PHYSANIM_PG_force(bpy.types.PropertyGroup):
     seed: IntProperty(name="Seed", min=0, max=2**31 - 1)
 
 
+BEND_ITEMS = [
+    ('ANGULAR', "Angular", "Angular spring-dampers: a restoring torque about each shared edge"),
+    ('DISTANCE', "Distance", "Cheaper: springs between the far corners of neighbouring triangles"),
+    ('NONE', "None", "No bending resistance"),
+]
+MASS_ITEMS = [
+    ('EVEN', "Even", "Every vertex gets the same share of the mass"),
+    ('AREA', "By Area", "Each vertex gets the mass of the surface around it"),
+]
+VIRTUAL_ITEMS = [
+    ('PIN', "Pin", "Hold the vertex group at its animated rest position (zero-length springs)"),
+    ('ATTACH', "Attach", "Attach the vertex group to the target object: it follows its animation"),
+    ('DISTANCE', "Keep Distance", "Keep the vertex group at the rest length from the target's origin"),
+]
+SPRING_INTEGRATOR_ITEMS = [('SCENE', "Scene", "Use the scene's integrator")] + INTEGRATOR_ITEMS
+
+
+class PHYSANIM_PG_virtual(bpy.types.PropertyGroup):
+    """A group of virtual springs (seed: virtual springs)."""
+
+    mode: EnumProperty(name="Mode", items=VIRTUAL_ITEMS, default='ATTACH', options=STATIC)
+    target: PointerProperty(name="Target", type=bpy.types.Object,
+                            description="Object the springs attach to or keep away from")
+    vertex_group: StringProperty(name="Vertex Group",
+                                 description="Vertices with springs; weight scales their strength")
+    rest_length: FloatProperty(name="Rest Length", min=0.0, max=1.0e4, unit='LENGTH',
+                               options=STATIC)
+    stiffness: FloatProperty(name="Stiffness", min=0.0, max=1.0e8, soft_max=1.0e4, default=200.0,
+                             options=STATIC, description="N/m")
+    damping: FloatProperty(name="Damping", min=0.0, max=1.0e6, soft_max=100.0, default=1.0,
+                           options=STATIC, description="N s/m")
+
+
+class PHYSANIM_PG_spring_mesh(bpy.types.PropertyGroup):
+    enabled: BoolProperty(name="Spring Mesh", options=STATIC,
+                          description="Simulate this mesh as point masses joined by springs")
+    mass: FloatProperty(name="Mass", min=1.0e-6, max=1.0e7, default=1.0, unit='MASS',
+                        options=STATIC, description="Total mass of the mesh")
+    mass_mode: EnumProperty(name="Mass Distribution", items=MASS_ITEMS, default='EVEN',
+                            options=STATIC)
+    stiffness: FloatProperty(name="Stiffness", min=0.0, max=1.0e9, soft_max=1.0e5,
+                             default=2000.0, options=STATIC,
+                             description="Edge (structural) springs, N/m")
+    damping: FloatProperty(name="Damping", min=0.0, max=1.0e7, soft_max=100.0, default=2.0,
+                           options=STATIC, description="Edge springs, N s/m")
+    shear_stiffness: FloatProperty(name="Shear Stiffness", min=0.0, max=1.0e9, soft_max=1.0e5,
+                                   default=1000.0, options=STATIC,
+                                   description="Face-diagonal springs, N/m (0 = none)")
+    shear_damping: FloatProperty(name="Shear Damping", min=0.0, max=1.0e7, soft_max=100.0,
+                                 default=1.0, options=STATIC)
+    bend_mode: EnumProperty(name="Bending", items=BEND_ITEMS, default='ANGULAR', options=STATIC)
+    bend_stiffness: FloatProperty(name="Bend Stiffness", min=0.0, max=1.0e7, soft_max=10.0,
+                                  default=0.02, options=STATIC,
+                                  description="N m/rad (angular) or N/m (distance)")
+    bend_damping: FloatProperty(name="Bend Damping", min=0.0, max=1.0e5, soft_max=1.0,
+                                default=0.0005, options=STATIC)
+    drag: FloatProperty(name="Air Drag", min=0.0, max=1.0e4, soft_max=10.0, default=0.5,
+                        options=STATIC, description="Viscous drag per unit mass, 1/s")
+    pin_group: StringProperty(name="Pin Group", description="Vertex group: weight 1 pins a "
+                              "vertex to its animated position, less holds it with a spring")
+    pin_stiffness: FloatProperty(name="Pin Stiffness", min=0.0, max=1.0e9, soft_max=1.0e5,
+                                 default=1000.0, options=STATIC,
+                                 description="Springs of partly weighted pins, N/m")
+    virtual_springs: CollectionProperty(type=PHYSANIM_PG_virtual)
+    integrator: EnumProperty(name="Integrator", items=SPRING_INTEGRATOR_ITEMS, default='SCENE',
+                             options=STATIC)
+    substeps: IntProperty(name="Substeps", min=0, max=1000, default=0, options=STATIC,
+                          description="Steps per frame (0 = the scene's)")
+    bake_hash: StringProperty(name="Bake Hash", options={'HIDDEN'})
+
+
 class PHYSANIM_PG_result(bpy.types.PropertyGroup):
     """Set on the points object a bake makes: where its per-frame cache lives."""
 
@@ -192,6 +263,7 @@ class PHYSANIM_PG_object(bpy.types.PropertyGroup):
     emitter: PointerProperty(type=PHYSANIM_PG_emitter)
     collider: PointerProperty(type=PHYSANIM_PG_collider)
     force: PointerProperty(type=PHYSANIM_PG_force)
+    spring_mesh: PointerProperty(type=PHYSANIM_PG_spring_mesh)
     result: PointerProperty(type=PHYSANIM_PG_result)
 
 
@@ -213,7 +285,8 @@ class PHYSANIM_PG_scene(bpy.types.PropertyGroup):
 
 
 CLASSES = (PHYSANIM_PG_stop, PHYSANIM_PG_emitter, PHYSANIM_PG_collider, PHYSANIM_PG_force,
-           PHYSANIM_PG_result, PHYSANIM_PG_object, PHYSANIM_PG_scene)
+           PHYSANIM_PG_virtual, PHYSANIM_PG_spring_mesh, PHYSANIM_PG_result, PHYSANIM_PG_object,
+           PHYSANIM_PG_scene)
 
 
 def register() -> None:

@@ -115,6 +115,13 @@ class CacheWriter:
             self._pool = None
         self._pending.clear()
 
+    def file_path(self, name: str) -> Path:
+        """A file of the bake (e.g. a PC2 mesh cache) to write now: it is created inside the
+        partial folder and appears at ``cache_dir / name`` once committed."""
+        if self._closed:
+            raise RuntimeError("cache writer already committed or aborted")
+        return self.partial_dir / name
+
     def stream_path(self, stream: str) -> Path:
         """Where ``stream`` will live once committed."""
         return self.cache_dir / stream

@@ -1,0 +1,238 @@
+"""Spring meshes in Blender: extract a mesh object into a core spring-mesh model, bake it frame
+by frame into a PC2 file, and play it back with a native Mesh Cache modifier named ``physanim``.
+
+Simulation happens in world space (so an object's own animation and parenting are honoured);
+the cache holds object-space positions (sample 0 = the bake's first frame), which the modifier
+at the end of the stack plays back exactly: evaluated vertex f == cached sample f.
+"""
+from __future__ import annotations
+
+import os
+
+import bpy
+import numpy as np
+
+from ..core.cache import CacheWriter
+from ..core.errors import PhysanimError
+from ..core.particles.forces import Wind
+from ..core.pc2 import Pc2Writer
+from ..core.springs import (SpringFrameInputs, SpringMeshBuilder, SpringMeshSettings,
+                            SpringMeshSolver, VirtualSprings)
+from ..core.transforms import inverse_affine, transform_points
+from . import convert
+
+MODIFIER = "physanim"
+CACHE_FILE = "mesh.pc2"
+
+
+def cache_modifier(ob):
+    """The Mesh Cache modifier a bake added to ``ob`` (None when there is none)."""
+    mod = ob.modifiers.get(MODIFIER)
+    return mod if mod is not None and mod.type == 'MESH_CACHE' else None
+
+
+def _mesh(ob, depsgraph, topology: bool):
+    """Evaluated mesh (without our cache modifier, which the bake disabled): local vertex
+    positions and, optionally, edges, polygons, triangles and vertex-group weights."""
+    ob_eval = ob.evaluated_get(depsgraph)
+    me = ob_eval.to_mesh()
+    try:
+        n = len(me.vertices)
+        co = np.empty(n * 3, np.float32)
+        me.vertices.foreach_get("co", co)
+        out = {"co": co.reshape(n, 3).astype(np.float64)}
+        if topology:
+            edges = np.empty(len(me.edges) * 2, np.int32)
+            me.edges.foreach_get("vertices", edges)
+            start = np.empty(len(me.polygons), np.int32)
+            total = np.empty(len(me.polygons), np.int32)
+            me.polygons.foreach_get("loop_start", start)
+            me.polygons.foreach_get("loop_total", total)
+            loops = np.empty(len(me.loops), np.int32)
+            me.loops.foreach_get("vertex_index", loops)
+            me.calc_loop_triangles()
+            tris = np.empty(len(me.loop_triangles) * 3, np.int32)
+            me.loop_triangles.foreach_get("vertices", tris)
+            out.update(edges=edges.reshape(-1, 2), loop_start=start, loop_total=total,
+                       loop_vertices=loops, triangles=tris.reshape(-1, 3))
+            names = {g.index: g.name for g in ob.vertex_groups}
+            weights = {name: np.zeros(n) for name in names.values()}
+            for v in me.vertices:  # setup only (once per bake): no vectorised access exists
+                for g in v.groups:
+                    if g.group in names:
+                        weights[names[g.group]][v.index] = g.weight
+            out["weights"] = weights
+        return out
+    finally:
+        ob_eval.to_mesh_clear()
+
+
+class SpringMeshBake:
+    """Bake of one spring-mesh object.
+
+    Args:
+        scene, ob: the scene and the mesh object. writer: its cache folder writer.
+        frame: bake start frame. settings: scene.physanim.
+    """
+
+    def __init__(self, scene, ob, writer: CacheWriter, frame: int):
+        if ob.type != 'MESH':
+            raise PhysanimError(f"a spring mesh must be a mesh object (this is a {ob.type})",
+                                obj=ob.name, frame=frame, kind="spring mesh")
+        self.scene, self.ob, self.writer = scene, ob, writer
+        p = ob.physanim.spring_mesh
+        self.props = p
+        self.groups = [v for v in p.virtual_springs]
+        self.needs_rest = bool(p.pin_group) or any(v.mode == 'PIN' for v in self.groups)
+        self.targets = sorted({v.target.name for v in self.groups
+                               if v.mode != 'PIN' and v.target is not None})
+        self.pc2: Pc2Writer | None = None
+
+    # --- set-up --------------------------------------------------------------------------------
+    def prepare(self, depsgraph, frame: int) -> None:
+        ob, p, s = self.ob, self.props, self.scene.physanim
+        mesh = _mesh(ob, depsgraph, topology=True)
+        m = convert.matrix(ob.matrix_world)
+        rest = transform_points(m, mesh["co"])
+        weights = mesh["weights"]
+        pin = None
+        if p.pin_group:
+            if p.pin_group not in weights:
+                raise PhysanimError(f'pin group "{p.pin_group}" is not a vertex group of the mesh',
+                                    obj=ob.name, frame=frame, kind="spring mesh")
+            pin = weights[p.pin_group]
+        settings = SpringMeshSettings(
+            ob.name, mass=p.mass, mass_mode=p.mass_mode, stiffness=p.stiffness, damping=p.damping,
+            shear_stiffness=p.shear_stiffness, shear_damping=p.shear_damping,
+            bend_mode=p.bend_mode, bend_stiffness=p.bend_stiffness, bend_damping=p.bend_damping,
+            drag=p.drag, pin_stiffness=p.pin_stiffness)
+        builder = SpringMeshBuilder(settings, rest, mesh["edges"], mesh["triangles"],
+                                    mesh["loop_start"], mesh["loop_total"], mesh["loop_vertices"],
+                                    pin)
+        if pin is not None:
+            soft = (pin > 0.0) & (pin < 0.999)
+            if soft.any():
+                builder.add_virtual(VirtualSprings("PIN", np.nonzero(soft)[0], pin[soft], 0.0,
+                                                   p.pin_stiffness, 0.1 * p.pin_stiffness ** 0.5))
+        for k, group in enumerate(self.groups):
+            self._add_group(builder, k, group, weights, frame)
+        self.model = builder.finalize(frame)
+        integrator = s.integrator if p.integrator == 'SCENE' else p.integrator
+        substeps = p.substeps or s.substeps
+        self.solver = SpringMeshSolver(self.model, integrator, substeps, s.tolerance,
+                                       1.0 / convert.fps(self.scene), frame)
+        self.state = self.model.state()
+        self.vertex_count = len(rest)
+        self.pc2 = Pc2Writer(self.writer.file_path(CACHE_FILE), self.vertex_count, frame)
+        self.sample = self.read(depsgraph, frame)
+        self.write()
+
+    def _add_group(self, builder, k: int, group, weights: dict, frame: int) -> None:
+        ob = self.ob
+        where = f"virtual spring group {k + 1}"
+        if group.vertex_group not in weights:
+            raise PhysanimError(f'{where}: "{group.vertex_group}" is not a vertex group of the mesh',
+                                obj=ob.name, frame=frame, kind="spring mesh")
+        if group.mode != 'PIN' and group.target is None:
+            raise PhysanimError(f"{where}: {group.mode.lower()} springs need a target object",
+                                obj=ob.name, frame=frame, kind="spring mesh")
+        w = weights[group.vertex_group]
+        index = np.nonzero(w > 0.0)[0]
+        builder.add_virtual(VirtualSprings(
+            group.mode, index, w[index], group.rest_length, group.stiffness, group.damping,
+            None if group.mode == 'PIN' else group.target.name))
+
+    # --- per frame -----------------------------------------------------------------------------
+    def read(self, depsgraph, frame: int) -> dict:
+        """What this mesh needs from the scene at ``frame``: its world matrix, its animated rest
+        shape (world, for pins) and its virtual-spring targets' matrices."""
+        ob = self.ob
+        m = convert.matrix(ob.matrix_world)
+        out = {"frame": frame, "matrix": m, "rest": None,
+               "targets": {name: convert.matrix(bpy.data.objects[name].matrix_world)
+                           for name in self.targets}}
+        if self.needs_rest:
+            co = _mesh(ob, depsgraph, topology=False)["co"]
+            if len(co) != self.vertex_count:
+                raise PhysanimError(f"the mesh changed its vertex count to {len(co)} (was "
+                                    f"{self.vertex_count}) — spring meshes must keep their topology",
+                                    obj=ob.name, frame=frame, kind="spring mesh")
+            out["rest"] = transform_points(m, co)
+        return out
+
+    def advance(self, nxt: dict, colliders, forces, t0: float, frame_dt: float, gravity) -> None:
+        a = self.sample
+        inputs = SpringFrameInputs(
+            frame=a["frame"], t0=t0, frame_dt=frame_dt, gravity=gravity, rest0=a["rest"],
+            rest1=nxt["rest"], targets={n: (a["targets"][n], nxt["targets"][n]) for n in self.targets},
+            colliders=colliders, winds=[f for f in forces if isinstance(f, Wind)])
+        self.solver.advance(self.state, inputs)
+        self.sample = nxt
+        self.write()
+
+    def write(self) -> None:
+        """Append this frame's object-space positions to the PC2 file."""
+        local = transform_points(inverse_affine(self.sample["matrix"]), self.state.x)
+        self.pc2.append(local)
+
+    def close(self) -> None:
+        if self.pc2 is not None:
+            self.pc2.close()
+
+
+# --- result: the Mesh Cache modifier ------------------------------------------------------------
+
+def suspend_modifier(ob) -> tuple | None:
+    """Disable our cache modifier during a bake (the bake reads the mesh without it)."""
+    mod = cache_modifier(ob)
+    if mod is None:
+        return None
+    state = (mod.show_viewport, mod.show_render)
+    mod.show_viewport = mod.show_render = False
+    return state
+
+
+def restore_modifier(ob, state) -> None:
+    mod = cache_modifier(ob)
+    if mod is not None and state is not None:
+        mod.show_viewport, mod.show_render = state
+
+
+def attach(ob, pc2_path: str, frame_start: int, inputs_hash: str) -> None:
+    """Add (or update) the ``physanim`` Mesh Cache modifier, last in the stack, playing the PC2
+    file: frame ``frame_start`` shows sample 0 (the guide's frame mapping)."""
+    mod = cache_modifier(ob)
+    if mod is None:
+        mod = ob.modifiers.new(MODIFIER, 'MESH_CACHE')
+    mod.cache_format = 'PC2'
+    mod.filepath = pc2_path
+    mod.time_mode = 'FRAME'
+    mod.play_mode = 'SCENE'
+    mod.frame_start = frame_start
+    mod.frame_scale = 1.0
+    mod.interpolation = 'LINEAR'
+    mod.deform_mode = 'OVERWRITE'
+    mod.forward_axis, mod.up_axis = 'POS_Y', 'POS_Z'
+    mod.show_viewport = mod.show_render = True
+    ob.physanim.spring_mesh.bake_hash = inputs_hash
+    last = len(ob.modifiers) - 1
+    if ob.modifiers.find(MODIFIER) != last:  # a user added modifiers after it: play it last
+        with bpy.context.temp_override(object=ob, active_object=ob):
+            bpy.ops.object.modifier_move_to_index(modifier=MODIFIER, index=last)
+
+
+def free(ob) -> bool:
+    """Remove the cache modifier (and nothing else of the object). True when there was one."""
+    mod = cache_modifier(ob)
+    if mod is None:
+        return False
+    ob.modifiers.remove(mod)
+    ob.physanim.spring_mesh.bake_hash = ""
+    return True
+
+
+def cache_folder_of(ob) -> str | None:
+    mod = cache_modifier(ob)
+    if mod is None or not mod.filepath:
+        return None
+    return os.path.dirname(bpy.path.abspath(mod.filepath, library=ob.library))

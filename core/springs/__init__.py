@@ -1,0 +1,8 @@
+"""Spring-mass meshes: every vertex a point mass, every edge a spring-damper, plus shear,
+bending and virtual springs; explicit integrators or Baraff-Witkin implicit Euler."""
+from .model import (SpringMeshBuilder, SpringMeshModel, SpringMeshSettings, SpringMeshState,
+                    VirtualSprings)
+from .solver import SpringFrameInputs, SpringMeshSolver
+
+__all__ = ["SpringFrameInputs", "SpringMeshBuilder", "SpringMeshModel", "SpringMeshSettings",
+           "SpringMeshSolver", "SpringMeshState", "VirtualSprings"]

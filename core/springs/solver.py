@@ -1,0 +1,290 @@
+"""Spring-mesh solver: advances a :class:`SpringMeshState` one frame interval in sub-steps.
+
+Per sub-step: collide (resting contacts) -> forces (gravity, springs, bending, virtual springs,
+drag, wind on faces, contact) -> integrate (any scene integrator; IMPLICIT is Baraff-Witkin)
+-> pins (exactly on their animated targets) -> respond (continuous collisions, as particles)
+-> check (finite, not torn apart).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from ..errors import PhysanimError, SimulationError
+from ..integrators import make_integrator
+from ..particles import colliders as coll
+from ..particles.forces import Gravity, ParticleView, Wind
+from ..particles.settings import ColliderFrame
+from ..transforms import TransformPath, inverse_affine, transform_points
+from .forces import AnchorSprings, AngularSprings, LinearDrag, SpringSet, scatter_add
+from .implicit import BaraffWitkin
+from .model import SpringMeshModel, SpringMeshState
+
+# explicit methods: largest stable h * omega on an undamped spring (Euler and midpoint grow at
+# any step; these keep the growth per frame small enough for damping to win)
+STABLE_H_OMEGA = {"EULER": 0.1, "MIDPOINT": 0.5, "SYMPLECTIC_EULER": 1.9, "RK4": 2.5}
+TEAR_FACTOR = 50.0  # a spring stretched past this many rest lengths means the solve blew up
+
+
+@dataclass
+class SpringFrameInputs:
+    """One frame interval [t0, t0 + frame_dt] of a spring mesh's world.
+
+    Args:
+        frame: scene frame at the start (messages). t0 [s], frame_dt [s]. gravity (3,).
+        rest0, rest1: (n, 3) animated rest positions (world) at start/end — pin targets.
+        targets: object name -> (m0, m1) world matrices of virtual-spring targets.
+        colliders: analytic colliders. winds: wind force objects (pressure on faces).
+    """
+
+    frame: int
+    t0: float
+    frame_dt: float
+    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
+    rest0: np.ndarray | None = None
+    rest1: np.ndarray | None = None
+    targets: dict = field(default_factory=dict)
+    colliders: Sequence[ColliderFrame] = ()
+    winds: Sequence[Wind] = ()
+
+
+@dataclass(frozen=True)
+class FaceWind:
+    """Wind pressure on faces: f = A (p . n) n per triangle, p = strength (d + gusts) [N/m^2],
+    shared equally by its three vertices."""
+
+    triangles: np.ndarray
+    wind: Wind
+
+    def apply(self, p: ParticleView, f_out: np.ndarray) -> None:
+        tri = self.triangles
+        a, b, c = p.x[tri[:, 0]], p.x[tri[:, 1]], p.x[tri[:, 2]]
+        cross = np.cross(b - a, c - a)  # |cross| = 2 A, direction = normal
+        w = self.wind
+        pressure = np.broadcast_to(np.asarray(w.direction) * w.strength, cross.shape)
+        if w.noise:
+            pressure = pressure + (w.strength * w.noise) * w.field((a + b + c) / 3.0, p.t)
+        norm = np.sqrt(np.einsum("ij,ij->i", cross, cross))
+        # A (p . n) n with A = |cross| / 2 and n = cross / |cross|, a third to each corner
+        f = (np.einsum("ij,ij->i", pressure, cross) / (6.0 * np.where(norm > 0, norm, 1.0)))[:, None] * cross
+        for k in range(3):
+            scatter_add(f_out, tri[:, k], f)
+
+
+
+class _MeshSystem:
+    """The spring mesh as integrators see it: flat y = [x, v] with derivative [v, f/m], plus
+    the richer interface of the Baraff-Witkin stepper. Pinned vertices move with their targets."""
+
+    def __init__(self, state: SpringMeshState, mass: np.ndarray, free: np.ndarray, forces: list,
+                 pin_x0: np.ndarray, pin_v: np.ndarray, t0: float):
+        self.state = state
+        self.mass = mass
+        self.free = free
+        self.forces = forces
+        self._pin_x0, self._pin_v, self._t0 = pin_x0, pin_v, t0
+        self.n = len(mass)
+        self.dim = 6 * self.n
+
+    # --- the Witkin & Baraff interface ---------------------------------------------------------
+    def get_state(self) -> np.ndarray:
+        return np.concatenate([self.state.x.ravel(), self.state.v.ravel()])
+
+    def set_state(self, y: np.ndarray) -> None:
+        n = self.n
+        self.state.x = y[:3 * n].reshape(n, 3).copy()
+        self.state.v = y[3 * n:].reshape(n, 3).copy()
+
+    def forces_at(self, t: float, x: np.ndarray, v: np.ndarray) -> np.ndarray:
+        f = np.zeros_like(x)
+        view = ParticleView(x, v, self.mass, t)
+        for force in self.forces:
+            force.apply(view, f)
+        return f
+
+    def derivative(self, t: float, y: np.ndarray) -> np.ndarray:
+        n = self.n
+        x, v = y[:3 * n].reshape(n, 3), y[3 * n:].reshape(n, 3)
+        a = self.forces_at(t, x, v) / self.mass[:, None]
+        a[~self.free] = 0.0
+        v = np.where(self.free[:, None], v, self._pin_v)
+        return np.concatenate([v.ravel(), a.ravel()])
+
+    # --- Baraff-Witkin extras ------------------------------------------------------------------
+    @property
+    def x(self):
+        return self.state.x
+
+    @x.setter
+    def x(self, value):
+        self.state.x = value
+
+    @property
+    def v(self):
+        return self.state.v
+
+    @v.setter
+    def v(self, value):
+        self.state.v = value
+
+    def weight_norm(self) -> float:
+        g = next((f.g for f in self.forces if isinstance(f, Gravity)), (0.0, 0.0, 0.0))
+        return float(np.linalg.norm(g) * np.linalg.norm(self.mass[self.free])) or \
+            float(np.linalg.norm(self.mass))
+
+    def pinned_velocity(self, t: float) -> np.ndarray:
+        return self._pin_v
+
+    def linearize(self, t, x, v) -> list:
+        """Jacobian blocks of every force at (x, v) that has them, built once per implicit step."""
+        view = ParticleView(x, v, self.mass, t)
+        return [force.linearize(view) for force in self.forces if hasattr(force, "linearize")]
+
+    def diagonal(self, h: float) -> np.ndarray:
+        d = self.mass.copy()
+        for force in self.forces:
+            if isinstance(force, SpringSet) and len(force.i):
+                w = h * h * force.stiffness + h * force.damping
+                d += np.bincount(force.i, weights=w, minlength=self.n)
+                d += np.bincount(force.j, weights=w, minlength=self.n)
+            elif isinstance(force, AnchorSprings) and len(force.index):
+                d += np.bincount(force.index, weights=h * h * force.stiffness + h * force.damping,
+                                 minlength=self.n)
+        return d
+
+
+class SpringMeshSolver:
+    """Advances one spring mesh frame by frame.
+
+    Args:
+        model: the frozen model. integrator: name from the scene menu. substeps: per frame.
+        tolerance: RK45 tolerance / implicit solve tolerance. frame_dt: frame length [s] (used
+        to check explicit stability up front). frame: start frame (messages).
+    """
+
+    def __init__(self, model: SpringMeshModel, integrator: str = "IMPLICIT", substeps: int = 1,
+                 tolerance: float = 1e-4, frame_dt: float = 1 / 24, frame: int | None = None):
+        if int(substeps) != substeps or substeps < 1:
+            raise ValueError(f"substeps must be an integer >= 1 (got {substeps})")
+        self.model = model
+        self.substeps = int(substeps)
+        self.integrator_name = integrator
+        self.integrator = (BaraffWitkin() if integrator == "IMPLICIT"
+                           else make_integrator(integrator, tolerance))
+        s = model.settings
+        self.springs = SpringSet(model.spring_i, model.spring_j, model.spring_rest,
+                                 model.spring_stiffness, model.spring_damping)
+        self.bending = AngularSprings(model.hinge, model.hinge_rest, s.bend_stiffness,
+                                      s.bend_damping)
+        self.free = ~model.pinned
+        self._check_stability(frame_dt / self.substeps, frame)
+        self._attach_local = self._attachments()
+
+    def _fail(self, message: str, frame, cls=PhysanimError):
+        return cls(message, obj=self.model.settings.name, frame=frame, kind="spring mesh")
+
+    def _check_stability(self, h: float, frame) -> None:
+        limit = STABLE_H_OMEGA.get(self.integrator_name)
+        omega = self.springs.max_rate(self.model.vertex_mass)
+        if limit is None or omega * h <= limit:
+            return
+        need = int(np.ceil(omega * h * self.substeps / limit))
+        k = float(self.model.spring_stiffness.max())
+        raise self._fail(
+            f"stiffness {k:g} N/m on vertices of {self.model.vertex_mass.min():.3g} kg oscillates "
+            f"at {omega:.3g} rad/s: {self.integrator_name} with {self.substeps} substep(s) "
+            f"(h = {h:.3g} s) would explode (it needs h < {limit / omega:.3g} s, about {need:,} "
+            "substeps per frame) — use the IMPLICIT integrator, more substeps or a lower stiffness",
+            frame)
+
+    def _attachments(self) -> list:
+        """Per ATTACH group: its vertices' rest positions in the target's local space; filled on
+        the first frame from the target's matrix then."""
+        return [None] * len(self.model.virtual)
+
+    def _virtual(self, inputs: SpringFrameInputs, t0: float, h: float, s0: float, s1: float):
+        forces = []
+        for g, vs in enumerate(self.model.virtual):
+            if vs.mode == "PIN":
+                rest0 = inputs.rest0 if inputs.rest0 is not None else self.model.rest_x
+                rest1 = inputs.rest1 if inputs.rest1 is not None else rest0
+                a0 = rest0[vs.index] + s0 * (rest1[vs.index] - rest0[vs.index])
+                a1 = rest0[vs.index] + s1 * (rest1[vs.index] - rest0[vs.index])
+            else:
+                if vs.target not in inputs.targets:
+                    raise self._fail(f"virtual spring target \"{vs.target}\" has no transform",
+                                     inputs.frame)
+                path = TransformPath(*inputs.targets[vs.target])
+                m0, m1 = path.matrices(s0), path.matrices(s1)
+                if vs.mode == "ATTACH":
+                    if self._attach_local[g] is None:
+                        self._attach_local[g] = transform_points(
+                            inverse_affine(path.m0), self.model.rest_x[vs.index])
+                    a0 = transform_points(m0, self._attach_local[g])
+                    a1 = transform_points(m1, self._attach_local[g])
+                else:
+                    a0 = np.broadcast_to(m0[:3, 3], (len(vs.index), 3))
+                    a1 = np.broadcast_to(m1[:3, 3], (len(vs.index), 3))
+            forces.append(AnchorSprings(vs.index, a0, a1, t0, h,
+                                        np.full(len(vs.index), vs.rest_length),
+                                        vs.stiffness * vs.weight, vs.damping * vs.weight))
+        return forces
+
+    def advance(self, state: SpringMeshState, inputs: SpringFrameInputs) -> int:
+        """Advance ``state`` (in place) by one frame interval. Returns collisions handled."""
+        model = self.model
+        n = model.vertex_count
+        h = inputs.frame_dt / self.substeps
+        g = np.asarray(inputs.gravity, dtype=np.float64)
+        rest0 = inputs.rest0 if inputs.rest0 is not None else model.rest_x
+        rest1 = inputs.rest1 if inputs.rest1 is not None else rest0
+        paths = [coll.ColliderPath.of(c, inputs.frame_dt) for c in inputs.colliders]
+        rest_speed = 2.0 * float(np.linalg.norm(g)) * h + 1e-4
+        hits = 0
+        for k in range(self.substeps):
+            s0, s1 = k / self.substeps, (k + 1) / self.substeps
+            t = inputs.t0 + k * h
+            pin_x1 = rest0 + s1 * (rest1 - rest0)
+            pin_v = (rest1 - rest0) / inputs.frame_dt
+            contact = coll.contacts(paths, state.x, state.v, s0, rest_speed, h)
+            forces = [Gravity(tuple(g)), self.springs, self.bending,
+                      LinearDrag(model.settings.drag)]
+            forces += self._virtual(inputs, t, h, s0, s1)
+            forces += [FaceWind(model.triangles, w) for w in inputs.winds if len(model.triangles)]
+            forces.append(contact)
+            system = _MeshSystem(state, model.vertex_mass, self.free, forces,
+                                 rest0 + s0 * (rest1 - rest0), pin_v, t)
+            x0, v0 = state.x.copy(), state.v.copy()
+            try:
+                self.integrator.step(system, t, h)
+            except SimulationError as exc:
+                raise self._fail(f"the simulation blew up ({exc}) — use the IMPLICIT integrator, "
+                                 "more substeps or lower stiffness", inputs.frame,
+                                 SimulationError) from exc
+            state.x[~self.free] = pin_x1[~self.free]
+            state.v[~self.free] = pin_v[~self.free]
+            if paths:
+                x, v, count = coll.respond(paths, x0, state.x, v0, state.v, s0, s1, h, rest_speed)
+                x[~self.free], v[~self.free] = pin_x1[~self.free], pin_v[~self.free]
+                state.x, state.v, hits = x, v, hits + count
+            self._check(state, inputs.frame)
+        return hits
+
+    def _check(self, state: SpringMeshState, frame) -> None:
+        if not (np.all(np.isfinite(state.x)) and np.all(np.isfinite(state.v))):
+            bad = int(np.argwhere(~np.isfinite(state.x).all(1) | ~np.isfinite(state.v).all(1))[0][0])
+            raise self._fail(f"vertex {bad} became non-finite (x = {state.x[bad].tolist()}) — use "
+                             "the IMPLICIT integrator, more substeps or lower stiffness", frame,
+                             SimulationError)
+        m = self.model
+        if len(m.spring_i):
+            length = np.linalg.norm(state.x[m.spring_i] - state.x[m.spring_j], axis=1)
+            ratio = length / np.maximum(m.spring_rest, 1e-9)
+            worst = int(np.argmax(ratio))
+            if ratio[worst] > TEAR_FACTOR and length[worst] > 1e-6:
+                raise self._fail(
+                    f"spring {int(m.spring_i[worst])}-{int(m.spring_j[worst])} stretched to "
+                    f"{ratio[worst]:.0f}x its rest length — the simulation is unstable: use the "
+                    "IMPLICIT integrator, more substeps or lower stiffness", frame, SimulationError)
