@@ -280,7 +280,7 @@ class BakeJob:
                            self.frame_start, self.frame_end, self.hashes[ob.name])
         for ob in self.roles.spring_meshes:
             springs.attach(ob, relative_path(os.path.join(mesh_paths[ob.name], springs.CACHE_FILE)),
-                           self.frame_start, self.mesh_hashes[ob.name])
+                           self.frame_start, self.mesh_hashes[ob.name], self.suspended.get(ob.name))
         self.suspended.clear()
         self.scene.frame_set(self.original_frame)
         self.settings.bake_hash = extract.scene_hash(

@@ -206,10 +206,10 @@ class Extractor:
         colliders = []
         for ob in self.roles.colliders:
             c = ob.physanim.collider
-            _check_finite(ob, frame, "collider",
-                          {"restitution": c.restitution, "friction": c.friction})
+            _check_finite(ob, frame, "collider", {"restitution": c.restitution,
+                                                   "friction": c.friction, "thickness": c.thickness})
             colliders.append((_world_matrix(ob, frame, "collider"), c.shape, c.restitution,
-                              c.friction))
+                              c.friction, c.thickness))
         forces = []
         for ob in self.roles.forces:
             values = {k: getattr(ob.physanim.force, k) for k in (
@@ -250,8 +250,8 @@ class Extractor:
                 inherit_velocity=val["inherit_velocity"], active=val["active"],
                 matrix0=m0, matrix1=m1, matrices=keys(0, i, m0, m1), verts0=v0, verts1=v1))
         colliders = [_framed(ob, a.frame, "collider", ColliderFrame,
-                             ob.name, shape, m0, m1, rest, fric, keys(1, i, m0, m1))
-                     for i, (ob, (m0, shape, rest, fric), (m1, *_))
+                             ob.name, shape, m0, m1, rest, fric, keys(1, i, m0, m1), thick)
+                     for i, (ob, (m0, shape, rest, fric, thick), (m1, *_))
                      in enumerate(zip(self.roles.colliders, a.colliders, b.colliders))]
         forces = [_framed(ob, a.frame, "force", self._force, ob, m, f)
                   for ob, (m, f) in zip(self.roles.forces, a.forces)]

@@ -176,6 +176,7 @@ class PHYSANIM_PT_collider(_PhysicsPanel, bpy.types.Panel):
         layout.prop(p, "shape")
         layout.prop(p, "restitution")
         layout.prop(p, "friction")
+        layout.prop(p, "thickness")
 
 
 class PHYSANIM_PT_force(_PhysicsPanel, bpy.types.Panel):

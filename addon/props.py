@@ -152,6 +152,9 @@ class PHYSANIM_PG_collider(bpy.types.PropertyGroup):
                                subtype='FACTOR', description="Normal speed kept after a bounce")
     friction: FloatProperty(name="Friction", min=0.0, max=100.0, soft_max=2.0, default=0.3,
                             description="Coulomb friction coefficient")
+    thickness: FloatProperty(name="Thickness", min=0.0, max=100.0, soft_max=0.1, default=0.0,
+                             unit='LENGTH', description="Grow the surface outwards by this much: "
+                             "particles and cloth stop that far from it")
 
 
 class PHYSANIM_PG_force(bpy.types.PropertyGroup):

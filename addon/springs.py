@@ -3,7 +3,8 @@ by frame into a PC2 file, and play it back with a native Mesh Cache modifier nam
 
 Simulation happens in world space (so an object's own animation and parenting are honoured);
 the cache holds object-space positions (sample 0 = the bake's first frame), which the modifier
-at the end of the stack plays back exactly: evaluated vertex f == cached sample f.
+plays back exactly: evaluated vertex f == cached sample f. Modifiers above ``physanim`` in the
+stack shape the rest mesh (inputs); modifiers below it deform the played-back result.
 """
 from __future__ import annotations
 
@@ -20,6 +21,7 @@ from ..core.springs import (SpringFrameInputs, SpringMeshBuilder, SpringMeshSett
                             SpringMeshSolver, VirtualSprings)
 from ..core.transforms import inverse_affine, transform_points
 from . import convert
+from .extract import _world_matrix
 
 MODIFIER = "physanim"
 CACHE_FILE = "mesh.pc2"
@@ -67,6 +69,19 @@ def _mesh(ob, depsgraph, topology: bool):
         ob_eval.to_mesh_clear()
 
 
+def _object_matrix(ob, frame: int) -> np.ndarray:
+    """World matrix of a spring mesh; an error naming object, frame and value when it is not
+    finite or has a zero scale (the cache holds object-space positions: it needs the inverse)."""
+    m = _world_matrix(ob, frame, "spring mesh")
+    if abs(np.linalg.det(m[:3, :3])) < 1e-12:
+        scale = tuple(round(v, 4) for v in ob.matrix_world.to_scale())
+        raise PhysanimError(f"its world matrix has a zero scale {scale}: the cache holds "
+                            "object-space positions, which a flattened object cannot map back — "
+                            "check its animation, drivers and parents",
+                            obj=ob.name, frame=frame, kind="spring mesh")
+    return m
+
+
 class SpringMeshBake:
     """Bake of one spring-mesh object.
 
@@ -92,7 +107,7 @@ class SpringMeshBake:
     def prepare(self, depsgraph, frame: int) -> None:
         ob, p, s = self.ob, self.props, self.scene.physanim
         mesh = _mesh(ob, depsgraph, topology=True)
-        m = convert.matrix(ob.matrix_world)
+        m = _object_matrix(ob, frame)
         rest = transform_points(m, mesh["co"])
         weights = mesh["weights"]
         pin = None
@@ -147,9 +162,12 @@ class SpringMeshBake:
         """What this mesh needs from the scene at ``frame``: its world matrix, its animated rest
         shape (world, for pins) and its virtual-spring targets' matrices."""
         ob = self.ob
-        m = convert.matrix(ob.matrix_world)
+        # a NaN key or driver must stop the bake here, naming the object and the frame: the
+        # solver would report a blow-up a frame early, and an unpinned mesh would write NaN
+        m = _object_matrix(ob, frame)
         out = {"frame": frame, "matrix": m, "rest": None,
-               "targets": {name: convert.matrix(bpy.data.objects[name].matrix_world)
+               "targets": {name: _world_matrix(bpy.data.objects[name], frame,
+                                               "virtual spring target")
                            for name in self.targets}}
         if self.needs_rest:
             co = _mesh(ob, depsgraph, topology=False)["co"]
@@ -182,25 +200,31 @@ class SpringMeshBake:
 
 # --- result: the Mesh Cache modifier ------------------------------------------------------------
 
-def suspend_modifier(ob) -> tuple | None:
-    """Disable our cache modifier during a bake (the bake reads the mesh without it)."""
+def suspend_modifier(ob) -> dict | None:
+    """Read the mesh as the cache modifier sees it while baking: disable it and every modifier
+    after it (those deform the cached result, they are not inputs). Returns what to restore."""
     mod = cache_modifier(ob)
     if mod is None:
         return None
-    state = (mod.show_viewport, mod.show_render)
-    mod.show_viewport = mod.show_render = False
+    index = ob.modifiers.find(MODIFIER)
+    state = {m.name: (m.show_viewport, m.show_render) for m in list(ob.modifiers)[index:]}
+    for m in list(ob.modifiers)[index:]:
+        m.show_viewport = m.show_render = False
     return state
 
 
-def restore_modifier(ob, state) -> None:
-    mod = cache_modifier(ob)
-    if mod is not None and state is not None:
-        mod.show_viewport, mod.show_render = state
+def restore_modifier(ob, state: dict | None) -> None:
+    for name, (viewport, render) in (state or {}).items():
+        mod = ob.modifiers.get(name)
+        if mod is not None:
+            mod.show_viewport, mod.show_render = viewport, render
 
 
-def attach(ob, pc2_path: str, frame_start: int, inputs_hash: str) -> None:
-    """Add (or update) the ``physanim`` Mesh Cache modifier, last in the stack, playing the PC2
-    file: frame ``frame_start`` shows sample 0 (the guide's frame mapping)."""
+def attach(ob, pc2_path: str, frame_start: int, inputs_hash: str, suspended: dict | None) -> None:
+    """Add (or update) the ``physanim`` Mesh Cache modifier playing the PC2 file: frame
+    ``frame_start`` shows sample 0 (the guide's frame mapping). A new one goes last in the stack;
+    an existing one keeps its place, and the modifiers after it (suspended during the bake) are
+    switched back on: they deform the cached result (e.g. a Solidify for rendering)."""
     mod = cache_modifier(ob)
     if mod is None:
         mod = ob.modifiers.new(MODIFIER, 'MESH_CACHE')
@@ -213,12 +237,9 @@ def attach(ob, pc2_path: str, frame_start: int, inputs_hash: str) -> None:
     mod.interpolation = 'LINEAR'
     mod.deform_mode = 'OVERWRITE'
     mod.forward_axis, mod.up_axis = 'POS_Y', 'POS_Z'
+    restore_modifier(ob, suspended)
     mod.show_viewport = mod.show_render = True
     ob.physanim.spring_mesh.bake_hash = inputs_hash
-    last = len(ob.modifiers) - 1
-    if ob.modifiers.find(MODIFIER) != last:  # a user added modifiers after it: play it last
-        with bpy.context.temp_override(object=ob, active_object=ob):
-            bpy.ops.object.modifier_move_to_index(modifier=MODIFIER, index=last)
 
 
 def free(ob) -> bool:

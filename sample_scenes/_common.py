@@ -95,3 +95,37 @@ def points(scene, emitter_name: str, frame: int) -> dict[str, np.ndarray]:
             attr.data.foreach_get(comp, buf)
         out[name] = buf.reshape(n, size) if size > 1 else buf
     return out
+
+
+def grid(scene, name: str, cuts_x: int, cuts_y: int, size: float):
+    """A (size x size*cuts_y/cuts_x) grid mesh in the XY plane, centred at the origin."""
+    import bmesh
+
+    return add_mesh(scene, name, lambda bm: bmesh.ops.create_grid(
+        bm, x_segments=cuts_x, y_segments=cuts_y, size=size / 2.0))
+
+
+def evaluated_vertices(ob, world: bool = True) -> np.ndarray:
+    """Evaluated vertex positions (n, 3) of a mesh object at the current frame."""
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    me = ob.evaluated_get(depsgraph).data
+    co = np.empty(len(me.vertices) * 3, np.float32)
+    me.vertices.foreach_get("co", co)
+    co = co.reshape(-1, 3).astype(np.float64)
+    if world:
+        m = np.array(ob.matrix_world)
+        co = co @ m[:3, :3].T + m[:3, 3]
+    return co
+
+
+def triangles(ob) -> np.ndarray:
+    me = ob.data
+    me.calc_loop_triangles()
+    tris = np.empty(len(me.loop_triangles) * 3, np.int32)
+    me.loop_triangles.foreach_get("vertices", tris)
+    return tris.reshape(-1, 3)
+
+
+def signed_volume(x: np.ndarray, tris: np.ndarray) -> float:
+    a, b, c = x[tris[:, 0]], x[tris[:, 1]], x[tris[:, 2]]
+    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)

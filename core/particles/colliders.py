@@ -34,9 +34,22 @@ class ColliderPath:
     path: TransformPath
     frame_dt: float
 
+    extent: np.ndarray | None = None
+
     @classmethod
     def of(cls, frame: ColliderFrame, frame_dt: float) -> "ColliderPath":
-        return cls(frame, TransformPath(frame.matrix0, frame.matrix1, frame.matrices), frame_dt)
+        path = TransformPath(frame.matrix0, frame.matrix1, frame.matrices)
+        # local units per world metre along each local axis (rows of the inverse matrix)
+        per_metre = np.linalg.norm(inverse_affine(path.m0)[:3, :3], axis=1)
+        margin = frame.thickness * per_metre
+        if frame.shape == "SPHERE":
+            extent = np.full(3, 1.0 + frame.thickness * float(per_metre.mean()))
+        elif frame.shape == "HALF_SPACE":
+            extent = np.array([0.0, 0.0, margin[2]])
+        else:  # PLANE: a slab of half-thickness margin; BOX: grown half extents
+            extent = np.array([1.0 + margin[0], 1.0 + margin[1],
+                               margin[2] if frame.shape == "PLANE" else 1.0 + margin[2]])
+        return cls(frame, path, frame_dt, extent)
 
     def _at(self, s) -> np.ndarray:
         """The matrix at ``s``: one (4, 4) when s is a scalar or the same for every particle
@@ -68,41 +81,45 @@ class ColliderPath:
 
 
 # --- shape geometry in local space -------------------------------------------------------------
+# ``e`` (3,) is the shape's extent in local units, grown by the collider's thickness:
+# HALF_SPACE: solid below z = e[2]; PLANE: the slab |z| <= e[2], |x| <= e[0], |y| <= e[1];
+# SPHERE: radius e[0]; BOX: half extents e.
 
-def _inside(shape: str, l: np.ndarray) -> np.ndarray:
+def _inside(shape: str, l: np.ndarray, e: np.ndarray) -> np.ndarray:
     if shape == "HALF_SPACE":
-        return l[:, 2] < 0.0
+        return l[:, 2] < e[2]
     if shape == "SPHERE":
-        return np.einsum("ij,ij->i", l, l) < 1.0
+        return np.einsum("ij,ij->i", l, l) < e[0] * e[0]
     if shape == "BOX":
-        return np.all(np.abs(l) < 1.0, axis=1)
-    return np.zeros(len(l), dtype=bool)  # a two-sided plane has no inside
+        return np.all(np.abs(l) < e, axis=1)
+    return np.zeros(len(l), dtype=bool)  # a plane is crossed, never entered
 
 
-def _closest(shape: str, l: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _closest(shape: str, l: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Closest surface point, outward normal (local) and whether that point is on the surface
     proper (False for points off a bounded plane's edge)."""
     n = np.zeros_like(l)
     valid = np.ones(len(l), dtype=bool)
     if shape in ("HALF_SPACE", "PLANE"):
+        side = np.ones(len(l)) if shape == "HALF_SPACE" else np.where(l[:, 2] >= 0.0, 1.0, -1.0)
         p = l.copy()
-        p[:, 2] = 0.0
-        n[:, 2] = 1.0 if shape == "HALF_SPACE" else np.where(l[:, 2] >= 0.0, 1.0, -1.0)
+        p[:, 2] = side * e[2]
+        n[:, 2] = side
         if shape == "PLANE":
-            valid = np.all(np.abs(l[:, :2]) <= 1.0, axis=1)
+            valid = np.all(np.abs(l[:, :2]) <= e[:2], axis=1)
     elif shape == "SPHERE":
         r = np.linalg.norm(l, axis=1, keepdims=True)
         n = np.where(r > 1e-12, l / np.where(r > 1e-12, r, 1.0), [0.0, 0.0, 1.0])
-        p = n.copy()
+        p = n * e[0]
     else:  # BOX: outside -> clamp; inside -> nearest face
-        inside = _inside("BOX", l)
-        p = np.clip(l, -1.0, 1.0)
-        gap = 1.0 - np.abs(l)
+        inside = _inside("BOX", l, e)
+        p = np.clip(l, -e, e)
+        gap = e - np.abs(l)
         axis = np.argmin(gap, axis=1)
         rows = np.arange(len(l))
         side = np.where(l[rows, axis] >= 0.0, 1.0, -1.0)
         p_in = l.copy()
-        p_in[rows, axis] = side
+        p_in[rows, axis] = side * e[axis]
         p = np.where(inside[:, None], p_in, p)
         d = l - p
         dn = np.linalg.norm(d, axis=1, keepdims=True)
@@ -113,7 +130,7 @@ def _closest(shape: str, l: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndar
     return p, n, valid
 
 
-def _segment_hit(shape: str, l0: np.ndarray, l1: np.ndarray):
+def _segment_hit(shape: str, l0: np.ndarray, l1: np.ndarray, e: np.ndarray):
     """First entry of segments l0 -> l1 into the shape: (hit mask, t in [0, 1], local normal)."""
     d = l1 - l0
     count = len(l0)
@@ -121,23 +138,21 @@ def _segment_hit(shape: str, l0: np.ndarray, l1: np.ndarray):
     n = np.zeros_like(l0)
     if shape in ("HALF_SPACE", "PLANE"):
         z0, z1 = l0[:, 2], l1[:, 2]
-        if shape == "HALF_SPACE":
-            cross = (z0 >= 0.0) & (z1 < 0.0)
-            side = np.ones(count)
-        else:
-            cross = ((z0 > 0.0) & (z1 <= 0.0)) | ((z0 < 0.0) & (z1 >= 0.0))
-            side = np.where(z0 > 0.0, 1.0, -1.0)
+        top = (z0 >= e[2]) & (z1 < e[2]) if shape == "HALF_SPACE" else (z0 > e[2]) & (z1 <= e[2])
+        bottom = np.zeros(count, bool) if shape == "HALF_SPACE" else (z0 < -e[2]) & (z1 >= -e[2])
+        level = np.where(top, e[2], -e[2])
+        cross = top | bottom
         denom = np.where(cross, z0 - z1, 1.0)
-        tt = np.where(cross, z0 / denom, np.inf)
+        tt = np.where(cross, (z0 - level) / denom, np.inf)
         if shape == "PLANE":
             p = l0 + tt.clip(0, 1)[:, None] * d
-            cross &= np.all(np.abs(p[:, :2]) <= 1.0, axis=1)
+            cross &= np.all(np.abs(p[:, :2]) <= e[:2], axis=1)
         t = np.where(cross, tt, np.inf)
-        n[:, 2] = side
+        n[:, 2] = np.where(bottom, -1.0, 1.0)
     elif shape == "SPHERE":
         a = np.einsum("ij,ij->i", d, d)
         b = np.einsum("ij,ij->i", l0, d)
-        c = np.einsum("ij,ij->i", l0, l0) - 1.0
+        c = np.einsum("ij,ij->i", l0, l0) - e[0] * e[0]
         disc = b * b - a * c
         ok = (c >= 0.0) & (disc >= 0.0) & (a > 0.0)
         tt = (-b - np.sqrt(np.where(ok, disc, 0.0))) / np.where(ok, a, 1.0)
@@ -147,16 +162,16 @@ def _segment_hit(shape: str, l0: np.ndarray, l1: np.ndarray):
         n = p / np.maximum(np.linalg.norm(p, axis=1, keepdims=True), 1e-12)
     else:  # BOX, slab method
         with np.errstate(divide="ignore", invalid="ignore"):
-            ta = (-1.0 - l0) / d
-            tb = (1.0 - l0) / d
+            ta = (-e - l0) / d
+            tb = (e - l0) / d
         parallel = d == 0.0
-        outside_slab = parallel & (np.abs(l0) > 1.0)
+        outside_slab = parallel & (np.abs(l0) > e)
         lo = np.where(parallel, -np.inf, np.minimum(ta, tb))
         hi = np.where(parallel, np.inf, np.maximum(ta, tb))
         t_enter = lo.max(axis=1)
         t_exit = hi.min(axis=1)
         axis = lo.argmax(axis=1)
-        start_out = ~_inside("BOX", l0)
+        start_out = ~_inside("BOX", l0, e)
         ok = start_out & ~outside_slab.any(axis=1) & (t_enter <= t_exit)
         ok &= (t_enter >= 0.0) & (t_enter <= 1.0)
         t = np.where(ok, t_enter, np.inf)
@@ -199,10 +214,11 @@ def _segment_candidates(col: ColliderPath, start, end, s_start, s_end) -> np.nda
     if shape not in ("HALF_SPACE", "PLANE"):
         return None
     z1 = _local_z(col, end, s_end)
+    level = col.extent[2]
     if shape == "HALF_SPACE":
-        return np.nonzero(z1 < 0.0)[0]
+        return np.nonzero(z1 < level)[0]
     z0 = _local_z(col, start, s_start)
-    return np.nonzero((z0 > 0.0) & (z1 <= 0.0) | (z0 < 0.0) & (z1 >= 0.0))[0]
+    return np.nonzero((z0 > level) & (z1 <= level) | (z0 < -level) & (z1 >= -level))[0]
 
 
 def _first_hits(colliders, start, x, s_start, s_end):
@@ -221,12 +237,12 @@ def _first_hits(colliders, start, x, s_start, s_end):
             continue
         l0 = col.to_local(start[cand], s_start[cand])
         l1 = col.to_local(x[cand], s_end[cand])
-        hit, t, n_local = _segment_hit(col.frame.shape, l0, l1)
+        hit, t, n_local = _segment_hit(col.frame.shape, l0, l1, col.extent)
         l_hit = l0 + t[:, None] * (l1 - l0)
         # a collider that moved onto a particle: push it out to the nearest surface point
-        stuck = ~hit & _inside(col.frame.shape, l1)
+        stuck = ~hit & _inside(col.frame.shape, l1, col.extent)
         if stuck.any():
-            p, n_in, _ = _closest(col.frame.shape, l1[stuck])
+            p, n_in, _ = _closest(col.frame.shape, l1[stuck], col.extent)
             l_hit[stuck] = p
             n_local[stuck] = n_in
             t = np.where(stuck, 1.0, t)
@@ -305,11 +321,11 @@ def _push_out(colliders: list[ColliderPath], x: np.ndarray, v: np.ndarray,
     moved = 0
     for col in colliders:
         l = col.to_local(x, s)
-        inside = _inside(col.frame.shape, l)
+        inside = _inside(col.frame.shape, l, col.extent)
         if not inside.any():
             continue
         idx = np.nonzero(inside)[0]
-        p, n_local, _ = _closest(col.frame.shape, l[idx])
+        p, n_local, _ = _closest(col.frame.shape, l[idx], col.extent)
         p_w, n_w = col.to_world(p, n_local, s[idx])
         x[idx] = p_w + SKIN * n_w
         rel = v[idx] - col.surface_velocity(p, s[idx])
@@ -333,14 +349,15 @@ def contacts(colliders: list[ColliderPath], x: np.ndarray, v: np.ndarray, s: flo
             # cheap prefilter: world distance to the plane is local z / |grad z|
             inv = inverse_affine(col._at(s))
             z = _local_z(col, x, s)
-            cand = np.nonzero(np.abs(z) < CONTACT_DISTANCE * np.linalg.norm(inv[2, :3]))[0]
+            gap = z - col.extent[2] if col.frame.shape == "HALF_SPACE" else np.abs(z) - col.extent[2]
+            cand = np.nonzero(np.abs(gap) < CONTACT_DISTANCE * np.linalg.norm(inv[2, :3]))[0]
         else:
             cand = np.arange(count)
         if len(cand) == 0:
             continue
         sv = np.full(len(cand), float(s))
         l = col.to_local(x[cand], s)
-        p, n_local, valid = _closest(col.frame.shape, l)
+        p, n_local, valid = _closest(col.frame.shape, l, col.extent)
         p_w, n_w = col.to_world(p, n_local, s)
         d = np.einsum("ij,ij->i", x[cand] - p_w, n_w)
         near = valid & (d > -CONTACT_DISTANCE) & (d < CONTACT_DISTANCE) & (np.abs(d) < best_d[cand])

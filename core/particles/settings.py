@@ -209,6 +209,8 @@ class ColliderFrame:
         matrices: optional (k + 1, 4, 4) sub-frame samples at s = 0, 1/k, ..., 1.
         restitution: k_r in [0, 1]: normal speed kept after a bounce.
         friction: Coulomb coefficient mu >= 0.
+        thickness: the surface is grown outwards by this much [m] (a particle's radius, a
+            cloth's half-thickness), so points stop that far from the shape.
     """
 
     name: str
@@ -218,9 +220,11 @@ class ColliderFrame:
     restitution: float = 0.5
     friction: float = 0.2
     matrices: np.ndarray | None = None
+    thickness: float = 0.0
 
     def __post_init__(self):
         owner = f'collider "{self.name}"'
+        _non_negative(owner, thickness=self.thickness)
         if self.shape not in COLLIDER_SHAPES:
             raise ValueError(f"{owner}: shape must be one of {COLLIDER_SHAPES} (got {self.shape!r})")
         _non_negative(owner, restitution=self.restitution, friction=self.friction)

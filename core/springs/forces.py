@@ -16,9 +16,17 @@ from ..particles.forces import ParticleView
 from .topology import dihedral_angles
 
 
-def scatter_add(out: np.ndarray, index: np.ndarray, values: np.ndarray) -> None:
-    """out[index] += values for (m, 3) values, repeated indices summed (one flat bincount)."""
-    flat = (index[:, None] * 3 + np.arange(3)).ravel()
+def flat_index(index: np.ndarray) -> np.ndarray:
+    """Indices of the x, y, z components of rows ``index`` in a flattened (n, 3) array."""
+    return (np.asarray(index)[:, None] * 3 + np.arange(3)).ravel()
+
+
+def scatter_add(out: np.ndarray, index: np.ndarray, values: np.ndarray,
+                flat: np.ndarray | None = None) -> None:
+    """out[index] += values for (m, 3) values, repeated indices summed (one flat bincount).
+    ``flat`` = flat_index(index), precomputed by callers that scatter often."""
+    if flat is None:
+        flat = flat_index(index)
     out += np.bincount(flat, weights=values.ravel(), minlength=out.size).reshape(out.shape)
 
 
@@ -28,11 +36,12 @@ class PairOperator:
     def __init__(self, i: np.ndarray, j: np.ndarray, blocks: np.ndarray):
         self.i, self.j, self.blocks = i, j, blocks
         self.index = np.concatenate([i, j])
+        self.flat = flat_index(self.index)
 
     def __call__(self, u: np.ndarray, out: np.ndarray) -> None:
         d = np.take(u, self.i, axis=0) - np.take(u, self.j, axis=0)  # take: faster than u[i]
         df = np.einsum("sab,sb->sa", self.blocks, d)
-        scatter_add(out, self.index, np.concatenate([df, -df]))
+        scatter_add(out, self.index, np.concatenate([df, -df]), self.flat)
 
 
 class HingeOperator:
@@ -40,12 +49,13 @@ class HingeOperator:
 
     def __init__(self, hinge: np.ndarray, grad: np.ndarray, coefficient: float):
         self.hinge, self.grad, self.c = hinge, grad, coefficient
-        self.index = hinge.T.ravel()
+        self.index = hinge.ravel()  # (h, 4) row-major: matches f.reshape(-1, 3) below
+        self.flat = flat_index(self.index)
 
     def __call__(self, u: np.ndarray, out: np.ndarray) -> None:
         w = self.c * np.einsum("hkc,hkc->h", self.grad, np.take(u, self.hinge, axis=0))
         f = -w[:, None, None] * self.grad  # (h, 4, 3)
-        scatter_add(out, self.index, np.swapaxes(f, 0, 1).reshape(-1, 3))
+        scatter_add(out, self.index, f.reshape(-1, 3), self.flat)
 
 
 class VertexOperator:
@@ -53,10 +63,11 @@ class VertexOperator:
 
     def __init__(self, index: np.ndarray, blocks: np.ndarray):
         self.index, self.blocks = index, blocks
+        self.flat = flat_index(index)
 
     def __call__(self, u: np.ndarray, out: np.ndarray) -> None:
         scatter_add(out, self.index,
-                    np.einsum("sab,sb->sa", self.blocks, np.take(u, self.index, axis=0)))
+                    np.einsum("sab,sb->sa", self.blocks, np.take(u, self.index, axis=0)), self.flat)
 
 
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
