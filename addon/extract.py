@@ -337,6 +337,18 @@ def _made_by_bake(modifier) -> bool:
             or (modifier.type == 'MESH_CACHE' and modifier.name == "physanim"))
 
 
+def _input_modifiers(ob) -> list:
+    """Modifiers that feed a bake: not the bake's own, and not those after the spring-mesh cache
+    (they deform the played-back result)."""
+    out = []
+    for m in ob.modifiers:
+        if m.type == 'MESH_CACHE' and m.name == "physanim":
+            break
+        if not _made_by_bake(m):
+            out.append((m.type, m.name, m.show_render, m.show_viewport))
+    return out
+
+
 def _object_record(ob, role: str | None) -> dict:
     """Everything about one object a bake reads, independent of the current frame."""
     animated = frozenset(_animated_paths(ob))
@@ -345,8 +357,7 @@ def _object_record(ob, role: str | None) -> dict:
               "parent_type": ob.parent_type, "parent_bone": ob.parent_bone,
               "constraints": [(c.type, c.name, round(c.influence, 7), c.mute)
                               for c in ob.constraints],
-              "modifiers": [(m.type, m.name, m.show_render, m.show_viewport)
-                            for m in ob.modifiers if not _made_by_bake(m)]}
+              "modifiers": _input_modifiers(ob)}
     for channel in ("location", "rotation_euler", "rotation_quaternion", "rotation_axis_angle",
                     "scale", "delta_location", "delta_rotation_euler", "delta_scale"):
         if channel not in animated:

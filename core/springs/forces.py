@@ -116,11 +116,14 @@ class SpringSet:
         return LinearizedPairs(self.i, self.j, kx, kv)
 
     def max_rate(self, mass: np.ndarray) -> float:
-        """Largest angular frequency of a single spring: sqrt(ks (1/m_i + 1/m_j)) [1/s]."""
+        """Upper bound of the highest angular frequency [1/s] of the spring network: by
+        Gershgorin, omega^2 <= max over vertices of 2 (sum of incident ks) / m."""
         if len(self.i) == 0:
             return 0.0
-        inv = 1.0 / mass[self.i] + 1.0 / mass[self.j]
-        return float(np.sqrt(np.max(self.stiffness * inv)))
+        n = len(mass)
+        incident = (np.bincount(self.i, weights=self.stiffness, minlength=n)
+                    + np.bincount(self.j, weights=self.stiffness, minlength=n))
+        return float(np.sqrt(np.max(2.0 * incident / mass)))
 
 
 @dataclass(frozen=True)

@@ -52,8 +52,12 @@ class SpringFrameInputs:
 
 @dataclass(frozen=True)
 class FaceWind:
-    """Wind pressure on faces: f = A (p . n) n per triangle, p = strength (d + gusts) [N/m^2],
-    shared equally by its three vertices."""
+    """Wind on faces: with p = strength (d + gusts) [N/m^2] the pressure vector, a triangle of
+    area A and unit normal n gets f = A [(p . n) n + c_t (p - (p . n) n)]: the pressure on the
+    side facing the wind plus skin friction along it (c_t = SKIN_FRICTION; it is what streams a
+    flag out). A third goes to each corner."""
+
+    SKIN_FRICTION = 0.25
 
     triangles: np.ndarray
     wind: Wind
@@ -67,11 +71,12 @@ class FaceWind:
         if w.noise:
             pressure = pressure + (w.strength * w.noise) * w.field((a + b + c) / 3.0, p.t)
         norm = np.sqrt(np.einsum("ij,ij->i", cross, cross))
-        # A (p . n) n with A = |cross| / 2 and n = cross / |cross|, a third to each corner
-        f = (np.einsum("ij,ij->i", pressure, cross) / (6.0 * np.where(norm > 0, norm, 1.0)))[:, None] * cross
+        area = 0.5 * norm
+        n = cross / np.where(norm > 0, norm, 1.0)[:, None]
+        normal = np.einsum("ij,ij->i", pressure, n)[:, None] * n
+        f = (area / 3.0)[:, None] * (normal + self.SKIN_FRICTION * (pressure - normal))
         for k in range(3):
             scatter_add(f_out, tri[:, k], f)
-
 
 
 class _MeshSystem:
