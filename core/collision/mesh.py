@@ -1,0 +1,159 @@
+"""Triangle meshes as the collision library sees them: validated, read-only arrays.
+
+Bad input policy (tested in ``tests/core/test_collision_bad_input.py``):
+
+* non-finite vertex positions, out-of-range or non-integer indices, wrong shapes, and meshes
+  without triangles raise :class:`~physanim.core.errors.PhysanimError` naming the mesh, the
+  index and the value;
+* degenerate (zero-area) triangles are kept: overlap tests treat them exactly as the segments or
+  points they are; segments and rays pass through them (they have no area to hit); closest-point
+  queries treat them as segments. :attr:`TriangleMesh.degenerate` flags them (exactly);
+* open, non-manifold meshes and duplicate (coincident, unwelded) vertices need nothing special
+  except for the sign of a distance, see :mod:`.distance`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from ..errors import PhysanimError
+from .tritri import normal_signs
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    a = np.ascontiguousarray(a)
+    a.setflags(write=False)
+    return a
+
+
+def check_points(name: str, what: str, points, kind: str = "mesh") -> np.ndarray:
+    """(n, 3) float64 copy of ``points``; raises naming the first non-finite one."""
+    p = np.array(points, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 3:
+        raise PhysanimError(f"{what} must be an (n, 3) array (got shape {p.shape})",
+                            obj=name, kind=kind)
+    bad = ~np.isfinite(p).all(axis=1)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise PhysanimError(f"{what} {i} is not finite: {p[i].tolist()} "
+                            f"({int(bad.sum())} such rows)", obj=name, kind=kind)
+    return p
+
+
+@dataclass(frozen=True, eq=False)
+class TriangleMesh:
+    """Vertices and triangles of one mesh in its local frame, validated and read-only.
+
+    Args:
+        vertices: (n_v, 3) positions [m].
+        triangles: (n_t, 3) vertex indices (any winding; winding gives the face normals).
+        name: used in every error message.
+    """
+
+    vertices: np.ndarray
+    triangles: np.ndarray
+    name: str = "mesh"
+
+    def __post_init__(self):
+        v = check_points(self.name, "vertex", self.vertices)
+        t = np.asarray(self.triangles)
+        if t.ndim != 2 or t.shape[1] != 3:
+            raise PhysanimError(f"triangles must be an (n, 3) array of vertex indices "
+                                f"(got shape {t.shape})", obj=self.name, kind="mesh")
+        if t.dtype.kind not in "iu":
+            if t.size and not np.all(np.isfinite(t) & (t == np.round(t))):
+                raise PhysanimError("triangle vertex indices must be integers",
+                                    obj=self.name, kind="mesh")
+        t = t.astype(np.int64)
+        if len(t) == 0:
+            raise PhysanimError("has no triangles to collide with", obj=self.name, kind="mesh")
+        out = (t < 0) | (t >= len(v))
+        if out.any():
+            i = int(np.argmax(out.any(axis=1)))
+            raise PhysanimError(f"triangle {i} refers to vertex {t[i].tolist()} but the mesh "
+                                f"has {len(v)} vertices", obj=self.name, kind="mesh")
+        object.__setattr__(self, "vertices", _frozen(v))
+        object.__setattr__(self, "triangles", _frozen(t))
+
+    @property
+    def vertex_count(self) -> int:
+        return len(self.vertices)
+
+    @property
+    def triangle_count(self) -> int:
+        return len(self.triangles)
+
+    def with_vertices(self, vertices) -> "TriangleMesh":
+        """The same triangles over new (deformed) vertex positions (n_v, 3) [m]."""
+        v = check_points(self.name, "vertex", vertices)
+        if v.shape != self.vertices.shape:
+            raise PhysanimError(f"deformed vertices must keep the shape {self.vertices.shape} "
+                                f"(got {v.shape})", obj=self.name, kind="mesh")
+        return TriangleMesh(v, self.triangles, self.name)
+
+    @cached_property
+    def triangle_vertices(self) -> np.ndarray:
+        """(n_t, 3, 3) corner positions of every triangle [m]."""
+        return _frozen(self.vertices[self.triangles])
+
+    @cached_property
+    def degenerate(self) -> np.ndarray:
+        """(n_t,) bool: the triangle has exactly zero area (its corners are collinear)."""
+        return _frozen(~normal_signs(self.triangle_vertices).any(axis=1))
+
+    @cached_property
+    def scale(self) -> float:
+        """Largest absolute coordinate [m] (sets the size of rounding-safety pads)."""
+        return float(np.abs(self.vertices).max()) if self.vertices.size else 0.0
+
+    @cached_property
+    def welded(self) -> np.ndarray:
+        """(n_v,) index of the first vertex at exactly the same position (coincident vertices of
+        unwelded meshes share one id)."""
+        _, first, inverse = np.unique(self.vertices, axis=0, return_index=True,
+                                      return_inverse=True)
+        return _frozen(first[inverse.reshape(-1)])
+
+    @cached_property
+    def pseudo_normals(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Angle-weighted pseudo-normals (Baerentzen & Aanaes 2005) for the sign of distances.
+
+        Coincident vertices are welded first, so unwelded seams do not open the surface. An
+        edge's pseudo-normal is the sum of the unit normals of every face on it (one on an open
+        boundary, more than two on a non-manifold edge); a vertex's sums its faces' unit normals
+        weighted by the face angle there. Zero-area faces contribute nothing.
+
+        Returns:
+            (face (n_t, 3), edge (n_t, 3, 3), vertex (n_t, 3, 3)) unit vectors: face normals,
+            the normal of each triangle's edge k (corner k -> k + 1), and of its corner k.
+            Zero vectors where only zero-area faces meet.
+        """
+        tri = self.triangle_vertices
+        face = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        face = _unit(face)
+        ids = self.welded[self.triangles]
+        vert = np.zeros((self.vertex_count, 3))
+        for k in range(3):
+            u = tri[:, (k + 1) % 3] - tri[:, k]
+            w = tri[:, (k + 2) % 3] - tri[:, k]
+            cos = np.einsum("ij,ij->i", _unit(u), _unit(w))
+            angle = np.arccos(np.clip(cos, -1.0, 1.0))
+            np.add.at(vert, ids[:, k], angle[:, None] * face)
+        key = np.sort(np.stack([ids, np.roll(ids, -1, axis=1)], axis=2), axis=2).reshape(-1, 2)
+        _, inverse = np.unique(key, axis=0, return_inverse=True)
+        inverse = inverse.reshape(-1)
+        edge = np.zeros((inverse.max() + 1, 3))
+        np.add.at(edge, inverse, np.repeat(face, 3, axis=0))
+        per_edge = _unit(edge[inverse]).reshape(-1, 3, 3)
+        per_vertex = _unit(vert[ids.reshape(-1)]).reshape(-1, 3, 3)
+        for a in (face, per_edge, per_vertex):
+            a.setflags(write=False)
+        return face, per_edge, per_vertex
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    """Rows of ``v`` scaled to unit length; zero rows stay zero."""
+    length = np.sqrt(np.einsum("ij,ij->i", v, v))
+    return v / np.where(length > 0.0, length, 1.0)[:, None]
