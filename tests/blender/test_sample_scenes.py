@@ -12,7 +12,7 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-SCENES = ("fountain", "fireworks", "robot_arm")
+SCENES = ("fountain", "fireworks", "robot_arm", "jelly_cube", "flag", "cloth_drape")
 
 
 def test_every_sample_scene_is_tested():
@@ -27,10 +27,26 @@ def test_sample_scene_bakes_and_passes_its_self_check(physanim_ext, tmp_path, na
     scene = bpy.context.scene
     module.build(scene)
     emitters = [o for o in scene.objects if o.physanim.emitter.enabled]
-    assert emitters
+    meshes = [o for o in scene.objects if o.physanim.spring_mesh.enabled]
+    assert emitters or meshes
     bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / f"{name}.blend"))
 
     assert bpy.ops.physanim.bake() == {'FINISHED'}
 
     assert all(o.physanim.emitter.result is not None for o in emitters)
+    assert all(o.modifiers.get("physanim") is not None for o in meshes)
     assert module.check(scene) == []
+
+
+def test_jelly_cube_needs_shear_and_angular_springs(physanim_ext, tmp_path):
+    """The seed's point: with edge springs only, the cube cannot hold its shape (it collapses
+    and never recovers, so its self-check fails); the full scene recovers (tested above)."""
+    from sample_scenes import jelly_cube
+
+    scene = bpy.context.scene
+    jelly_cube.build(scene, shear=False, angular=False)
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "edges_only.blend"))
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    volume = jelly_cube.volumes(scene, [1, scene.physanim.frame_end])
+    assert volume[-1] < 0.2 * volume[0]
+    assert any("did not recover" in p for p in jelly_cube.check(scene))
