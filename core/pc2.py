@@ -32,6 +32,7 @@ class Pc2Writer:
         self._file = open(self.path, "wb")
         self._file.write(HEADER.pack(MAGIC, 1, self.point_count, float(start_frame),
                                      float(sample_rate), 0))
+        self._file.flush()  # a file with no sample yet is already a valid (empty) PC2
 
     def append(self, points: np.ndarray) -> None:
         data = np.ascontiguousarray(points, dtype="<f4")
@@ -43,6 +44,7 @@ class Pc2Writer:
         self._file.seek(SAMPLE_COUNT_OFFSET)
         self._file.write(struct.pack("<i", self.samples))
         self._file.seek(end)
+        self._file.flush()
 
     def close(self) -> None:
         if not self._file.closed:

@@ -1,9 +1,15 @@
 #!/usr/bin/env bash
 # Benchmarks: physanim against Blender's built-in particle system (same scene, same process) and
 # the core solver's cost per particle-step. Prints markdown tables; asserts no timings.
-# Usage: tools/bench.sh [--quick] [--count N] [--frames F] [--profile] [--help]
+# Usage: tools/bench.sh [particles] [--quick] [--count N] [--frames F] [--profile] [--help]
+#        tools/bench.sh cloth [--frames F] [--grid N]      tools/bench.sh broadphase [--quick]
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 venv="$("$here/tools/venv.sh" "${PHYSANIM_BLENDER:-4.5}")"
 cd "$here"
-exec "$venv/bin/python" bench/particles.py "$@"
+case "${1:-}" in
+  cloth) shift; exec "$venv/bin/python" bench/cloth.py "$@" ;;
+  broadphase) shift; exec "$venv/bin/python" bench/broadphase.py "$@" ;;
+  particles) shift; exec "$venv/bin/python" bench/particles.py "$@" ;;
+  *) exec "$venv/bin/python" bench/particles.py "$@" ;;
+esac

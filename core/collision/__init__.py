@@ -1,7 +1,21 @@
 """Collision detection: bounding volumes, hierarchies over mesh triangles, exact primitive tests
-and the queries built on them (mesh against mesh, segments and rays against a mesh, closest
-points and signed distances). Numpy only; every query reports the seed's cost terms n_v, n_p,
-n_u. See each module's docstring for its exactness and rounding policy.
+and the queries built on them. Numpy only; every query reports the seed's cost terms n_v (volume
+tests), n_p (primitive tests) and n_u (volumes updated).
+
+Modules, bottom up:
+
+* :mod:`.predicates` exact orientation signs; :mod:`.tritri` exact triangle-triangle overlap.
+* :mod:`.mesh` validated triangle meshes; :mod:`.shapes` procedural grids, spheres, boxes.
+* Bounding volumes (:mod:`.bounding` interface): :mod:`.sphere`, :mod:`.kdop` (AABB = 6-DOP,
+  14/18/26-DOPs), :mod:`.obb` with :mod:`.sat` (15- and 6-axis tests) and :mod:`.hull`
+  (quickhull for hull-based OBB fits); :mod:`.kinds` names them.
+* Hierarchies: :mod:`.bvh` (flat layout, refit), built by :mod:`.build_topdown`,
+  :mod:`.build_bottomup`, :mod:`.build_incremental` (:func:`build_bvh` picks one by name).
+* Queries: :mod:`.queries` mesh against mesh (determination, detection, time-critical),
+  :mod:`.raycast` segments and rays, :mod:`.distance` closest points and signed distances;
+  :mod:`.cost` the cost terms and budgets.
+
+Each module's docstring states its exactness and rounding policy.
 """
 from .bounding import BoundingVolume
 from .build import BUILDERS, build_bvh
@@ -16,17 +30,17 @@ from .kdop import AABB, KDOP
 from .kinds import KINDS, bounding_volume
 from .mesh import TriangleMesh
 from .obb import OBB
-from .queries import (MeshContacts, collide, collision_detection,
-                      collision_determination)
+from .queries import MeshContacts, collide, collision_detection, collision_determination
 from .raycast import SegmentHits, ray_hits, segment_hits
 from .sat import obb_overlap
 from .sphere import Sphere
 from .tritri import triangles_overlap
 
 __all__ = [
-    "AABB", "BUILDERS", "BVH", "BoundingVolume", "Budget", "ClosestPoints", "ConvexHull", "KDOP",
-    "KINDS", "MeshContacts", "OBB", "QueryCost", "SegmentHits", "Sphere", "TriangleMesh",
-    "bounding_volume", "build_bottomup", "build_bvh", "build_incremental", "build_topdown",
-    "closest_points", "collide", "collision_detection", "collision_determination",
-    "convex_hull", "obb_overlap", "ray_hits", "segment_hits", "triangles_overlap",
+    "AABB", "BUILDERS", "BVH", "KDOP", "KINDS", "OBB", "BoundingVolume", "Budget",
+    "ClosestPoints", "ConvexHull", "MeshContacts", "QueryCost", "SegmentHits", "Sphere",
+    "TriangleMesh", "bounding_volume", "build_bottomup", "build_bvh", "build_incremental",
+    "build_topdown", "closest_points", "collide", "collision_detection",
+    "collision_determination", "convex_hull", "obb_overlap", "ray_hits", "segment_hits",
+    "triangles_overlap",
 ]

@@ -26,7 +26,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .bounding import PAD_REL, BoundingVolume
+from .bounding import BoundingVolume
 from .mesh import TriangleMesh
 
 
@@ -102,11 +102,6 @@ class BVH:
         out.setflags(write=False)
         return out
 
-    @property
-    def pad(self) -> float:
-        """Safety margin [m] for tests on this tree's volumes in its own frame."""
-        return PAD_REL * max(self.mesh.scale, 1e-300)
-
     @cached_property
     def ordered_triangles(self) -> np.ndarray:
         """(n_tri, 3, 3) triangle corners in leaf order [m]."""
@@ -148,7 +143,7 @@ class BVH:
         real = kids >= 0
         assert np.all(real[:, :-1] | ~real[:, 1:]), "children must be packed to the left"
         ids = kids[real]
-        assert np.array_equal(np.sort(ids), np.arange(1, n)), "every node but the root has one parent"
+        assert np.array_equal(np.sort(ids), np.arange(1, n)), "one parent for all but the root"
         internal = ~self.node_is_leaf
         assert np.all(real[internal].sum(axis=1) >= 2), "internal nodes have >= 2 children"
         assert np.all(self.node_tri_count[self.node_is_leaf] <= self.leaf_size)

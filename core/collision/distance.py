@@ -41,7 +41,8 @@ class ClosestPoints:
         distance: (n,) [m] unsigned; inf where nothing lies within ``max_distance``.
         signed_distance: (n,) [m] negative inside (see the module docstring).
         point: (n, 3) closest surface points [m].
-        normal: (n, 3) unit pseudo-normal of the closest feature (the winding's outside).
+        normal: (n, 3) unit pseudo-normal of the closest feature, pointing to the outside: the
+            sign of ``signed_distance`` is the sign of (query point - point) . normal.
         triangle: (n,) int64 triangle of the closest point, -1 where none.
         feature: (n,) int8 0 face, 1..3 edge k (corner k -> k + 1), 4..6 corner k, -1 none.
         n_v, n_p, n_u: the seed's cost terms.
@@ -94,9 +95,7 @@ def closest_points(bvh: BVH, points, *, max_distance: float = np.inf,
     sign = np.where(side < 0.0, -1.0, 1.0)
     if matrix is not None:
         q = transform_points(matrix, q)
-        normal = transform_vectors(matrix[:3, :3], normal) / scale
-        if np.linalg.det(matrix[:3, :3]) < 0.0:  # a mirror flips the winding's outside
-            normal = -normal
+        normal = transform_vectors(matrix[:3, :3], normal) / scale  # rotation (or mirror) part
         dist = dist * scale
     return ClosestPoints(dist, np.where(found, sign * dist, np.inf), q, normal, tri_id,
                          feature, n_v, n_p, 0)
@@ -190,6 +189,7 @@ def _leaf_tests(bvh, p, pt, node, tri, bound, best_d, best_tri, best_q, best_f,
         better = ((d < best_d[sc]) | ((d == best_d[sc]) & (tri_id < best_tri[sc])))
         better &= d <= max_distance
         g = sc[better]
-        best_d[g], best_tri[g], best_q[g], best_f[g] = d[better], tri_id[better], q[better], f[better]
+        best_d[g], best_tri[g] = d[better], tri_id[better]
+        best_q[g], best_f[g] = q[better], f[better]
         bound[g] = np.minimum(bound[g], d[better])
     return len(s)

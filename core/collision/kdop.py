@@ -54,6 +54,8 @@ class KDOP(BoundingVolume):
             start += len(fam)
         self.triples = np.array(triples, dtype=np.int64)
         self._triple_inv = np.linalg.inv(self.directions[self.triples])  # (t, 3, 3)
+        for a in (self.directions, self.norms, self.triples, self._triple_inv):
+            a.setflags(write=False)  # shared by every user of this kind
 
     # --- fitting ---------------------------------------------------------------------------
     def project(self, points: np.ndarray) -> np.ndarray:

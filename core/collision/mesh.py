@@ -62,10 +62,10 @@ class TriangleMesh:
         if t.ndim != 2 or t.shape[1] != 3:
             raise PhysanimError(f"triangles must be an (n, 3) array of vertex indices "
                                 f"(got shape {t.shape})", obj=self.name, kind="mesh")
-        if t.dtype.kind not in "iu":
-            if t.size and not np.all(np.isfinite(t) & (t == np.round(t))):
-                raise PhysanimError("triangle vertex indices must be integers",
-                                    obj=self.name, kind="mesh")
+        if t.dtype.kind not in "iu" and t.size and not np.all(np.isfinite(t)
+                                                              & (t == np.round(t))):
+            raise PhysanimError("triangle vertex indices must be integers",
+                                obj=self.name, kind="mesh")
         t = t.astype(np.int64)
         if len(t) == 0:
             raise PhysanimError("has no triangles to collide with", obj=self.name, kind="mesh")
@@ -134,23 +134,30 @@ class TriangleMesh:
         face = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
         face = _unit(face)
         ids = self.welded[self.triangles]
-        vert = np.zeros((self.vertex_count, 3))
+        weight = np.empty((len(tri), 3))  # the face angle at each corner
         for k in range(3):
-            u = tri[:, (k + 1) % 3] - tri[:, k]
-            w = tri[:, (k + 2) % 3] - tri[:, k]
-            cos = np.einsum("ij,ij->i", _unit(u), _unit(w))
-            angle = np.arccos(np.clip(cos, -1.0, 1.0))
-            np.add.at(vert, ids[:, k], angle[:, None] * face)
-        key = np.sort(np.stack([ids, np.roll(ids, -1, axis=1)], axis=2), axis=2).reshape(-1, 2)
-        _, inverse = np.unique(key, axis=0, return_inverse=True)
+            u = _unit(tri[:, (k + 1) % 3] - tri[:, k])
+            w = _unit(tri[:, (k + 2) % 3] - tri[:, k])
+            weight[:, k] = np.arccos(np.clip(np.einsum("ij,ij->i", u, w), -1.0, 1.0))
+        vert = _sum_by(ids.reshape(-1), (weight[:, :, None] * face[:, None, :]).reshape(-1, 3),
+                       self.vertex_count)
+        n = np.int64(self.vertex_count)
+        a, b = ids, np.roll(ids, -1, axis=1)  # edge k joins corners k and k + 1
+        key = (np.minimum(a, b) * n + np.maximum(a, b)).reshape(-1)
+        _, inverse = np.unique(key, return_inverse=True)
         inverse = inverse.reshape(-1)
-        edge = np.zeros((inverse.max() + 1, 3))
-        np.add.at(edge, inverse, np.repeat(face, 3, axis=0))
+        edge = _sum_by(inverse, np.repeat(face, 3, axis=0), int(inverse.max()) + 1)
         per_edge = _unit(edge[inverse]).reshape(-1, 3, 3)
         per_vertex = _unit(vert[ids.reshape(-1)]).reshape(-1, 3, 3)
-        for a in (face, per_edge, per_vertex):
-            a.setflags(write=False)
+        for out in (face, per_edge, per_vertex):
+            out.setflags(write=False)
         return face, per_edge, per_vertex
+
+
+def _sum_by(index: np.ndarray, values: np.ndarray, count: int) -> np.ndarray:
+    """(count, 3) sums of (m, 3) ``values`` grouped by ``index`` (m,)."""
+    return np.stack([np.bincount(index, weights=values[:, k], minlength=count)
+                     for k in range(3)], axis=1)
 
 
 def _unit(v: np.ndarray) -> np.ndarray:

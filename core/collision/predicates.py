@@ -70,7 +70,8 @@ def orient3d(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray) -> np.n
     q1, q2 = v[:, 2] * w[:, 0], v[:, 0] * w[:, 2]
     r1, r2 = v[:, 0] * w[:, 1], v[:, 1] * w[:, 0]
     det = u[:, 0] * (p1 - p2) + u[:, 1] * (q1 - q2) + u[:, 2] * (r1 - r2)
-    perm = (np.abs(u[:, 0]) * (np.abs(p1) + np.abs(p2)) + np.abs(u[:, 1]) * (np.abs(q1) + np.abs(q2))
+    perm = (np.abs(u[:, 0]) * (np.abs(p1) + np.abs(p2))
+            + np.abs(u[:, 1]) * (np.abs(q1) + np.abs(q2))
             + np.abs(u[:, 2]) * (np.abs(r1) + np.abs(r2)))
     bound = O3D_ERROR * perm
     sign = np.sign(det).astype(np.int8)

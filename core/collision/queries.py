@@ -6,9 +6,10 @@ volumes, keep the overlapping ones, replace each by the pairs of its children, a
 two leaves to the exact triangle test (:func:`.tritri.triangles_overlap`). Descent rule
 ``"larger"`` opens the larger volume of a pair (Gottschalk), ``"both"`` opens both at once.
 
-Frames: everything happens in mesh A's local frame. B's vertices are mapped there once, and B's
-volumes lazily, the first time each is needed (counted in n_u): exactly for spheres and OBBs,
-by a conservative re-bound for AABBs and k-DOPs. Volume tests use a margin of
+Frames: everything happens in mesh A's local frame (when both meshes share one transform, in
+their common frame, with no mapping at all). B's vertices are mapped there once, at the first
+triangle test, and B's volumes lazily, the first time each is needed (counted in n_u): exactly
+for spheres and OBBs, by a conservative re-bound for AABBs and k-DOPs. Volume tests use a margin of
 :data:`.bounding.PAD_REL` times the coordinates' magnitude, so rounding in those maps can never
 hide a pair the triangle test would report: the result is exactly the brute-force set of
 overlapping triangle pairs for the mapped coordinates.
@@ -131,8 +132,8 @@ class _Descent:
         mb = eye if matrix_b is None else np.asarray(matrix_b, dtype=np.float64)
         similarity_scale(ma, a.mesh.name)
         similarity_scale(mb, b.mesh.name)
-        rel = inverse_affine(ma) @ mb  # B's local frame -> A's local frame
-        identity = bool(np.array_equal(rel, eye))
+        identity = bool(np.array_equal(ma, mb))  # one frame: nothing to map, nothing rounded
+        rel = eye if identity else inverse_affine(ma) @ mb  # B's local frame -> A's local frame
         self.scale_b = 1.0 if identity else similarity_scale(rel, b.mesh.name)
         self.rel, self.identity = rel, identity
         # magnitude of B's coordinates in A's frame, bounded without mapping every vertex

@@ -42,7 +42,7 @@ def obb_overlap(centre_a, axes_a, half_a, centre_b, axes_b, half_b, margin: floa
     """
     if axis_count not in (6, 15):
         raise ValueError(f"the OBB separating-axis test uses 15 or 6 axes (got {axis_count})")
-    r = np.einsum("nik,njk->nij", axes_a, axes_b)
+    r = np.matmul(axes_a, axes_b.transpose(0, 2, 1))
     t = np.einsum("nik,nk->ni", axes_a, centre_b - centre_a)
     abs_r = np.abs(r) + PARALLEL_SLACK
     # 3 face axes of A: L = a_i
@@ -63,8 +63,9 @@ def obb_overlap(centre_a, axes_a, half_a, centre_b, axes_b, half_b, margin: floa
 
 def _edge_axes_overlap(r, abs_r, t, ha, hb, margin) -> np.ndarray:
     """No edge-edge axis a_i x b_j separates (pairs that survived the face axes)."""
-    ra = ha[:, _I1] * abs_r[:, _I2, _J] + ha[:, _I2] * abs_r[:, _I1, _J]
-    rb = hb[:, _J1] * abs_r[:, _I, _J2] + hb[:, _J2] * abs_r[:, _I, _J1]
-    dist = np.abs(t[:, _I2] * r[:, _I1, _J] - t[:, _I1] * r[:, _I2, _J])
-    length = np.sqrt(np.maximum(1.0 - r[:, _I, _J] ** 2, 0.0))  # |a_i x b_j|
+    r, abs_r = r.reshape(-1, 9), abs_r.reshape(-1, 9)  # flat (i, j) -> 3 i + j
+    ra = ha[:, _I1] * abs_r[:, 3 * _I2 + _J] + ha[:, _I2] * abs_r[:, 3 * _I1 + _J]
+    rb = hb[:, _J1] * abs_r[:, 3 * _I + _J2] + hb[:, _J2] * abs_r[:, 3 * _I + _J1]
+    dist = np.abs(t[:, _I2] * r[:, 3 * _I1 + _J] - t[:, _I1] * r[:, 3 * _I2 + _J])
+    length = np.sqrt(np.maximum(1.0 - r[:, 3 * _I + _J] ** 2, 0.0))  # |a_i x b_j|
     return ~np.any(dist > ra + rb + margin * length, axis=1)

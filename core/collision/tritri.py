@@ -81,8 +81,8 @@ def triangles_overlap(tri_a: np.ndarray, tri_b: np.ndarray) -> np.ndarray:
                              f"{tri[i].tolist()}")
     out = np.zeros(len(tri_a), dtype=bool)
     # exact prefilter: disjoint axis-aligned bounds (plain comparisons of the inputs)
-    box = (np.all(tri_a.min(axis=1) <= tri_b.max(axis=1), axis=1)
-           & np.all(tri_b.min(axis=1) <= tri_a.max(axis=1), axis=1))
+    box = (np.all(_corner_min(tri_a) <= _corner_max(tri_b), axis=1)
+           & np.all(_corner_min(tri_b) <= _corner_max(tri_a), axis=1))
     idx = np.nonzero(box)[0]
     if len(idx) == 0:
         return out
@@ -98,6 +98,14 @@ def triangles_overlap(tri_a: np.ndarray, tri_b: np.ndarray) -> np.ndarray:
     sel = flat_a & flat_b
     out[idx[sel]] = _segment_segment(_extent(a[sel]), _extent(b[sel]))
     return out
+
+
+def _corner_min(tri: np.ndarray) -> np.ndarray:
+    return np.minimum(np.minimum(tri[:, 0], tri[:, 1]), tri[:, 2])
+
+
+def _corner_max(tri: np.ndarray) -> np.ndarray:
+    return np.maximum(np.maximum(tri[:, 0], tri[:, 1]), tri[:, 2])
 
 
 def normal_signs(tri: np.ndarray) -> np.ndarray:

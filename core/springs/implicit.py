@@ -7,7 +7,8 @@ spring Jacobians, with pinned vertices handled by filtering (their velocity chan
 The matrix is symmetric (spring Jacobians with the compressed-spring term clamped are
 symmetric negative semi-definite), so CG applies, with a Jacobi preconditioner from the
 per-vertex mass and incident spring constants and a warm start from the previous step's dv.
-As in Baraff & Witkin, the solve is inexact: CG stops at the tolerance or the iteration cap.
+As in Baraff & Witkin, the solve is inexact: CG stops at the tolerance or the iteration cap;
+a second Newton iteration (re-linearised at the step's end) follows the first.
 Every CG iterate lowers the A-norm of the error, so a capped solve is still a damped, stable
 step; only a loss of positive definiteness or a non-finite value is an error.
 """
@@ -36,9 +37,14 @@ class BaraffWitkin:
 
     TOLERANCE = 1e-3  # relative residual: Baraff & Witkin's inexact solve, visually converged
 
-    def __init__(self, tolerance: float = TOLERANCE, max_iterations: int = 200):
+    def __init__(self, tolerance: float = TOLERANCE, max_iterations: int = 200,
+                 newton_iterations: int = 4):
         self.tolerance = float(tolerance)
         self.max_iterations = int(max_iterations)
+        # A second Newton iteration re-linearises at the end of the step when Baraff & Witkin's
+        # single linearisation gained energy (stiff springs rotating within one large step);
+        # systems that offer ``energy(x, v)`` are checked, others always iterate.
+        self.newton_iterations = int(newton_iterations)
         self._warm: np.ndarray | None = None  # last dv: the next step's first guess
         self.last_residual = 0.0
         self.last_iterations = 0
@@ -48,41 +54,101 @@ class BaraffWitkin:
         mass = system.mass[:, None]
         free = system.free[:, None]
         f0 = system.forces_at(t, x0, v0)
-        blocks = system.linearize(t, x0, v0)  # Jacobian blocks once; many products below
-        a_ops = [b.operator(h * h, h) for b in blocks]  # h^2 df/dx + h df/dv, pre-combined
-        rhs = f0.copy()
-        for b in blocks:
-            b.operator(h, 0.0)(v0, rhs)  # f0 + h df/dx v0
-        rhs *= h
 
-        def apply_a(u: np.ndarray) -> np.ndarray:
-            out = np.zeros_like(u)
-            for op in a_ops:
-                op(u, out)
-            return mass * u - out
-
-        # pinned vertices: their velocity change is prescribed; move it to the right-hand side
+        # Constraints (Baraff & Witkin's filter): pinned vertices have a prescribed velocity
+        # change; vertices pressed onto a collider have a prescribed normal velocity (the
+        # surface's) and move freely along it.
         given = np.where(free, 0.0, system.pinned_velocity(t + h) - v0)
-        b = np.where(free, rhs - (apply_a(given) if np.any(given) else 0.0), 0.0)
+        contact = getattr(system, "contact", None)
+        pressed, normal = np.zeros(0, np.int64), np.zeros((0, 3))
+        if contact is not None and len(contact.index):
+            push = np.einsum("ij,ij->i", f0[contact.index], contact.normal)
+            keep = (push < 0.0) & system.free[contact.index]  # only where forces press inwards
+            pressed, normal = contact.index[keep], contact.normal[keep]
+            surface_vn = np.einsum("ij,ij->i", contact.surface_velocity[keep], normal)
+            vn = np.einsum("ij,ij->i", v0[pressed], normal)
+            given[pressed] = (surface_vn - vn)[:, None] * normal
+
+        def project(u: np.ndarray) -> np.ndarray:
+            u = np.where(free, u, 0.0)
+            if len(pressed):
+                un = np.einsum("ij,ij->i", u[pressed], normal)
+                u[pressed] -= un[:, None] * normal
+            return u
+
         inv_diag = np.where(free, 1.0 / system.diagonal(h)[:, None], 0.0)
-        start = self._warm if self._warm is not None and self._warm.shape == b.shape else None
-        # residuals are judged against the larger of the right-hand side and the impulse gravity
-        # gives in one step: near equilibrium b -> 0 and a purely relative test never stops
-        scale = max(float(np.sqrt(np.sum(b * b))), h * float(system.weight_norm()))
-        dv, iterations, residual = self._pcg(apply_a, b, inv_diag, free, start, scale)
-        self._warm = dv.copy()
-        self.last_residual, self.last_iterations = residual, iterations
-        dv = dv + given
+        # residuals are judged against the impulse gravity gives in one step (at least): near
+        # equilibrium the right-hand side -> 0 and a purely relative test never stops
+        floor = h * float(system.weight_norm())
+        dv = given.copy()
+        iterations_total, reaction = 0, None
+        energy = getattr(system, "energy", None)
+        e0 = energy(x0, v0) if energy is not None else None
+        for newton in range(self.newton_iterations):
+            if newton > 0 and e0 is not None and energy(x0 + h * (v0 + dv), v0 + dv) <= e0:
+                break  # the linearised step already lost energy: no need to re-linearise
+            if newton == 0:  # Baraff & Witkin: linearise at (x0, v0), rhs h (f0 + h df/dx v0)
+                blocks = system.linearize(t, x0, v0)
+                rhs = f0.copy()
+                for blk in blocks:
+                    blk.operator(h, 0.0)(v0, rhs)
+                rhs *= h
+            else:  # Newton on g(dv) = M dv - h f(x0 + h (v0 + dv), v0 + dv)
+                v1 = v0 + dv
+                x1 = x0 + h * v1
+                blocks = system.linearize(t + h, x1, v1)
+                rhs = h * system.forces_at(t + h, x1, v1) - mass * dv
+            apply_a = self._operator(blocks, mass, h)
+            known = dv if newton == 0 else np.zeros_like(dv)
+            b = project(rhs - (apply_a(known) if np.any(known) else 0.0))
+            start = self._warm if (newton == 0 and self._warm is not None
+                                   and self._warm.shape == b.shape) else None
+            scale = max(float(np.sqrt(np.sum(b * b))), floor)
+            delta, iterations, residual = self._pcg(apply_a, b, inv_diag, project, start, scale)
+            iterations_total += iterations
+            if newton == 0:
+                self._warm = delta.copy()
+                reaction = apply_a(delta + known) - rhs  # the constraints' impulses
+            dv = dv + delta
+            self.last_residual = residual
+        self.last_iterations = iterations_total
         v1 = v0 + dv
+        if len(pressed):
+            self._friction(v1, pressed, normal, contact, reaction, mass)
         x1 = x0 + h * v1
         if not (np.all(np.isfinite(x1)) and np.all(np.isfinite(v1))):
             raise SimulationError("state became non-finite in the implicit step")
         system.x, system.v = x1, v1
-        return StepReport(steps=1, evaluations=iterations, h_last=h)
+        return StepReport(steps=1, evaluations=iterations_total, h_last=h)
 
-    def _pcg(self, apply_a, b, inv_diag, free, start=None, scale=None):
-        """Filtered preconditioned conjugate gradients (only free vertices move). Stops when
-        |r| <= tolerance * scale (default |b|)."""
+    @staticmethod
+    def _operator(blocks, mass, h):
+        ops = [blk.operator(h * h, h) for blk in blocks]  # h^2 df/dx + h df/dv, pre-combined
+
+        def apply_a(u: np.ndarray) -> np.ndarray:
+            out = np.zeros_like(u)
+            for op in ops:
+                op(u, out)
+            return mass * u - out
+        return apply_a
+
+    @staticmethod
+    def _friction(v1, pressed, normal, contact, reaction, mass) -> None:
+        """Coulomb friction on pressed vertices: the constraint's normal impulse (the residual
+        of the unfiltered system along n) caps how much tangential sliding it can stop."""
+        row = np.searchsorted(contact.index, pressed)  # contact.index is sorted
+        mu = contact.friction[row]
+        impulse = np.maximum(0.0, np.einsum("ij,ij->i", reaction[pressed], normal))
+        rel = v1[pressed] - contact.surface_velocity[row]
+        vt = rel - np.einsum("ij,ij->i", rel, normal)[:, None] * normal
+        speed = np.sqrt(np.einsum("ij,ij->i", vt, vt))
+        stop = np.minimum(speed, mu * impulse / mass[pressed, 0])
+        v1[pressed] -= (stop / np.where(speed > 1e-12, speed, np.inf))[:, None] * vt
+
+    def _pcg(self, apply_a, b, inv_diag, project, start=None, scale=None):
+        """Filtered preconditioned conjugate gradients: ``project`` removes the constrained
+        directions (pinned vertices, normals of pressed ones). Stops when |r| <= tolerance *
+        scale (default |b|)."""
         b_norm = float(np.sqrt(np.sum(b * b))) if scale is None else scale
         if b_norm == 0.0:
             return np.zeros_like(b), 0, 0.0
@@ -90,16 +156,16 @@ class BaraffWitkin:
             x = np.zeros_like(b)
             r = b.copy()
         else:
-            x = np.where(free, start, 0.0)
-            r = b - np.where(free, apply_a(x), 0.0)
+            x = project(start)
+            r = b - project(apply_a(x))
         residual = float(np.sqrt(np.sum(r * r))) / b_norm
         if residual <= self.tolerance:
             return x, 0, residual
-        z = inv_diag * r
+        z = project(inv_diag * r)
         p = z.copy()
         rz = float(np.sum(r * z))
         for it in range(1, self.max_iterations + 1):
-            q = np.where(free, apply_a(p), 0.0)
+            q = project(apply_a(p))
             pq = float(np.sum(p * q))
             if not (pq > 0.0 and np.isfinite(pq)):
                 raise SimulationError("the implicit solve lost positive definiteness "
@@ -110,7 +176,7 @@ class BaraffWitkin:
             residual = float(np.sqrt(np.sum(r * r))) / b_norm
             if residual <= self.tolerance:
                 return x, it, residual
-            z = inv_diag * r
+            z = project(inv_diag * r)
             rz_new = float(np.sum(r * z))
             p = z + (rz_new / rz) * p
             rz = rz_new

@@ -35,7 +35,8 @@ class SpringMeshSettings:
         (springs between the wing vertices of each shared edge) or ``NONE``.
         bend_stiffness, bend_damping: [N m/rad], [N m s/rad] for ANGULAR, [N/m], [N s/m] else.
         drag: viscous air drag per unit mass [1/s]. pin_stiffness: [N/m] of soft pins (weight
-        below 1 scales it).
+        below 1 scales it). max_stretch: strain limit of edge and shear springs (0.1 = they
+        never stretch past 110 %; 0 = no limit), Provot's deformation constraints.
     """
 
     name: str
@@ -50,6 +51,7 @@ class SpringMeshSettings:
     bend_damping: float = 0.001
     drag: float = 0.1
     pin_stiffness: float = 1000.0
+    max_stretch: float = 0.0
 
     def __post_init__(self):
         owner = f'spring mesh "{self.name}"'
@@ -60,7 +62,7 @@ class SpringMeshSettings:
         if not (math.isfinite(self.mass) and self.mass > 0.0):
             raise ValueError(f"{owner}: mass must be > 0 kg (got {self.mass})")
         for key in ("stiffness", "damping", "shear_stiffness", "shear_damping", "bend_stiffness",
-                    "bend_damping", "drag", "pin_stiffness"):
+                    "bend_damping", "drag", "pin_stiffness", "max_stretch"):
             value = getattr(self, key)
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError(f"{owner}: {key} must be finite and >= 0 (got {value})")

@@ -2,8 +2,8 @@
 
 Per sub-step: collide (resting contacts) -> forces (gravity, springs, bending, virtual springs,
 drag, wind on faces, contact) -> integrate (any scene integrator; IMPLICIT is Baraff-Witkin)
--> pins (exactly on their animated targets) -> respond (continuous collisions, as particles)
--> check (finite, not torn apart).
+-> pins (exactly on their animated targets) -> limit strain (optional, Provot) -> respond
+(continuous collisions, as particles) -> check (finite, not torn apart).
 """
 from __future__ import annotations
 
@@ -20,6 +20,8 @@ from ..particles.settings import ColliderFrame
 from ..transforms import TransformPath, inverse_affine, transform_points
 from .forces import AnchorSprings, AngularSprings, LinearDrag, SpringSet, scatter_add
 from .implicit import BaraffWitkin
+from .strain import limit_strain
+from .topology import dihedral_angles
 from .model import SpringMeshModel, SpringMeshState
 
 # explicit methods: largest stable h * omega on an undamped spring (Euler and midpoint grow at
@@ -134,6 +136,23 @@ class _MeshSystem:
     def v(self, value):
         self.state.v = value
 
+    def energy(self, x: np.ndarray, v: np.ndarray) -> float:
+        """Kinetic + gravitational + spring + bending energy [J] of the free vertices' motion
+        (what an implicit step must not increase when nothing drives the mesh)."""
+        m = self.mass
+        e = 0.5 * float(np.sum(m[:, None] * v * v))
+        for force in self.forces:
+            if isinstance(force, Gravity):
+                e -= float(np.sum(m * (x @ np.asarray(force.g))))
+            elif isinstance(force, SpringSet) and len(force.i):
+                length = np.linalg.norm(x[force.i] - x[force.j], axis=1)
+                e += 0.5 * float(np.sum(force.stiffness * (length - force.rest) ** 2))
+            elif isinstance(force, AngularSprings) and len(force.hinge):
+                theta = dihedral_angles(x, force.hinge)
+                delta = np.angle(np.exp(1j * (theta - force.rest)))
+                e += 0.5 * force.stiffness * float(np.sum(delta * delta))
+        return e
+
     def weight_norm(self) -> float:
         g = next((f.g for f in self.forces if isinstance(f, Gravity)), (0.0, 0.0, 0.0))
         return float(np.linalg.norm(g) * np.linalg.norm(self.mass[self.free])) or \
@@ -165,8 +184,9 @@ class SpringMeshSolver:
 
     Args:
         model: the frozen model. integrator: name from the scene menu. substeps: per frame.
-        tolerance: RK45 tolerance / implicit solve tolerance. frame_dt: frame length [s] (used
-        to check explicit stability up front). frame: start frame (messages).
+        tolerance: RK45 tolerance (the implicit solve has its own, BaraffWitkin.TOLERANCE).
+        frame_dt: frame length [s] (used to check explicit stability up front). frame: start
+        frame (messages).
     """
 
     def __init__(self, model: SpringMeshModel, integrator: str = "IMPLICIT", substeps: int = 1,
@@ -184,6 +204,7 @@ class SpringMeshSolver:
         self.bending = AngularSprings(model.hinge, model.hinge_rest, s.bend_stiffness,
                                       s.bend_damping)
         self.free = ~model.pinned
+        self._inv_mass = np.where(self.free, 1.0 / model.vertex_mass, 0.0)
         self._check_stability(frame_dt / self.substeps, frame)
         self._attach_local = self._attachments()
 
@@ -258,9 +279,12 @@ class SpringMeshSolver:
                       LinearDrag(model.settings.drag)]
             forces += self._virtual(inputs, t, h, s0, s1)
             forces += [FaceWind(model.triangles, w) for w in inputs.winds if len(model.triangles)]
-            forces.append(contact)
+            implicit = isinstance(self.integrator, BaraffWitkin)
+            if not implicit:  # the implicit step enforces contacts as constraints instead
+                forces.append(contact)
             system = _MeshSystem(state, model.vertex_mass, self.free, forces,
                                  rest0 + s0 * (rest1 - rest0), pin_v, t)
+            system.contact = contact if implicit else None
             x0, v0 = state.x.copy(), state.v.copy()
             try:
                 self.integrator.step(system, t, h)
@@ -270,6 +294,11 @@ class SpringMeshSolver:
                                  SimulationError) from exc
             state.x[~self.free] = pin_x1[~self.free]
             state.v[~self.free] = pin_v[~self.free]
+            if model.settings.max_stretch > 0.0:
+                limited = model.spring_family < 2  # edge and shear springs, not bending ones
+                limit_strain(state.x, state.v, model.spring_i[limited], model.spring_j[limited],
+                             model.spring_rest[limited], self._inv_mass,
+                             model.settings.max_stretch, h)
             if paths:
                 x, v, count = coll.respond(paths, x0, state.x, v0, state.v, s0, s1, h, rest_speed)
                 x[~self.free], v[~self.free] = pin_x1[~self.free], pin_v[~self.free]
@@ -280,16 +309,23 @@ class SpringMeshSolver:
     def _check(self, state: SpringMeshState, frame) -> None:
         if not (np.all(np.isfinite(state.x)) and np.all(np.isfinite(state.v))):
             bad = int(np.argwhere(~np.isfinite(state.x).all(1) | ~np.isfinite(state.v).all(1))[0][0])
-            raise self._fail(f"vertex {bad} became non-finite (x = {state.x[bad].tolist()}) — use "
-                             "the IMPLICIT integrator, more substeps or lower stiffness", frame,
-                             SimulationError)
+            raise self._fail(f"vertex {bad} became non-finite (x = {state.x[bad].tolist()}) — "
+                             f"{self._advice()}", frame, SimulationError)
         m = self.model
         if len(m.spring_i):
             length = np.linalg.norm(state.x[m.spring_i] - state.x[m.spring_j], axis=1)
-            ratio = length / np.maximum(m.spring_rest, 1e-9)
+            # zero-length springs (duplicate vertices) are measured against the mesh's scale
+            scale = float(np.median(m.spring_rest[m.spring_rest > 0])) if np.any(
+                m.spring_rest > 0) else 1.0
+            ratio = length / np.maximum(m.spring_rest, scale)
             worst = int(np.argmax(ratio))
             if ratio[worst] > TEAR_FACTOR and length[worst] > 1e-6:
                 raise self._fail(
                     f"spring {int(m.spring_i[worst])}-{int(m.spring_j[worst])} stretched to "
-                    f"{ratio[worst]:.0f}x its rest length — the simulation is unstable: use the "
-                    "IMPLICIT integrator, more substeps or lower stiffness", frame, SimulationError)
+                    f"{ratio[worst]:.0f}x its rest length — the simulation is unstable: "
+                    f"{self._advice()}", frame, SimulationError)
+
+    def _advice(self) -> str:
+        if self.integrator_name == "IMPLICIT":
+            return "use more substeps or lower stiffness"
+        return "use the IMPLICIT integrator, more substeps or lower stiffness"

@@ -132,6 +132,19 @@ def test_degenerate_duplicate_and_non_manifold_meshes():
     assert np.all(np.isfinite(d.signed_distance))
 
 
+def test_tiny_meshes_build_with_every_builder_and_kind():
+    one = TriangleMesh(np.eye(3), [[0, 1, 2]])
+    twice = TriangleMesh(np.eye(3), [[0, 1, 2], [0, 2, 1]])  # the same triangle, both windings
+    for mesh in (one, twice):
+        for method in ("topdown", "bottomup", "incremental"):
+            for kind in KINDS:
+                bvh = build_bvh(mesh, kind, method, arity=4, leaf_size=1)
+                bvh.check()
+                n = mesh.triangle_count
+                assert len(collide(bvh, bvh).pairs) == n * n
+                assert segment_hits(bvh, [[0.2, 0.3, 1.0]], [[0.2, 0.3, -1.0]]).hit.all()
+
+
 def test_convex_hull_degenerate_inputs():
     rng = np.random.default_rng(0)
     assert convex_hull(np.ones((4, 3))).dimension == 0

@@ -256,3 +256,11 @@ def test_max_distance_and_world_transform(bumpy, queries):
     np.testing.assert_allclose(world.signed_distance, 1.5 * full.signed_distance[:1000],
                                rtol=1e-9)
     np.testing.assert_allclose(world.point, transform_points(m, full.point[:1000]), atol=1e-9)
+    mirror = compose([0.5, 0, 0], [1, 0, 0, 0], [-2.0, 2.0, 2.0])
+    q = transform_points(mirror, queries[:1000])
+    world = closest_points(bvh, q, matrix=mirror)
+    np.testing.assert_allclose(world.signed_distance, 2.0 * full.signed_distance[:1000],
+                               rtol=1e-9)
+    side = np.einsum("ij,ij->i", q - world.point, world.normal)
+    far = world.distance > 1e-9
+    np.testing.assert_array_equal(np.sign(side[far]), np.sign(world.signed_distance[far]))

@@ -131,7 +131,7 @@ def test_detection_finds_a_pair_exactly_when_there_is_one(truth, kind):
 
 
 def test_both_descent_rules_and_all_pairs_agree_with_swapped_roles(truth):
-    name, ma, mb, xa, xb = SCENES[0]
+    _, ma, mb, xa, xb = SCENES[0]
     ta, tb = build_bvh(ma, "obb"), build_bvh(mb, "obb")
     ab = collide(ta, tb, xa, xb).pairs
     ba = collide(tb, ta, xb, xa).pairs[:, ::-1]

@@ -139,7 +139,7 @@ def _segment_hits_box(p0, p1, half):
     return t0 <= t1
 
 
-_EDGES = [(i, j) for i in range(8) for j in range(8) if i < j and bin(i ^ j).count("1") == 1]
+_EDGES = [(i, j) for i in range(8) for j in range(8) if i < j and (i ^ j).bit_count() == 1]
 
 
 def _boxes_intersect_reference(a, b, grow):

@@ -1,0 +1,105 @@
+"""Spring meshes against analytic colliders: a cloth falls onto the ground and onto a sphere.
+
+Vertices are collided continuously (as particles) and placed SKIN = 1e-4 m outside a surface
+after a hit, so no vertex may end below a surface; we allow 1e-6 m for rounding. Collisions
+with restitution 0 and friction only take energy: the total (kinetic + gravitational + spring)
+may never exceed its start, up to the implicit solve's inexactness (relative residual <= 1e-2
+even at the iteration cap: 1e-2 of the starting energy).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from physanim.core.particles import ColliderFrame
+from physanim.core.springs import (SpringFrameInputs, SpringMeshBuilder, SpringMeshSettings,
+                                   SpringMeshSolver)
+
+DT = 1.0 / 24.0
+G = 9.81
+
+
+def _grid(nx: int, ny: int, size: float = 1.0):
+    """Flat grid of nx * ny vertices in z = 0: positions, edges, triangles and quad loops."""
+    xs, ys = np.meshgrid(np.linspace(0.0, size, nx), np.linspace(0.0, size, ny))
+    x = np.stack([xs.ravel(), ys.ravel(), np.zeros(nx * ny)], axis=1)
+    i, j = np.meshgrid(np.arange(nx - 1), np.arange(ny - 1))
+    a = (j * nx + i).ravel()
+    quads = np.stack([a, a + 1, a + nx + 1, a + nx], axis=1)
+    triangles = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+    edges = np.concatenate([quads[:, [0, 1]], quads[:, [1, 2]], quads[:, [2, 3]], quads[:, [3, 0]]])
+    return x, edges, triangles, 4 * np.arange(len(quads)), np.full(len(quads), 4), quads.ravel()
+
+
+def _cloth(name: str, centre, size: float = 1.0, n: int = 9):
+    x, edges, tris, ls, lt, lv = _grid(n, n, size)
+    x += np.asarray(centre) - [size / 2, size / 2, 0.0]
+    settings = SpringMeshSettings(name, mass=0.3, stiffness=2000.0, damping=2.0,
+                                  shear_stiffness=500.0, bend_stiffness=0.01, drag=0.5)
+    return SpringMeshBuilder(settings, x, edges, tris, ls, lt, lv).finalize(1)
+
+
+def _scaled(radius: float, centre=(0.0, 0.0, 0.0)) -> np.ndarray:
+    m = np.diag([radius, radius, radius, 1.0])
+    m[:3, 3] = centre
+    return m
+
+
+def _energy(model, state) -> float:
+    m = model.vertex_mass
+    length = np.linalg.norm(state.x[model.spring_i] - state.x[model.spring_j], axis=1)
+    return float(0.5 * np.sum(m * np.sum(state.v ** 2, axis=1)) + G * np.sum(m * state.x[:, 2])
+                 + 0.5 * np.sum(model.spring_stiffness * (length - model.spring_rest) ** 2))
+
+
+def _drop(model, collider, frames: int, substeps: int):
+    solver = SpringMeshSolver(model, "IMPLICIT", substeps, frame_dt=DT, frame=1)
+    state = model.state()
+    hits = 0
+    for frame in range(1, frames + 1):
+        hits += solver.advance(state, SpringFrameInputs(frame, frame * DT, DT,
+                                                        colliders=[collider]))
+        yield state, hits
+
+
+@pytest.mark.parametrize("substeps", [1, 4])
+def test_cloth_falling_on_the_ground_rests_above_it(substeps):
+    ground = ColliderFrame("Ground", "HALF_SPACE", np.eye(4), np.eye(4), restitution=0.0,
+                           friction=0.5)
+    model = _cloth("Sheet", (0.0, 0.0, 0.4))
+    start = _energy(model, model.state())
+    for state, hits in _drop(model, ground, 96, substeps):  # lands by frame 8, then rests
+        assert state.x[:, 2].min() >= -1e-6
+        assert _energy(model, state) <= start * (1.0 + 1e-2)
+    assert hits > 0
+    # at rest on the ground, flat: every vertex within 1 cm of it, slower than 1/20 of what
+    # gravity gives in one frame (g / 24 = 0.41 m/s: 0.02 m/s), and not drifting sideways —
+    # the drop is symmetric, so any net horizontal motion of the centroid is spurious (1 mm)
+    speed = np.linalg.norm(state.v, axis=1).max()
+    drift = np.linalg.norm(state.x[:, :2].mean(axis=0) - model.rest_x[:, :2].mean(axis=0))
+    assert state.x[:, 2].max() < 0.01
+    assert speed < 0.02 and drift < 1e-3, f"resting cloth moves at {speed:.3g} m/s, drifted " \
+                                          f"{drift:.3g} m sideways"
+
+
+@pytest.mark.parametrize("substeps", [2, 4])
+def test_cloth_draped_over_a_sphere_never_enters_it(substeps):
+    """The 'cloth drape' sample's setting (2 substeps) and a finer one. At one step per frame
+    this stiff cloth still never enters the sphere, but vertices newly hitting the curved
+    surface are projected out by up to a step's travel (per-vertex continuous collisions, not
+    yet constraints in the solve), which stores a few percent of spring energy: a documented
+    limitation, so one step per frame is not asserted here."""
+    radius, centre = 0.3, np.array([0.0, 0.0, 0.0])
+    ball = ColliderFrame("Ball", "SPHERE", _scaled(radius, centre), _scaled(radius, centre),
+                         restitution=0.0, friction=0.3)
+    model = _cloth("Drape", (0.02, -0.01, 0.5))  # slightly off-centre
+    start = _energy(model, model.state())
+    for state, hits in _drop(model, ball, 36, substeps):
+        distance = np.linalg.norm(state.x - centre, axis=1)
+        assert distance.min() >= radius - 1e-6
+        energy = _energy(model, state)
+        assert energy <= start * (1.0 + 1e-2), f"energy {energy:.4g} J > start {start:.4g} J"
+    assert hits > 0
+    top = np.argmin(np.linalg.norm(model.rest_x[:, :2] - [0.02, -0.01], axis=1))
+    assert np.linalg.norm(state.x[top] - centre) < radius + 0.02  # it lies on the sphere
+    assert state.x[:, 2].min() < -0.1  # and hangs around it

@@ -1,0 +1,151 @@
+"""Internal spring-mesh forces: momentum conservation, dihedral gradients, bending restores.
+
+Internal forces (pair springs, angular springs) must add no net force and no net torque: the
+pair force acts along x_i - x_j, equal and opposite; the angular force is -torque * d(theta)/dx
+and theta is invariant under translation and rotation, so its gradient sums to zero force and
+zero torque. Both hold to rounding: relative 1e-9 of the summed force magnitudes is ~1e6 ulps.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from physanim.core.particles.forces import ParticleView
+from physanim.core.springs import SpringMeshBuilder, SpringMeshSettings, topology
+from physanim.core.springs.forces import AngularSprings, SpringSet, dihedral_gradients
+
+
+def _grid(nx: int, ny: int, size: float = 1.0):
+    """Flat grid of nx * ny vertices in z = 0: positions, edges, triangles and quad loops."""
+    xs, ys = np.meshgrid(np.linspace(0.0, size, nx), np.linspace(0.0, size, ny))
+    x = np.stack([xs.ravel(), ys.ravel(), np.zeros(nx * ny)], axis=1)
+    i, j = np.meshgrid(np.arange(nx - 1), np.arange(ny - 1))
+    a = (j * nx + i).ravel()
+    quads = np.stack([a, a + 1, a + nx + 1, a + nx], axis=1)
+    triangles = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+    edges = np.concatenate([quads[:, [0, 1]], quads[:, [1, 2]], quads[:, [2, 3]], quads[:, [3, 0]]])
+    return x, edges, triangles, 4 * np.arange(len(quads)), np.full(len(quads), 4), quads.ravel()
+
+
+def _model(nx: int = 7, ny: int = 6):
+    x, edges, tris, ls, lt, lv = _grid(nx, ny)
+    settings = SpringMeshSettings("Cloth", stiffness=800.0, damping=3.0, shear_stiffness=300.0,
+                                  shear_damping=1.5, bend_mode="ANGULAR", bend_stiffness=0.7,
+                                  bend_damping=0.2)
+    return SpringMeshBuilder(settings, x, edges, tris, ls, lt, lv).finalize()
+
+
+def _deformed(model, seed: int):
+    """A randomly crumpled, moved and rotated copy of the rest mesh with random velocities."""
+    rng = np.random.default_rng(seed)
+    x = model.rest_x + rng.normal(scale=0.08, size=model.rest_x.shape)
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    x = x @ q.T + rng.normal(scale=5.0, size=3)  # far from the origin: torque arms matter
+    v = rng.normal(scale=2.0, size=x.shape)
+    return ParticleView(x, v, model.vertex_mass, 0.0)
+
+
+def _forces(model):
+    return [SpringSet(model.spring_i, model.spring_j, model.spring_rest, model.spring_stiffness,
+                      model.spring_damping),
+            AngularSprings(model.hinge, model.hinge_rest, model.settings.bend_stiffness,
+                           model.settings.bend_damping)]
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+@pytest.mark.parametrize("which", ["springs", "angular"])
+def test_internal_forces_conserve_linear_and_angular_momentum(seed, which):
+    model = _model()
+    assert len(model.hinge) and np.any(model.spring_family == 1)  # shear springs are in
+    view = _deformed(model, seed)
+    force = _forces(model)[0 if which == "springs" else 1]
+    f = np.zeros_like(view.x)
+    force.apply(view, f)
+    magnitude = np.abs(f).sum()
+    assert magnitude > 1.0  # a real deformation, not a trivial zero
+    np.testing.assert_allclose(f.sum(axis=0), 0.0, atol=1e-9 * magnitude)
+    torque = np.cross(view.x, f).sum(axis=0)
+    lever = (np.linalg.norm(view.x, axis=1) * np.linalg.norm(f, axis=1)).sum()
+    np.testing.assert_allclose(torque, 0.0, atol=1e-9 * lever)
+
+
+def _random_hinges(seed: int, count: int = 40):
+    """Non-degenerate hinges bent well away from +-pi (where the angle wraps)."""
+    rng = np.random.default_rng(seed)
+    x = []
+    for _ in range(count):
+        e0, e1 = rng.normal(size=3), rng.normal(size=3)
+        mid, axis = 0.5 * (e0 + e1), e1 - e0
+        side = np.cross(axis, rng.normal(size=3))
+        side /= np.linalg.norm(side)
+        up = np.cross(axis / np.linalg.norm(axis), side)
+        bend = rng.uniform(-2.5, 2.5)  # dihedral angle
+        w0 = mid + side + 0.1 * rng.normal(size=3)
+        w1 = mid - np.cos(bend) * side + np.sin(bend) * up
+        x += [e0, e1, w0, w1]
+    x = np.array(x)
+    return x, np.arange(len(x)).reshape(-1, 4)
+
+
+@pytest.mark.parametrize("seed", [4, 5])
+def test_dihedral_gradients_match_central_differences(seed):
+    """Central differences err by O(eps^2 theta''') ~ 1e-12 plus rounding 1e-16 / eps ~ 1e-10."""
+    x, hinge = _random_hinges(seed)
+    theta = topology.dihedral_angles(x, hinge)
+    assert np.all(np.abs(theta) < 3.0) and np.ptp(theta) > 2.0
+    grad = dihedral_gradients(x, hinge)
+    eps = 1e-6
+    numeric = np.zeros_like(grad)
+    for k in range(4):
+        for c in range(3):
+            xp, xm = x.copy(), x.copy()
+            xp[hinge[:, k], c] += eps
+            xm[hinge[:, k], c] -= eps
+            numeric[:, k, c] = (topology.dihedral_angles(xp, hinge)
+                                - topology.dihedral_angles(xm, hinge)) / (2 * eps)
+    np.testing.assert_allclose(grad, numeric, atol=1e-7 * np.abs(numeric).max())
+
+
+def test_flat_hinge_has_zero_angle_and_sign_follows_the_fold():
+    x = np.array([[0, 0, 0], [1, 0, 0], [0.5, 1, 0], [0.5, -1, 0]], float)
+    hinge = np.array([[0, 1, 2, 3]])
+    assert topology.dihedral_angles(x, hinge)[0] == pytest.approx(0.0, abs=1e-15)
+    up, down = x.copy(), x.copy()
+    up[3, 2], down[3, 2] = 0.5, -0.5
+    a_up, a_down = topology.dihedral_angles(up, hinge)[0], topology.dihedral_angles(down, hinge)[0]
+    assert a_up == pytest.approx(-a_down) and abs(a_up) == pytest.approx(np.arctan2(0.5, 1.0))
+
+
+@pytest.mark.parametrize("rest", [0.0, 0.6, -1.2])
+def test_angular_spring_pushes_a_bent_hinge_back_to_its_rest_angle(rest):
+    """Energy E = k/2 (theta - theta0)^2 must decrease along the force (f = -dE/dx), and a small
+    step along it brings theta closer to theta0. Damping off, so f is purely elastic."""
+    x = np.array([[0, 0, 0], [1, 0, 0], [0.5, 1, 0], [0.5, -1, 0]], float)
+    hinge = np.array([[0, 1, 2, 3]])
+    bend = rest + 0.5  # fold the hinge 0.5 rad past its rest angle
+    x[3] = [0.5, -np.cos(bend), np.sin(bend)]
+    theta = topology.dihedral_angles(x, hinge)[0]
+    k = 2.0
+    springs = AngularSprings(hinge, np.array([rest]), k, 0.0)
+    f = np.zeros_like(x)
+    springs.apply(ParticleView(x, np.zeros_like(x), np.ones(4), 0.0), f)
+    energy = lambda y: 0.5 * k * (topology.dihedral_angles(y, hinge)[0] - rest) ** 2  # noqa: E731
+    # the force is minus the energy gradient: dE along f is -|f|^2 (first order in the step)
+    step = 1e-4
+    assert energy(x + step * f) < energy(x)
+    assert (energy(x + step * f) - energy(x)) / step == pytest.approx(-np.sum(f * f), rel=1e-3)
+    after = topology.dihedral_angles(x + step * f, hinge)[0]
+    assert abs(after - rest) < abs(theta - rest)
+    np.testing.assert_allclose(f.sum(axis=0), 0.0, atol=1e-12)
+
+
+def test_angular_damping_opposes_the_folding_rate():
+    """The damping part -kd theta_dot grad(theta) takes power from the hinge: f . v < 0."""
+    x = np.array([[0, 0, 0], [1, 0, 0], [0.5, 1, 0], [0.5, -1, 0]], float)
+    hinge = np.array([[0, 1, 2, 3]])
+    v = np.zeros_like(x)
+    v[3, 2] = 1.0  # folding the wing up
+    springs = AngularSprings(hinge, np.zeros(1), 0.0, 0.5)
+    f = np.zeros_like(x)
+    springs.apply(ParticleView(x, v, np.ones(4), 0.0), f)
+    assert np.sum(f * v) < 0.0

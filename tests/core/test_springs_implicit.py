@@ -1,0 +1,126 @@
+"""Stiff spring meshes: implicit Euler (Baraff-Witkin) at one step per frame, and the up-front
+stability check of explicit integrators on the same mesh.
+
+Scene: a 10 x 10 grid, 1 m square, total mass 1 kg (0.01 kg per vertex), k = 1e5 N/m edges,
+5e4 N/m shear springs, angular bending, pinned at its two corners at y = 1, falling under
+gravity at 24 fps: omega h of one edge spring is sqrt(2k/m) h = 4472 * 0.0417 = 186.
+"""
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+from physanim.core.errors import PhysanimError
+from physanim.core.springs import (SpringFrameInputs, SpringMeshBuilder, SpringMeshSettings,
+                                   SpringMeshSolver, topology)
+
+G = 9.81
+FPS = 24
+N = 10
+K = 1e5
+MASS = 1.0
+SIZE = 1.0
+ENERGY_SCALE = MASS * G * SIZE  # [J]: the potential energy the grid can lose by falling
+
+
+def _grid(nx: int, ny: int, size: float = 1.0):
+    """Flat grid of nx * ny vertices in z = 0: positions, edges, triangles and quad loops."""
+    xs, ys = np.meshgrid(np.linspace(0.0, size, nx), np.linspace(0.0, size, ny))
+    x = np.stack([xs.ravel(), ys.ravel(), np.zeros(nx * ny)], axis=1)
+    i, j = np.meshgrid(np.arange(nx - 1), np.arange(ny - 1))
+    a = (j * nx + i).ravel()
+    quads = np.stack([a, a + 1, a + nx + 1, a + nx], axis=1)
+    triangles = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+    edges = np.concatenate([quads[:, [0, 1]], quads[:, [1, 2]], quads[:, [2, 3]], quads[:, [3, 0]]])
+    return x, edges, triangles, 4 * np.arange(len(quads)), np.full(len(quads), 4), quads.ravel()
+
+
+PINNED = [N * (N - 1), N * N - 1]  # the corners at y = SIZE
+
+
+def _stiff_grid(name: str = "Sheet"):
+    x, edges, tris, ls, lt, lv = _grid(N, N, SIZE)
+    pin = np.zeros(N * N)
+    pin[PINNED] = 1.0
+    settings = SpringMeshSettings(name, mass=MASS, stiffness=K, damping=1.0,
+                                  shear_stiffness=K / 2, shear_damping=0.5, bend_mode="ANGULAR")
+    return SpringMeshBuilder(settings, x, edges, tris, ls, lt, lv, pin_weight=pin).finalize(1)
+
+
+def _energy(model, state) -> float:
+    """Kinetic + gravitational + spring + bending energy [J] (drag and dampers only remove)."""
+    m = model.vertex_mass
+    kinetic = 0.5 * np.sum(m * np.sum(state.v ** 2, axis=1))
+    gravity = G * np.sum(m * state.x[:, 2])
+    length = np.linalg.norm(state.x[model.spring_i] - state.x[model.spring_j], axis=1)
+    springs = 0.5 * np.sum(model.spring_stiffness * (length - model.spring_rest) ** 2)
+    turn = topology.dihedral_angles(state.x, model.hinge) - model.hinge_rest
+    bending = 0.5 * model.settings.bend_stiffness * np.sum(np.angle(np.exp(1j * turn)) ** 2)
+    return float(kinetic + gravity + springs + bending)
+
+
+def _inputs(frame: int) -> SpringFrameInputs:
+    return SpringFrameInputs(frame, (frame - 1) / FPS, 1.0 / FPS, gravity=(0.0, 0.0, -G))
+
+
+def test_implicit_stiff_grid_at_one_step_per_frame_is_bounded_and_loses_energy():
+    """Backward Euler dissipates: the total energy may never rise from one frame to the next.
+
+    Allowance: the solve is inexact (CG stops at relative residual 1e-3, or at 200 iterations
+    with what it has: on this grid up to ~6e-3, read from the solver each frame). A relative
+    impulse error rho changes the energy exchanged in a frame (<= |Mg| |v| h ~ 0.8 J here) by
+    at most rho times that; we allow rho * ENERGY_SCALE (10x more) plus 1e-6 ENERGY_SCALE.
+    """
+    model = _stiff_grid()
+    solver = SpringMeshSolver(model, "IMPLICIT", 1, frame_dt=1 / FPS, frame=1)
+    state = model.state()
+    energy = [_energy(model, state)]
+    allowance = []
+    for frame in range(1, 101):
+        solver.advance(state, _inputs(frame))
+        energy.append(_energy(model, state))
+        allowance.append((1e-6 + solver.integrator.last_residual) * ENERGY_SCALE)
+        # bounded: stiff springs stay near their rest length (the weight alone stretches them by
+        # ~1e-4; the linearised step overshoots to ~1.4% in the first frames), the sheet hangs
+        length = np.linalg.norm(state.x[model.spring_i] - state.x[model.spring_j], axis=1)
+        assert np.all(length < 1.05 * model.spring_rest)
+        reach = np.linalg.norm(state.x[:, None, :] - model.rest_x[None, PINNED], axis=2).min(1)
+        assert np.all(reach < 1.01 * np.hypot(SIZE, SIZE))
+    assert state.x[:, 2].min() > -1.01 * SIZE  # it did fall (not stuck) and stays hanging
+    assert energy[-1] < energy[0] - 0.3 * ENERGY_SCALE
+    rise = np.diff(energy)
+    bad = np.nonzero(rise > np.array(allowance))[0]
+    assert len(bad) == 0, (
+        f"energy rose in {len(bad)} frames, e.g. frame {bad[0] + 1}: +{rise[bad[0]]:.3g} J "
+        f"(allowance {allowance[bad[0]]:.3g} J); rises {np.round(rise[bad], 4).tolist()}")
+
+
+def _refusal(integrator: str) -> PhysanimError:
+    with pytest.raises(PhysanimError) as info:
+        SpringMeshSolver(_stiff_grid(), integrator, 1, frame_dt=1 / FPS, frame=7)
+    return info.value
+
+
+def test_explicit_euler_on_the_stiff_grid_is_refused_with_a_clear_message():
+    error = _refusal("EULER")
+    message = str(error)
+    assert error.obj == "Sheet" and message.startswith('spring mesh "Sheet" at frame 7')
+    assert "EULER" in message and "IMPLICIT" in message and "substeps" in message
+    assert "100000 N/m" in message  # the value at fault
+
+
+def test_symplectic_euler_with_the_substeps_the_message_asks_for_runs():
+    """The refusal says how many substeps the explicit method needs; with that many it must run
+    (here two frames: the grid starts hanging, the first frames are the most violent)."""
+    message = str(_refusal("SYMPLECTIC_EULER"))
+    substeps = int(re.search(r"about ([\d,]+) substeps", message).group(1).replace(",", ""))
+    model = _stiff_grid()
+    solver = SpringMeshSolver(model, "SYMPLECTIC_EULER", substeps, frame_dt=1 / FPS, frame=1)
+    state = model.state()
+    for frame in (1, 2):
+        solver.advance(state, _inputs(frame))
+    length = np.linalg.norm(state.x[model.spring_i] - state.x[model.spring_j], axis=1)
+    assert np.all(length < 1.01 * model.spring_rest)
+    assert state.x[:, 2].min() < -0.02  # it is falling (freely: g t^2 / 2 = 0.034 m)
