@@ -69,8 +69,10 @@ class BaraffWitkin:
             vn = np.einsum("ij,ij->i", v0[pressed], normal)
             given[pressed] = (surface_vn - vn)[:, None] * normal
 
+        free_scale = free.astype(np.float64)
+
         def project(u: np.ndarray) -> np.ndarray:
-            u = np.where(free, u, 0.0)
+            u = u * free_scale
             if len(pressed):
                 un = np.einsum("ij,ij->i", u[pressed], normal)
                 u[pressed] -= un[:, None] * normal
