@@ -139,6 +139,15 @@ class LinearizedPairs:
     def operator(self, cx: float, cv: float) -> PairOperator:
         return PairOperator(self.i, self.j, cx * self.kx + cv * self.kv)
 
+    def add_diagonal(self, cx: float, cv: float, out: np.ndarray) -> None:
+        """out (n, 3, 3) += the operator's diagonal blocks (C at both ends of every pair)."""
+        c = (cx * self.kx + cv * self.kv).reshape(-1, 9)
+        n = len(out)
+        flat = out.reshape(n, 9)
+        for k in range(9):
+            flat[:, k] += np.bincount(self.i, weights=c[:, k], minlength=n)
+            flat[:, k] += np.bincount(self.j, weights=c[:, k], minlength=n)
+
 
 @dataclass(frozen=True)
 class LinearizedHinges:
@@ -152,6 +161,17 @@ class LinearizedHinges:
 
     def operator(self, cx: float, cv: float) -> HingeOperator:
         return HingeOperator(self.hinge, self.grad, cx * self.stiffness + cv * self.damping)
+
+    def add_diagonal(self, cx: float, cv: float, out: np.ndarray) -> None:
+        """out (n, 3, 3) += -c g_a g_a^T at each hinge vertex a."""
+        c = cx * self.stiffness + cv * self.damping
+        g = self.grad.reshape(-1, 3)
+        blocks = (-c * g[:, :, None] * g[:, None, :]).reshape(-1, 9)
+        index = self.hinge.ravel()
+        n = len(out)
+        flat = out.reshape(n, 9)
+        for k in range(9):
+            flat[:, k] += np.bincount(index, weights=blocks[:, k], minlength=n)
 
 
 def dihedral_gradients(x: np.ndarray, hinge: np.ndarray) -> np.ndarray:
@@ -272,6 +292,13 @@ class LinearizedVertices:
 
     def operator(self, cx: float, cv: float) -> VertexOperator:
         return VertexOperator(self.index, cx * self.kx + cv * self.kv)
+
+    def add_diagonal(self, cx: float, cv: float, out: np.ndarray) -> None:
+        c = (cx * self.kx + cv * self.kv).reshape(-1, 9)
+        n = len(out)
+        flat = out.reshape(n, 9)
+        for k in range(9):
+            flat[:, k] += np.bincount(self.index, weights=c[:, k], minlength=n)
 
 
 @dataclass(frozen=True)

@@ -18,6 +18,7 @@ import numpy as np
 
 from ..errors import SimulationError
 from ..integrators import StepReport
+from ..transforms import inverse3
 
 
 class BaraffWitkin:
@@ -26,8 +27,9 @@ class BaraffWitkin:
     The system must offer ``mass`` (n,), ``free`` (n,) bool, ``pinned_velocity(t)`` (n, 3),
     ``weight_norm()`` (|M g| [N], the force scale residuals are judged against),
     ``forces_at(t, x, v) -> (n, 3)``, ``linearize(t, x, v)`` -> Jacobian blocks whose
-    ``operator(cx, cv)`` adds (cx df/dx + cv df/dv) u into ``out``, ``diagonal(h) -> (n,)`` (a positive estimate of the
-    matrix diagonal), and ``x``/``v`` attributes it updates.
+    ``operator(cx, cv)`` adds (cx df/dx + cv df/dv) u into ``out`` and ``add_diagonal(cx, cv,
+    out)`` its 3 x 3 diagonal blocks (for the block-Jacobi preconditioner), and ``x``/``v``
+    attributes it updates; optionally ``energy(x, v)`` and ``contact``.
 
     Args:
         tolerance: relative residual at which CG stops. max_iterations: CG cap.
@@ -78,7 +80,7 @@ class BaraffWitkin:
                 u[pressed] -= un[:, None] * normal
             return u
 
-        inv_diag = np.where(free, 1.0 / system.diagonal(h)[:, None], 0.0)
+        inv_diag = None  # block-Jacobi preconditioner, from the first linearisation below
         # residuals are judged against the impulse gravity gives in one step (at least): near
         # equilibrium the right-hand side -> 0 and a purely relative test never stops
         floor = h * float(system.weight_norm())
@@ -101,6 +103,8 @@ class BaraffWitkin:
                 blocks = system.linearize(t + h, x1, v1)
                 rhs = h * system.forces_at(t + h, x1, v1) - mass * dv
             apply_a = self._operator(blocks, mass, h)
+            if inv_diag is None:
+                inv_diag = self._block_jacobi(blocks, system.mass, system.free, h)
             known = dv if newton == 0 else np.zeros_like(dv)
             b = project(rhs - (apply_a(known) if np.any(known) else 0.0))
             start = self._warm if (newton == 0 and self._warm is not None
@@ -122,6 +126,18 @@ class BaraffWitkin:
             raise SimulationError("state became non-finite in the implicit step")
         system.x, system.v = x1, v1
         return StepReport(steps=1, evaluations=iterations_total, h_last=h)
+
+    @staticmethod
+    def _block_jacobi(blocks, mass, free, h):
+        """Inverse 3 x 3 diagonal blocks of A (anisotropic: a cloth's springs are stiff only
+        along themselves), zero for pinned vertices; applied as a (n, 3, 3) batch."""
+        diag = np.zeros((len(mass), 3, 3))
+        for blk in blocks:
+            blk.add_diagonal(h * h, h, diag)
+        a = mass[:, None, None] * np.eye(3) - diag
+        inv = inverse3(np.where(free[:, None, None], a, np.eye(3)))
+        inv[~free] = 0.0
+        return inv
 
     @staticmethod
     def _operator(blocks, mass, h):
@@ -163,7 +179,7 @@ class BaraffWitkin:
         residual = float(np.sqrt(np.sum(r * r))) / b_norm
         if residual <= self.tolerance:
             return x, 0, residual
-        z = project(inv_diag * r)
+        z = project(np.einsum("nab,nb->na", inv_diag, r))
         p = z.copy()
         rz = float(np.sum(r * z))
         for it in range(1, self.max_iterations + 1):
@@ -178,7 +194,7 @@ class BaraffWitkin:
             residual = float(np.sqrt(np.sum(r * r))) / b_norm
             if residual <= self.tolerance:
                 return x, it, residual
-            z = project(inv_diag * r)
+            z = project(np.einsum("nab,nb->na", inv_diag, r))
             rz_new = float(np.sum(r * z))
             p = z + (rz_new / rz) * p
             rz = rz_new

@@ -166,18 +166,6 @@ class _MeshSystem:
         view = ParticleView(x, v, self.mass, t)
         return [force.linearize(view) for force in self.forces if hasattr(force, "linearize")]
 
-    def diagonal(self, h: float) -> np.ndarray:
-        d = self.mass.copy()
-        for force in self.forces:
-            if isinstance(force, SpringSet) and len(force.i):
-                w = h * h * force.stiffness + h * force.damping
-                d += np.bincount(force.i, weights=w, minlength=self.n)
-                d += np.bincount(force.j, weights=w, minlength=self.n)
-            elif isinstance(force, AnchorSprings) and len(force.index):
-                d += np.bincount(force.index, weights=h * h * force.stiffness + h * force.damping,
-                                 minlength=self.n)
-        return d
-
 
 class SpringMeshSolver:
     """Advances one spring mesh frame by frame.
