@@ -5,10 +5,10 @@ spring Jacobians, with pinned vertices handled by filtering (their velocity chan
     (M - h df/dv - h^2 df/dx) dv = h (f0 + h df/dx v0),   v1 = v0 + dv,   x1 = x0 + h v1
 
 The matrix is symmetric (spring Jacobians with the compressed-spring term clamped are
-symmetric negative semi-definite), so CG applies, with a Jacobi preconditioner from the
-per-vertex mass and incident spring constants and a warm start from the previous step's dv.
-As in Baraff & Witkin, the solve is inexact: CG stops at the tolerance or the iteration cap;
-a second Newton iteration (re-linearised at the step's end) follows the first.
+symmetric negative semi-definite), so CG applies, with a block-Jacobi preconditioner (the
+exact 3 x 3 diagonal blocks) and a warm start from the previous step's dv. As in Baraff &
+Witkin, the solve is inexact: CG stops at the tolerance or the iteration cap; when the step
+gained energy, further Newton iterations re-linearise at its end.
 Every CG iterate lowers the A-norm of the error, so a capped solve is still a damped, stable
 step; only a loss of positive definiteness or a non-finite value is an error.
 """
