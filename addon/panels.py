@@ -231,6 +231,7 @@ class PHYSANIM_PT_spring_mesh(_PhysicsPanel, bpy.types.Panel):
         col = layout.column(align=True)
         col.prop(p, "stiffness", text="Edge Stiffness")
         col.prop(p, "damping", text="Damping")
+        col.prop(p, "max_stretch")
         faces = len(ob.data.polygons) > 0
         col = layout.column(align=True)
         col.active = faces

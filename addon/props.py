@@ -239,6 +239,11 @@ class PHYSANIM_PG_spring_mesh(bpy.types.PropertyGroup):
                                 default=0.0005, options=STATIC)
     drag: FloatProperty(name="Air Drag", min=0.0, max=1.0e4, soft_max=10.0, default=0.5,
                         options=STATIC, description="Viscous drag per unit mass, 1/s")
+    max_stretch: FloatProperty(name="Max Stretch", min=0.0, max=10.0, soft_max=0.5, default=0.0,
+                               subtype='FACTOR', options=STATIC,
+                               description="Strain limit of edge and shear springs (0.1 = never "
+                                           "longer than 110%; 0 = off): soft springs solve fast "
+                                           "and still do not stretch like rubber")
     pin_group: StringProperty(name="Pin Group", description="Vertex group: weight 1 pins a "
                               "vertex to its animated position, less holds it with a spring")
     pin_stiffness: FloatProperty(name="Pin Stiffness", min=0.0, max=1.0e9, soft_max=1.0e5,

@@ -120,7 +120,7 @@ class SpringMeshBake:
             ob.name, mass=p.mass, mass_mode=p.mass_mode, stiffness=p.stiffness, damping=p.damping,
             shear_stiffness=p.shear_stiffness, shear_damping=p.shear_damping,
             bend_mode=p.bend_mode, bend_stiffness=p.bend_stiffness, bend_damping=p.bend_damping,
-            drag=p.drag, pin_stiffness=p.pin_stiffness)
+            drag=p.drag, pin_stiffness=p.pin_stiffness, max_stretch=p.max_stretch)
         builder = SpringMeshBuilder(settings, rest, mesh["edges"], mesh["triangles"],
                                     mesh["loop_start"], mesh["loop_total"], mesh["loop_vertices"],
                                     pin)

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-SWEEPS = 8  # Jacobi sweeps per sub-step: enough to spread a correction a few springs away
+SWEEPS = 40  # Jacobi sweeps per sub-step at most (stops early once every spring is within)
 RELAXATION = 0.8  # under-relaxation keeps the Jacobi averaging from overshooting
 
 
