@@ -26,6 +26,8 @@ def build(scene) -> None:
     flag.rotation_euler = (math.radians(90.0), 0.0, 0.0)  # hang in the XZ plane
     flag.location = (0.0, 0.0, 5.0 - HEIGHT / 2)
     flag.data.materials.append(_common.material("Flag", (0.85, 0.12, 0.1)))
+    for poly in flag.data.polygons:
+        poly.use_smooth = True
     co = np.array([v.co[:] for v in flag.data.vertices])
     pinned = [int(i) for i in np.nonzero(co[:, 0] < co[:, 0].min() + 1e-6)[0]]
     group = flag.vertex_groups.new(name="Pole")

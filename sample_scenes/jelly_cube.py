@@ -24,6 +24,8 @@ def build(scene, shear: bool = True, angular: bool = True) -> None:
     jelly = _common.add_mesh(scene, "Jelly", make)
     jelly.location = (0.0, 0.0, 1.2)
     jelly.data.materials.append(_common.material("Jelly", (0.35, 0.85, 0.3)))
+    for poly in jelly.data.polygons:
+        poly.use_smooth = True
     p = jelly.physanim.spring_mesh
     p.enabled = True
     p.mass = 2.0
