@@ -10,6 +10,7 @@ cd "$here"
 case "${1:-}" in
   cloth) shift; exec "$venv/bin/python" bench/cloth.py "$@" ;;
   broadphase) shift; exec "$venv/bin/python" bench/broadphase.py "$@" ;;
+  collision) shift; exec "$venv/bin/python" bench/collision.py "$@" ;;
   particles) shift; exec "$venv/bin/python" bench/particles.py "$@" ;;
   *) exec "$venv/bin/python" bench/particles.py "$@" ;;
 esac
