@@ -1,4 +1,4 @@
-"""Particle systems: emitters, forces, analytic colliders and the sub-stepping solver."""
+"""Particle systems: emitters, forces, analytic and mesh colliders and the sub-stepping solver."""
 from .forces import Attractor, DampedSprings, Drag, Gravity, Vortex, Wind
 from .model import ParticleModel, ParticleModelBuilder, ParticleState
 from .output import emitter_arrays

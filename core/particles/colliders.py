@@ -1,83 +1,122 @@
-"""Particles against analytic colliders: continuous detection, bounce and resting contact.
+"""Particles against colliders: continuous detection, bounce and resting contact.
 
-Each collider is a unit shape in its object's local space (see :class:`ColliderFrame`) moved by an
-interpolated world transform. A particle's path over a sub-step, x0 (at s0) -> x1 (at s1), is
-mapped into the collider's frame at its own times, l0 = M(s0)^-1 x0 and l1 = M(s1)^-1 x1, which
-makes a moving collider a static one with the relative motion. The seed's "more complicated"
-response follows: find the time of impact on that segment, reflect the velocity there
-(v' = -k_r v_n + v_t, Coulomb friction on v_t, relative to the collider's surface velocity),
-then move the remainder of the sub-step along v' — so a fast particle can never tunnel.
+Each collider kind (analytic shapes here, triangle meshes in :mod:`.mesh_collider`) answers
+through its :class:`~.collider_path.ColliderPath`: first hits of segments, points to push out,
+surface near points. The passes below are shared. A particle's path over a sub-step, x0 (at s0)
+-> x1 (at s1), is tested in the collider's frame at its own times, which makes a moving collider
+a static one with the relative motion. The seed's "more complicated" response follows: find the
+time of impact on that segment, reflect the velocity there (v' = -k_r v_n + v_t, Coulomb
+friction on v_t, relative to the collider's surface velocity), then move the remainder of the
+sub-step along v' — so a fast particle can never tunnel.
 
 Everything is vectorised over particles; the only Python loops are over colliders and passes.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
-from ..transforms import (TransformPath, inverse3, inverse_affine, norm_rows, transform_points,
-                          transform_vectors)
+from ..transforms import inverse_affine
+from .collider_path import CONTACT_DISTANCE, SKIN, ColliderPath, Hits, SurfacePoints
 from .forces import ContactForce
+from .mesh_collider import MeshPath
 from .settings import ColliderFrame
 
-SKIN = 1e-4  # [m] particles are placed this far outside a surface after a hit
-CONTACT_DISTANCE = 1e-3  # [m] closer than this (and not separating) counts as resting contact
+__all__ = ["CONTACT_DISTANCE", "PASSES", "SKIN", "AnalyticPath", "ColliderPath", "MeshPath",
+           "contacts", "reflect", "respond"]
+
 PASSES = 3  # a bounce's remaining motion may hit another collider: re-test up to this often
 
 
-@dataclass
-class ColliderPath:
-    """One collider during one frame interval, with its motion path."""
+class AnalyticPath(ColliderPath, shapes=("HALF_SPACE", "PLANE", "SPHERE", "BOX")):
+    """A unit shape (see :class:`ColliderFrame`) grown by the collider's thickness.
 
-    frame: ColliderFrame
-    path: TransformPath
-    frame_dt: float
+    Attributes:
+        extent: (3,) the shape's extent in local units, thickness included (see below).
+    """
 
-    extent: np.ndarray | None = None
-
-    @classmethod
-    def of(cls, frame: ColliderFrame, frame_dt: float) -> "ColliderPath":
-        path = TransformPath(frame.matrix0, frame.matrix1, frame.matrices)
-        # local units per world metre along each local axis (rows of the inverse matrix)
-        per_metre = np.linalg.norm(inverse_affine(path.m0)[:3, :3], axis=1)
-        margin = frame.thickness * per_metre
+    def __init__(self, frame: ColliderFrame, frame_dt: float):
+        super().__init__(frame, frame_dt)
+        margin = frame.thickness * self.per_metre
         if frame.shape == "SPHERE":
-            extent = np.full(3, 1.0 + frame.thickness * float(per_metre.mean()))
+            extent = np.full(3, 1.0 + frame.thickness * float(self.per_metre.mean()))
         elif frame.shape == "HALF_SPACE":
             extent = np.array([0.0, 0.0, margin[2]])
         else:  # PLANE: a slab of half-thickness margin; BOX: grown half extents
             extent = np.array([1.0 + margin[0], 1.0 + margin[1],
                                margin[2] if frame.shape == "PLANE" else 1.0 + margin[2]])
-        return cls(frame, path, frame_dt, extent)
+        self.extent = extent
 
-    def _at(self, s) -> np.ndarray:
-        """The matrix at ``s``: one (4, 4) when s is a scalar or the same for every particle
-        (the common case, far cheaper), else (n, 4, 4)."""
-        s = np.asarray(s, dtype=np.float64)
-        if self.path.static:
-            return self.path.m0
-        if s.ndim == 0 or (len(s) and s.min() == s.max()):
-            return self.path.matrices(float(s.flat[0]) if s.size else 0.0)
-        return self.path.matrices(s)
+    def first_hits(self, start, end, s_start, s_end) -> Hits:
+        shape = self.frame.shape
+        cand = self._segment_candidates(start, end, s_start, s_end)
+        if cand is None:
+            cand = np.arange(len(end))
+        if len(cand) == 0:
+            return Hits.none()
+        l0 = self.to_local(start[cand], s_start[cand])
+        l1 = self.to_local(end[cand], s_end[cand])
+        hit, t, n_local = _segment_hit(shape, l0, l1, self.extent)
+        l_hit = l0 + t[:, None] * (l1 - l0)
+        # a collider that moved onto a particle: push it out to the nearest surface point
+        stuck = ~hit & _inside(shape, l1, self.extent)
+        if stuck.any():
+            p, n_in, _ = _closest(shape, l1[stuck], self.extent)
+            l_hit[stuck] = p
+            n_local[stuck] = n_in
+            t = np.where(stuck, 1.0, t)
+            hit = hit | stuck
+        return Hits(cand[hit], t[hit], n_local[hit], l_hit[hit])
 
-    def to_local(self, x: np.ndarray, s) -> np.ndarray:
-        return transform_points(inverse_affine(self._at(s)), x)
+    def push_out(self, x, s, start, s_start) -> SurfacePoints:
+        l = self.to_local(x, s)
+        inside = _inside(self.frame.shape, l, self.extent)
+        if not inside.any():
+            return SurfacePoints.none()
+        idx = np.nonzero(inside)[0]
+        p, n_local, _ = _closest(self.frame.shape, l[idx], self.extent)
+        p_w, n_w = self.to_world(p, n_local, s[idx])
+        gap = np.einsum("ij,ij->i", x[idx] - p_w, n_w)
+        return SurfacePoints(idx, p_w, n_w, self.surface_velocity(p, s[idx]), gap)
 
-    def to_world(self, l: np.ndarray, n_local: np.ndarray, s):
-        """World points and unit normals of local points/normals at parameters s."""
-        m = self._at(s)
-        lin = m[..., :3, :3]
-        p = transform_points(m, l)
-        n = transform_vectors(np.swapaxes(inverse3(lin), -1, -2), n_local)  # inverse-transpose
-        n /= norm_rows(n)[:, None]
-        return p, n
+    def near_surface(self, x, s) -> SurfacePoints:
+        shape = self.frame.shape
+        if shape in ("HALF_SPACE", "PLANE"):
+            # cheap prefilter: world distance to the plane is local z / |grad z|
+            inv = inverse_affine(self._at(s))
+            z = self._local_z(x, s)
+            gap = z - self.extent[2] if shape == "HALF_SPACE" else np.abs(z) - self.extent[2]
+            cand = np.nonzero(np.abs(gap) < CONTACT_DISTANCE * np.linalg.norm(inv[2, :3]))[0]
+        else:
+            cand = np.arange(len(x))
+        if len(cand) == 0:
+            return SurfacePoints.none()
+        l = self.to_local(x[cand], s)
+        p, n_local, valid = _closest(shape, l, self.extent)
+        p_w, n_w = self.to_world(p, n_local, s)
+        d = np.einsum("ij,ij->i", x[cand] - p_w, n_w)
+        near = np.nonzero(valid & (d > -CONTACT_DISTANCE) & (d < CONTACT_DISTANCE))[0]
+        return SurfacePoints(cand[near], p_w[near], n_w[near],
+                             self.surface_velocity(p[near], s), d[near])
 
-    def surface_velocity(self, l: np.ndarray, s) -> np.ndarray:
-        if self.path.static:
-            return np.zeros_like(l)
-        return self.path.point_velocities(l, np.broadcast_to(np.asarray(s, float), len(l)),
-                                          self.frame_dt)
+    def _local_z(self, x: np.ndarray, s) -> np.ndarray:
+        """Local z of points (the only coordinate planes need): one row of the inverse matrix."""
+        inv = inverse_affine(self._at(s))
+        if inv.ndim == 2:
+            return x[:, 0] * inv[2, 0] + x[:, 1] * inv[2, 1] + x[:, 2] * inv[2, 2] + inv[2, 3]
+        return np.einsum("nj,nj->n", inv[:, 2, :3], x) + inv[:, 2, 3]
+
+    def _segment_candidates(self, start, end, s_start, s_end) -> np.ndarray | None:
+        """Indices of segments that may hit a plane-like collider (cheap z test), or None when
+        every segment must be tested (spheres, boxes)."""
+        shape = self.frame.shape
+        if shape not in ("HALF_SPACE", "PLANE"):
+            return None
+        z1 = self._local_z(end, s_end)
+        level = self.extent[2]
+        if shape == "HALF_SPACE":
+            return np.nonzero(z1 < level)[0]
+        z0 = self._local_z(start, s_start)
+        return np.nonzero((z0 > level) & (z1 <= level) | (z0 < -level) & (z1 >= -level))[0]
 
 
 # --- shape geometry in local space -------------------------------------------------------------
@@ -199,61 +238,25 @@ def reflect(u: np.ndarray, n: np.ndarray, restitution: float, friction: float,
     return ut * keep[:, None] + un_new[:, None] * n
 
 
-def _local_z(col: ColliderPath, x: np.ndarray, s) -> np.ndarray:
-    """Local z of points (the only coordinate planes need): one row of the inverse matrix."""
-    inv = inverse_affine(col._at(s))
-    if inv.ndim == 2:
-        return x[:, 0] * inv[2, 0] + x[:, 1] * inv[2, 1] + x[:, 2] * inv[2, 2] + inv[2, 3]
-    return np.einsum("nj,nj->n", inv[:, 2, :3], x) + inv[:, 2, 3]
-
-
-def _segment_candidates(col: ColliderPath, start, end, s_start, s_end) -> np.ndarray | None:
-    """Indices of segments that may hit a plane-like collider (cheap z test), or None when
-    every segment must be tested (spheres, boxes)."""
-    shape = col.frame.shape
-    if shape not in ("HALF_SPACE", "PLANE"):
-        return None
-    z1 = _local_z(col, end, s_end)
-    level = col.extent[2]
-    if shape == "HALF_SPACE":
-        return np.nonzero(z1 < level)[0]
-    z0 = _local_z(col, start, s_start)
-    return np.nonzero((z0 > level) & (z1 <= level) | (z0 < -level) & (z1 >= -level))[0]
-
-
 def _first_hits(colliders, start, x, s_start, s_end):
     """Earliest collider entry of each segment start -> x: (collider index or -1, t, local
-    normal, local hit point)."""
+    normal, local hit point, surface element or -1)."""
     count = len(x)
     best_t = np.full(count, np.inf)
     best = np.full(count, -1)
     normals = np.zeros((count, 3))
     locals_ = np.zeros((count, 3))
+    elements = np.full(count, -1, dtype=np.int64)
     for ci, col in enumerate(colliders):
-        cand = _segment_candidates(col, start, x, s_start, s_end)
-        if cand is None:
-            cand = np.arange(count)
-        if len(cand) == 0:
-            continue
-        l0 = col.to_local(start[cand], s_start[cand])
-        l1 = col.to_local(x[cand], s_end[cand])
-        hit, t, n_local = _segment_hit(col.frame.shape, l0, l1, col.extent)
-        l_hit = l0 + t[:, None] * (l1 - l0)
-        # a collider that moved onto a particle: push it out to the nearest surface point
-        stuck = ~hit & _inside(col.frame.shape, l1, col.extent)
-        if stuck.any():
-            p, n_in, _ = _closest(col.frame.shape, l1[stuck], col.extent)
-            l_hit[stuck] = p
-            n_local[stuck] = n_in
-            t = np.where(stuck, 1.0, t)
-            hit = hit | stuck
-        better = hit & (t < best_t[cand])
-        g = cand[better]
-        best_t[g] = t[better]
+        hits = col.first_hits(start, x, s_start, s_end)
+        better = hits.t < best_t[hits.index]
+        g = hits.index[better]
+        best_t[g] = hits.t[better]
         best[g] = ci
-        normals[g] = n_local[better]
-        locals_[g] = l_hit[better]
-    return best, best_t, normals, locals_
+        normals[g] = hits.normal[better]
+        locals_[g] = hits.point[better]
+        elements[g] = -1 if hits.element is None else hits.element[better]
+    return best, best_t, normals, locals_, elements
 
 
 def respond(colliders: list[ColliderPath], x0: np.ndarray, x1: np.ndarray, v0: np.ndarray,
@@ -278,7 +281,7 @@ def respond(colliders: list[ColliderPath], x0: np.ndarray, x1: np.ndarray, v0: n
     active = np.arange(len(x))  # pass 1 tests everyone; later passes only re-test the hit ones
     touched = []
     for _ in range(PASSES):
-        best, best_t, normals, locals_ = _first_hits(
+        best, best_t, normals, locals_, elements = _first_hits(
             colliders, start[active], x[active], s_start[active], s_end[active])
         if not (best >= 0).any():
             break
@@ -291,13 +294,13 @@ def respond(colliders: list[ColliderPath], x0: np.ndarray, x1: np.ndarray, v0: n
             s_hit = s_start[idx] + t * (s_end[idx] - s_start[idx])
             p_w, n_w = col.to_world(locals_[sub], normals[sub], s_hit)
             v_hit = v_start[idx] + t[:, None] * (v[idx] - v_start[idx])
-            v_c = col.surface_velocity(locals_[sub], s_hit)
+            v_c = col.surface_velocity(locals_[sub], s_hit, elements[sub])
             u = reflect(v_hit - v_c, n_w, col.frame.restitution, col.frame.friction, rest_speed)
             # the forces keep acting for the rest of the sub-step after the impact
             dv_after = (1.0 - t)[:, None] * (v[idx] - v_start[idx])
             v_new = u + v_c + dv_after
             remaining = (1.0 - t) * (s_end[idx] - s_start[idx]) / max(s1 - s0, 1e-300) * h
-            start[idx] = p_w + SKIN * n_w
+            start[idx] = p_w + (SKIN + col.offset) * n_w
             s_start[idx] = s_hit
             v_start[idx] = v_new
             x[idx] = start[idx] + remaining[:, None] * (v_new - 0.5 * dv_after)
@@ -308,28 +311,25 @@ def respond(colliders: list[ColliderPath], x0: np.ndarray, x1: np.ndarray, v0: n
     if touched:
         moved = np.unique(np.concatenate(touched))
         xs, vs = x[moved], v[moved]
-        hits += _push_out(colliders, xs, vs, s_end[moved])
+        hits += _push_out(colliders, xs, vs, s_end[moved], start[moved], s_start[moved])
         x[moved], v[moved] = xs, vs
     return x, v, hits
 
 
-def _push_out(colliders: list[ColliderPath], x: np.ndarray, v: np.ndarray,
-              s: np.ndarray) -> int:
+def _push_out(colliders: list[ColliderPath], x: np.ndarray, v: np.ndarray, s: np.ndarray,
+              start: np.ndarray, s_start: np.ndarray) -> int:
     """Last resort after the passes: a collider that swept back over a particle's remaining
-    path (fast rotation) leaves it inside; move it to the surface and drop the approaching
-    normal velocity. Modifies x and v in place; returns how many particles it moved."""
+    path start (at s_start) -> x (at s) (fast rotation) leaves it inside, or past a thin mesh;
+    move it to the surface and drop the approaching normal velocity. Modifies x and v in place;
+    returns how many particles it moved."""
     moved = 0
     for col in colliders:
-        l = col.to_local(x, s)
-        inside = _inside(col.frame.shape, l, col.extent)
-        if not inside.any():
+        surf = col.push_out(x, s, start, s_start)
+        idx, n_w = surf.index, surf.normal
+        if len(idx) == 0:
             continue
-        idx = np.nonzero(inside)[0]
-        p, n_local, _ = _closest(col.frame.shape, l[idx], col.extent)
-        p_w, n_w = col.to_world(p, n_local, s[idx])
-        x[idx] = p_w + SKIN * n_w
-        rel = v[idx] - col.surface_velocity(p, s[idx])
-        un = np.einsum("ij,ij->i", rel, n_w)
+        x[idx] = surf.point + (SKIN + col.offset) * n_w
+        un = np.einsum("ij,ij->i", v[idx] - surf.velocity, n_w)
         v[idx] -= np.minimum(un, 0.0)[:, None] * n_w
         moved += len(idx)
     return moved
@@ -345,33 +345,15 @@ def contacts(colliders: list[ColliderPath], x: np.ndarray, v: np.ndarray, s: flo
     surf_v = np.zeros((count, 3))
     mu = np.zeros(count)
     for col in colliders if count else ():
-        if col.frame.shape in ("HALF_SPACE", "PLANE"):
-            # cheap prefilter: world distance to the plane is local z / |grad z|
-            inv = inverse_affine(col._at(s))
-            z = _local_z(col, x, s)
-            gap = z - col.extent[2] if col.frame.shape == "HALF_SPACE" else np.abs(z) - col.extent[2]
-            cand = np.nonzero(np.abs(gap) < CONTACT_DISTANCE * np.linalg.norm(inv[2, :3]))[0]
-        else:
-            cand = np.arange(count)
-        if len(cand) == 0:
-            continue
-        sv = np.full(len(cand), float(s))
-        l = col.to_local(x[cand], s)
-        p, n_local, valid = _closest(col.frame.shape, l, col.extent)
-        p_w, n_w = col.to_world(p, n_local, s)
-        d = np.einsum("ij,ij->i", x[cand] - p_w, n_w)
-        near = valid & (d > -CONTACT_DISTANCE) & (d < CONTACT_DISTANCE) & (np.abs(d) < best_d[cand])
-        if not near.any():
-            continue
-        sub = np.nonzero(near)[0]
-        vc = col.surface_velocity(p[sub], sv[sub])
-        un = np.einsum("ij,ij->i", v[cand[sub]] - vc, n_w[sub])
-        ok = un < rest_speed
-        sub, vc = sub[ok], vc[ok]
-        idx = cand[sub]
-        best_d[idx] = np.abs(d[sub])
-        normal[idx] = n_w[sub]
-        surf_v[idx] = vc
+        surf = col.near_surface(x, s)
+        d = np.abs(surf.gap)
+        near = d < best_d[surf.index]
+        un = np.einsum("ij,ij->i", v[surf.index] - surf.velocity, surf.normal)
+        ok = near & (un < rest_speed)
+        idx = surf.index[ok]
+        best_d[idx] = d[ok]
+        normal[idx] = surf.normal[ok]
+        surf_v[idx] = surf.velocity[ok]
         mu[idx] = col.frame.friction
     idx = np.nonzero(np.isfinite(best_d))[0]
     return ContactForce(idx, normal[idx], surf_v[idx], mu[idx], h)

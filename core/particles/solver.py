@@ -38,7 +38,8 @@ class FrameInputs:
         t0: start time [s]. frame_dt: interval length [s].
         gravity: (3,) [m/s^2].
         emitters: one :class:`EmitterFrame` per model emitter, same order.
-        colliders: analytic colliders with their motion over the interval.
+        colliders: colliders (analytic shapes or triangle meshes) with their motion over the
+            interval.
         forces: force objects (drag, wind, attractors, ...) for this interval.
     """
 

@@ -38,7 +38,7 @@ class SpringFrameInputs:
         frame: scene frame at the start (messages). t0 [s], frame_dt [s]. gravity (3,).
         rest0, rest1: (n, 3) animated rest positions (world) at start/end — pin targets.
         targets: object name -> (m0, m1) world matrices of virtual-spring targets.
-        colliders: analytic colliders. winds: wind force objects (pressure on faces).
+        colliders: analytic or mesh colliders. winds: wind force objects (pressure on faces).
     """
 
     frame: int

@@ -1,0 +1,163 @@
+"""What every collider kind answers during one frame interval, and the motion they share.
+
+A collider is a shape in its object's local space moved by an interpolated world transform
+(:class:`~physanim.core.transforms.TransformPath`). A point path over a sub-step, x0 (at s0) ->
+x1 (at s1), is mapped into the collider's frame at its own times, l0 = M(s0)^-1 x0 and
+l1 = M(s1)^-1 x1, which makes a moving collider a static one with the relative motion.
+
+Each kind (analytic shapes in :mod:`.colliders`, triangle meshes in :mod:`.mesh_collider`)
+subclasses :class:`ColliderPath` and answers the three questions of the collision passes:
+
+* :meth:`ColliderPath.first_hits`: where segments start -> end first enter the collider;
+* :meth:`ColliderPath.push_out`: which points ended inside it, and the surface to put them on;
+* :meth:`ColliderPath.near_surface`: which points are near its surface (resting contact).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..transforms import (TransformPath, inverse3, inverse_affine, norm_rows, transform_points,
+                          transform_vectors)
+from .settings import ColliderFrame
+
+SKIN = 1e-4  # [m] particles are placed this far outside a surface after a hit
+CONTACT_DISTANCE = 1e-3  # [m] closer than this (and not separating) counts as resting contact
+
+
+@dataclass(frozen=True)
+class Hits:
+    """First hits of the segments that hit (k of them), in the collider's local frame.
+
+    Attributes:
+        index: (k,) indices of the segments that hit.
+        t: (k,) fraction of each segment before the hit, in [0, 1].
+        normal: (k, 3) local unit normals facing the side the segment came from.
+        point: (k, 3) local hit points (on the surface proper; :attr:`ColliderPath.offset`
+            is added along the normal when a point is placed there).
+        element: (k,) int64 surface element hit (a mesh's triangle), or None.
+    """
+
+    index: np.ndarray
+    t: np.ndarray
+    normal: np.ndarray
+    point: np.ndarray
+    element: np.ndarray | None = None
+
+    @classmethod
+    def none(cls) -> "Hits":
+        return cls(np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)))
+
+
+@dataclass(frozen=True)
+class SurfacePoints:
+    """Surface points near k query points, in world space.
+
+    Attributes:
+        index: (k,) indices of the query points.
+        point: (k, 3) surface points [m] (on the surface proper, see :attr:`Hits.point`).
+        normal: (k, 3) unit normals facing the query points' side.
+        velocity: (k, 3) the surface's velocity there [m/s].
+        gap: (k,) distance of each query point beyond the surface, ``offset`` included [m]
+            (negative: inside).
+    """
+
+    index: np.ndarray
+    point: np.ndarray
+    normal: np.ndarray
+    velocity: np.ndarray
+    gap: np.ndarray
+
+    @classmethod
+    def none(cls) -> "SurfacePoints":
+        return cls(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)),
+                   np.zeros(0))
+
+
+class ColliderPath:
+    """One collider during one frame interval, with its motion path.
+
+    Subclasses register the shapes they handle (``class MeshPath(ColliderPath,
+    shapes=("MESH",))``) and implement :meth:`first_hits`, :meth:`push_out` and
+    :meth:`near_surface`.
+
+    Attributes:
+        frame: the collider's settings for this interval.
+        path: its world transform over the interval (s = 0..1).
+        frame_dt: the interval's length [s].
+        per_metre: (3,) local units per world metre along each local axis.
+        offset: [m] world distance kept between a placed point and the surface proper, beyond
+            :data:`SKIN` (0 for analytic shapes, whose extent already includes the thickness).
+    """
+
+    offset: float = 0.0
+    _kinds: dict[str, type] = {}
+
+    def __init_subclass__(cls, shapes: tuple[str, ...] = (), **kwargs):
+        super().__init_subclass__(**kwargs)
+        for shape in shapes:
+            ColliderPath._kinds[shape] = cls
+
+    def __init__(self, frame: ColliderFrame, frame_dt: float):
+        self.frame = frame
+        self.frame_dt = frame_dt
+        self.path = TransformPath(frame.matrix0, frame.matrix1, frame.matrices)
+        self.per_metre = np.linalg.norm(inverse_affine(self.path.m0)[:3, :3], axis=1)
+
+    @classmethod
+    def of(cls, frame: ColliderFrame, frame_dt: float) -> "ColliderPath":
+        """The path object of the kind that handles ``frame.shape``."""
+        try:
+            kind = ColliderPath._kinds[frame.shape]
+        except KeyError:
+            raise ValueError(f'collider "{frame.name}": no collider kind handles shape '
+                             f"{frame.shape!r}") from None
+        return kind(frame, frame_dt)
+
+    # -- motion ---------------------------------------------------------------------------------
+    def _at(self, s) -> np.ndarray:
+        """The matrix at ``s``: one (4, 4) when s is a scalar or the same for every particle
+        (the common case, far cheaper), else (n, 4, 4)."""
+        s = np.asarray(s, dtype=np.float64)
+        if self.path.static:
+            return self.path.m0
+        if s.ndim == 0 or (len(s) and s.min() == s.max()):
+            return self.path.matrices(float(s.flat[0]) if s.size else 0.0)
+        return self.path.matrices(s)
+
+    def to_local(self, x: np.ndarray, s) -> np.ndarray:
+        return transform_points(inverse_affine(self._at(s)), x)
+
+    def to_world(self, l: np.ndarray, n_local: np.ndarray, s):
+        """World points and unit normals of local points/normals at parameters s."""
+        m = self._at(s)
+        lin = m[..., :3, :3]
+        p = transform_points(m, l)
+        n = transform_vectors(np.swapaxes(inverse3(lin), -1, -2), n_local)  # inverse-transpose
+        n /= norm_rows(n)[:, None]
+        return p, n
+
+    def surface_velocity(self, l: np.ndarray, s, element: np.ndarray | None = None) -> np.ndarray:
+        """World velocity [m/s] of the surface at local points ``l`` (on ``element``) at s."""
+        if self.path.static:
+            return np.zeros_like(l)
+        return self.path.point_velocities(l, np.broadcast_to(np.asarray(s, float), len(l)),
+                                          self.frame_dt)
+
+    # -- the three questions --------------------------------------------------------------------
+    def first_hits(self, start: np.ndarray, end: np.ndarray, s_start: np.ndarray,
+                   s_end: np.ndarray) -> Hits:
+        """First entry of world segments start (at s_start) -> end (at s_end), (n, 3) and (n,),
+        into the collider; a collider that moved onto an end point counts as a hit at t = 1."""
+        raise NotImplementedError
+
+    def push_out(self, x: np.ndarray, s: np.ndarray, start: np.ndarray,
+                 s_start: np.ndarray) -> SurfacePoints:
+        """Points x (n, 3) at s (n,) found inside the collider (or, for a surface without an
+        inside, past it since ``start`` at ``s_start``), with the surface to put them on."""
+        raise NotImplementedError
+
+    def near_surface(self, x: np.ndarray, s: float) -> SurfacePoints:
+        """Points x (n, 3) whose ``gap`` to the surface at s is below CONTACT_DISTANCE."""
+        raise NotImplementedError

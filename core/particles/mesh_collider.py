@@ -1,0 +1,274 @@
+"""Any triangle mesh as a particle collider: moving, rotating and deforming, open or closed.
+
+The mesh lives in its object's local frame like the analytic shapes (see :mod:`.collider_path`):
+a particle's path is tested as the local segment l0 = M(s0)^-1 x0 -> l1 = M(s1)^-1 x1. Its local
+vertices move linearly over the frame interval, vertices(s) = lerp(vertices0, vertices1, s); one
+bounding-volume hierarchy is built per interval and refitted for the sub-step times.
+
+Two tests together leave no way through a thin, single-sided mesh:
+
+* fast particles: the exact segment-triangle test (:func:`~..collision.raycast.segment_hits`) of
+  the local segment against the mesh at s1 — watertight, a segment cannot slip through a shared
+  edge, and it hits either face;
+* a mesh moving over slow particles (deforming, or rotating so that the local path is a curve
+  rather than the segment): side tracking. For particles near the mesh, the side of the surface
+  at s0 (against the mesh at s0) is compared with the side at s1 (against the mesh at s1); the
+  side is the sign of (l - closest point) . n with n the closest triangle's winding normal, which
+  is defined for open single-sided meshes too. A side change without a segment hit is a crossing
+  caused by the mesh: it is reported as a hit at t = 1 on the s1 closest point, its normal
+  pointing back to the original side. Near an open boundary (the closest point on a boundary
+  edge or corner) a particle may pass around the mesh, so no side is taken there.
+
+Thickness: the segment tests use the surface proper and a point placed on it is moved
+``thickness`` out along the normal (:attr:`ColliderPath.offset`); an end point closer to the
+surface than ``thickness`` counts as a hit at t = 1. Distances are measured in the local frame
+and mapped to world lengths, which is exact for rotations and uniform scales (and close for
+moderate non-uniform ones).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..collision.build import build_bvh
+from ..collision.bvh import BVH
+from ..collision.distance import CORNER, EDGE, closest_on_triangles, closest_points
+from ..collision.mesh import TriangleMesh
+from ..collision.raycast import segment_hits
+from ..transforms import inverse_affine, norm_rows, transform_vectors
+from .collider_path import CONTACT_DISTANCE, ColliderPath, Hits, SurfacePoints
+from .settings import ColliderFrame
+
+BVH_KIND = "aabb"  # refits cheaply and exactly for deforming meshes
+BVH_CACHE = 8  # hierarchies kept per interval (refits for the sub-step times in use)
+
+
+class MeshPath(ColliderPath, shapes=("MESH",)):
+    """A triangle mesh collider during one frame interval.
+
+    Attributes:
+        vertex_step: (n, 3) local vertex displacement over the interval [local units].
+        deforming: whether any vertex moves in the local frame.
+        max_step: largest vertex displacement over the interval [local units].
+    """
+
+    def __init__(self, frame: ColliderFrame, frame_dt: float):
+        super().__init__(frame, frame_dt)
+        self.offset = frame.thickness
+        self.triangles = frame.triangles
+        self.vertices0 = frame.vertices0
+        self.vertex_step = frame.vertices1 - frame.vertices0
+        self.deforming = bool(np.any(self.vertex_step))
+        self.max_step = float(norm_rows(self.vertex_step).max())
+        mesh = TriangleMesh(frame.vertices0, frame.triangles, frame.name)
+        self._bvh0 = build_bvh(mesh, BVH_KIND, "topdown")
+        self._bvhs: dict[float, BVH] = {}
+        both = np.concatenate([frame.vertices0, frame.vertices1])
+        self._lo, self._hi = both.min(axis=0), both.max(axis=0)
+        self._boundary = _boundary_features(mesh)
+        # the most local units a world metre can span over the interval (distance conversions)
+        self._local_metre = max(float(np.linalg.norm(inverse_affine(m)[:3, :3], axis=1).max())
+                                for m in self.path.samples)
+        self._still = self.path.static and not self.deforming
+
+    # -- geometry at a time s ---------------------------------------------------------------------
+    def bvh_at(self, s: float) -> BVH:
+        """The hierarchy over the mesh at parameter s (refitted from the interval's start)."""
+        s = float(s)
+        if not self.deforming or s == 0.0:
+            return self._bvh0
+        bvh = self._bvhs.get(s)
+        if bvh is None:
+            if len(self._bvhs) >= BVH_CACHE:
+                self._bvhs.clear()
+            bvh, _ = self._bvh0.refit(self.vertices0 + s * self.vertex_step)
+            self._bvhs[s] = bvh
+        return bvh
+
+    def _corners(self, tri: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """(k, 3, 3) corners of triangles ``tri`` (k,) at per-triangle parameters s (k,)."""
+        ids = self.triangles[tri]
+        return self.vertices0[ids] + np.asarray(s, float).reshape(-1, 1, 1) * self.vertex_step[ids]
+
+    def _closest(self, l: np.ndarray, s: np.ndarray, reach: float):
+        """Closest points of local points l (k, 3) on the mesh at their times s (k,).
+
+        Returns (found, point, diff = l - point, distance, face normal, triangle, side): side is
+        +1/-1 in front of/behind the winding normal, 0 where not found, on the surface, or
+        nearest to an open boundary edge or corner.
+        """
+        values = np.unique(s)
+        bvh = self.bvh_at(values[-1])
+        cp = closest_points(bvh, l, max_distance=max(reach, 1e-300))
+        found = cp.triangle >= 0
+        tri = np.where(found, cp.triangle, 0)
+        q, feature = cp.point, cp.feature
+        if len(values) > 1 and self.deforming:
+            # per-point times (re-tests after a hit): the triangle found at the latest time,
+            # evaluated at each point's own time
+            corners = self._corners(tri, s)
+            q, _, feature = closest_on_triangles(l, corners)
+        else:
+            corners = bvh.mesh.triangle_vertices[tri]
+        face = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        face /= np.maximum(norm_rows(face), 1e-300)[:, None]
+        diff = l - q
+        dist = norm_rows(diff)
+        on_boundary = self._boundary[tri, np.maximum(feature, 0)]
+        side = np.where(found & ~on_boundary, np.sign(np.einsum("ij,ij->i", diff, face)), 0.0)
+        return found, q, diff, dist, face, tri, side
+
+    @staticmethod
+    def _facing(diff, dist, face, side, prefer) -> np.ndarray:
+        """Local unit normals facing the query points: the face normal turned to ``side`` (or
+        ``prefer`` where the side is undefined); beside an open boundary, the direction from
+        the closest point to the query point."""
+        sign = np.where(side != 0.0, side, prefer)
+        n = face * sign[:, None]
+        around = (side == 0.0) & (dist > 0.0)
+        return np.where(around[:, None], diff / np.where(around, dist, 1.0)[:, None], n)
+
+    def _world_length(self, vec: np.ndarray, s) -> np.ndarray:
+        lin = self._at(s)[..., :3, :3]
+        return norm_rows(transform_vectors(lin, vec))
+
+    def _near_box(self, lo: np.ndarray, hi: np.ndarray, reach) -> np.ndarray:
+        """Indices of boxes [lo, hi] (k, 3) within ``reach`` of the mesh's interval bounds."""
+        r = np.asarray(reach, float).reshape(-1, 1)
+        return np.nonzero(np.all((lo <= self._hi + r) & (hi >= self._lo - r), axis=1))[0]
+
+    # -- the three questions --------------------------------------------------------------------
+    def first_hits(self, start, end, s_start, s_end) -> Hits:
+        if len(end) == 0:
+            return Hits.none()
+        l0 = self.to_local(start, s_start)
+        l1 = self.to_local(end, s_end)
+        thick = self.frame.thickness * self._local_metre
+        reach = (norm_rows(l1 - l0) + self.max_step * np.abs(s_end - s_start) + thick
+                 + CONTACT_DISTANCE * self._local_metre)
+        cand = self._near_box(np.minimum(l0, l1), np.maximum(l0, l1), reach)
+        if len(cand) == 0:
+            return Hits.none()
+        l0, l1, sa, sb, reach = l0[cand], l1[cand], s_start[cand], s_end[cand], reach[cand]
+        k = len(cand)
+        hit, t = np.zeros(k, bool), np.ones(k)
+        normal, point, tri = np.zeros((k, 3)), np.zeros((k, 3)), np.full(k, -1, np.int64)
+        front = np.zeros(k, bool)
+        # fast particles: exact segment-triangle tests on the mesh at the end time
+        for s in np.unique(sb):
+            g = np.nonzero(sb == s)[0]
+            sh = segment_hits(self.bvh_at(s), l0[g], l1[g])
+            # a segment starting on the surface has no side to come from: it counts as coming
+            # from the front (as contacts do), so only moving into the back is a hit
+            hit[g] = sh.hit & ~((sh.t == 0.0) & ~sh.front)
+            normal[g], point[g], tri[g], front[g] = sh.normal, sh.point, sh.triangle, sh.front
+            t[g] = np.where(sh.hit, sh.t, 1.0)
+        if self.deforming and hit.any():
+            # the segment is tested against the mesh at the end time: a particle riding a
+            # deforming surface crosses where that surface will be from behind. Such a hit is
+            # real only if the particle started on the side of the triangle it hits from;
+            # otherwise the triangle moved past it and side tracking decides.
+            g = np.nonzero(hit)[0]
+            c = self._corners(tri[g], sa[g])
+            face = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
+            side = np.sign(np.einsum("ij,ij->i", l0[g] - c[:, 0], face))
+            hit[g[side * np.where(front[g], 1.0, -1.0) < 0.0]] = False
+        if self._still and self.frame.thickness == 0.0:
+            return Hits(cand[hit], t[hit], normal[hit], point[hit], tri[hit])
+        r = float(reach.max())
+        f1, q1, diff1, d1, face1, tri1, side1 = self._closest(l1, sb, r)
+        late = np.zeros(k, bool)  # hits at t = 1 on the end-time surface
+        late_n = np.zeros((k, 3))
+        if not self._still:  # the mesh moving over a particle: a side change without a hit
+            _, _, _, _, _, _, side0 = self._closest(l0, sa, r)
+            crossed = ~hit & (side0 * side1 < 0.0)
+            late |= crossed
+            late_n[crossed] = face1[crossed] * side0[crossed, None]
+        if self.frame.thickness > 0.0:  # ends within the thickness: out to the grown surface
+            near = ~hit & ~late & f1
+            near[near] = self._world_length(diff1[near], sb[near]) < self.frame.thickness
+            late |= near
+            late_n[near] = self._facing(diff1[near], d1[near], face1[near], side1[near], 1.0)
+        normal[late], point[late], tri[late], t[late] = late_n[late], q1[late], tri1[late], 1.0
+        hit |= late
+        return Hits(cand[hit], t[hit], normal[hit], point[hit], tri[hit])
+
+    def push_out(self, x, s, start, s_start) -> SurfacePoints:
+        """A thin mesh has no inside: points whose last path start -> x still hits the mesh
+        (the passes ran out) are put back on the side they came from, at the hit point on the
+        mesh at s (segment hits and side tracking both report points on that mesh)."""
+        hits = self.first_hits(start, x, s_start, s)
+        idx = hits.index
+        if len(idx) == 0:
+            return SurfacePoints.none()
+        p_w, n_w = self.to_world(hits.point, hits.normal, s[idx])
+        gap = np.einsum("ij,ij->i", x[idx] - p_w, n_w) - self.frame.thickness
+        velocity = self.surface_velocity(hits.point, s[idx], hits.element)
+        return SurfacePoints(idx, p_w, n_w, velocity, gap)
+
+    def near_surface(self, x, s) -> SurfacePoints:
+        if len(x) == 0:
+            return SurfacePoints.none()
+        s = np.full(len(x), float(s))
+        l = self.to_local(x, s)
+        within = self.frame.thickness + CONTACT_DISTANCE
+        reach = within * self._local_metre * (1.0 + 1e-9)
+        cand = self._near_box(l, l, reach)
+        if len(cand) == 0:
+            return SurfacePoints.none()
+        found, q, diff, dist, face, tri, side = self._closest(l[cand], s[cand], reach)
+        n_local = self._facing(diff, dist, face, side, 1.0)
+        p_w, n_w = self.to_world(q, n_local, s[cand])
+        gap = np.einsum("ij,ij->i", x[cand] - p_w, n_w) - self.frame.thickness
+        keep = found & (np.abs(gap) < CONTACT_DISTANCE)
+        sel = np.nonzero(keep)[0]
+        velocity = self.surface_velocity(q[sel], s[cand][sel], tri[sel])
+        return SurfacePoints(cand[sel], p_w[sel], n_w[sel], velocity, gap[sel])
+
+    def surface_velocity(self, l, s, element=None) -> np.ndarray:
+        s = np.broadcast_to(np.asarray(s, float), len(l))
+        local_v = None
+        if self.deforming and element is not None and len(l):
+            el = np.maximum(element, 0)
+            w = _barycentric(l, self._corners(el, s))
+            local_v = np.einsum("nk,nkj->nj", w, self.vertex_step[self.triangles[el]])
+            local_v /= self.frame_dt
+        if local_v is None and self.path.static:
+            return np.zeros_like(l)
+        return self.path.point_velocities(l, s, self.frame_dt, local_velocity=local_v)
+
+
+def _boundary_features(mesh: TriangleMesh) -> np.ndarray:
+    """(m, 7) bool by feature code (see :mod:`..collision.distance`): the triangle's edge or
+    corner lies on an open boundary (an edge of only one triangle, after welding)."""
+    ids = mesh.welded[mesh.triangles]
+    n = np.int64(mesh.vertex_count)
+    a, b = ids, np.roll(ids, -1, axis=1)  # edge k joins corners k and k + 1
+    key = (np.minimum(a, b) * n + np.maximum(a, b)).reshape(-1)
+    _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
+    edge_open = (counts[inverse.reshape(-1)] == 1).reshape(-1, 3)
+    vertex_open = np.zeros(mesh.vertex_count, dtype=bool)
+    vertex_open[a[edge_open]] = True
+    vertex_open[b[edge_open]] = True
+    out = np.zeros((mesh.triangle_count, 7), dtype=bool)
+    out[:, EDGE:EDGE + 3] = edge_open
+    out[:, CORNER:CORNER + 3] = vertex_open[ids]
+    return out
+
+
+def _barycentric(p: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """(k, 3) barycentric weights of points p (k, 3) in triangles (k, 3, 3), clamped to the
+    triangle; zero-area triangles weigh their corners equally."""
+    a = corners[:, 0]
+    e0, e1, e2 = corners[:, 1] - a, corners[:, 2] - a, p - a
+    d00 = np.einsum("ij,ij->i", e0, e0)
+    d01 = np.einsum("ij,ij->i", e0, e1)
+    d11 = np.einsum("ij,ij->i", e1, e1)
+    d20 = np.einsum("ij,ij->i", e2, e0)
+    d21 = np.einsum("ij,ij->i", e2, e1)
+    denom = d00 * d11 - d01 * d01
+    ok = denom > 0.0
+    safe = np.where(ok, denom, 1.0)
+    v = np.where(ok, (d11 * d20 - d01 * d21) / safe, 1.0 / 3.0)
+    w = np.where(ok, (d00 * d21 - d01 * d20) / safe, 1.0 / 3.0)
+    weights = np.clip(np.stack([1.0 - v - w, v, w], axis=1), 0.0, 1.0)
+    return weights / weights.sum(axis=1, keepdims=True)

@@ -1,0 +1,363 @@
+"""Any triangle mesh as a particle collider: no tunnelling through a thin single-sided mesh (fast
+particles, a fast-rotating mesh, a deforming mesh), bounces and resting contact that match the
+analytic half space, friction on a sloped mesh, and clear errors for bad input.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from physanim.core.collision.shapes import grid_mesh
+from physanim.core.particles import (ColliderFrame, EmitterFrame, EmitterSettings, FrameInputs,
+                                     ParticleModelBuilder, ParticleSolver)
+from physanim.core.particles.colliders import SKIN
+
+G = 9.81
+DT = 1.0 / 24.0
+
+
+def _model():
+    builder = ParticleModelBuilder(0)
+    builder.add_emitter(EmitterSettings("Shot"))
+    return builder.finalize()
+
+
+def _place(state, x, v):
+    x = np.atleast_2d(np.asarray(x, dtype=np.float64))
+    v = np.atleast_2d(np.asarray(v, dtype=np.float64))
+    n = len(x)
+    state.append(0, x, v, np.ones(n), np.zeros(n), np.full(n, 1e9), np.full(n, 0.05))
+
+
+def _inputs(frame, colliders, gravity=(0.0, 0.0, -G)):
+    return FrameInputs(frame=frame, t0=frame * DT, frame_dt=DT, gravity=gravity,
+                       emitters=[EmitterFrame(active=False)], colliders=colliders)
+
+
+def _translate(x=0.0, y=0.0, z=0.0):
+    m = np.eye(4)
+    m[:3, 3] = (x, y, z)
+    return m
+
+
+def _rotation(axis, angle):
+    a = np.asarray(axis, dtype=np.float64)
+    a = a / np.linalg.norm(a)
+    k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    m = np.eye(4)
+    m[:3, :3] = np.eye(3) + math.sin(angle) * k + (1 - math.cos(angle)) * k @ k
+    return m
+
+
+def _sheet(n, size):
+    """A flat n x n vertex grid of side ``size`` centred on the origin in z = 0, normals +z."""
+    mesh = grid_mesh(n, size)
+    return mesh.vertices - [size / 2, size / 2, 0.0], mesh.triangles
+
+
+def _mesh_collider(name, verts, tris, m0=None, m1=None, verts1=None, **kw):
+    m0 = np.eye(4) if m0 is None else m0
+    m1 = m0 if m1 is None else m1
+    return ColliderFrame(name, "MESH", m0, m1, vertices0=verts,
+                         vertices1=verts if verts1 is None else verts1, triangles=tris, **kw)
+
+
+# -- tunnelling ---------------------------------------------------------------------------------
+
+def test_fast_particles_never_cross_a_thin_mesh():
+    # 100 m/s with one sub-step: 4.2 m per step across a zero-thickness sheet, from both faces,
+    # oblique, and straight down onto its shared edges and vertices (where a segment could slip
+    # between two triangles). All bounce; particles aimed beside the sheet pass.
+    speed, k = 100.0, 0.5
+    verts, tris = _sheet(9, 10.0)  # vertices every 1.25 m
+    sheet = _mesh_collider("Glass", verts, tris, restitution=k, friction=0.0)
+    rng = np.random.default_rng(0)
+    n = 60
+    xy = rng.uniform(-4.5, 4.5, size=(n, 2))
+    xy[:20] = np.round(xy[:20] / 1.25) * 1.25  # exactly over vertices
+    xy[20:30, 0] = np.round(xy[20:30, 0] / 1.25) * 1.25  # exactly over edges
+    tilt = rng.uniform(-0.2, 0.2, size=(n, 2)) * speed
+    tilt[:30] = 0.0  # straight down onto the vertices and edges
+    above = np.column_stack([xy, np.full(n, 1.0)])
+    below = np.column_stack([xy, np.full(n, -1.0)])
+    beside = np.column_stack([xy + 20.0, np.full(n, 1.0)])
+    down = np.column_stack([tilt, np.full(n, -speed)])
+    up = np.column_stack([tilt, np.full(n, speed)])
+    model = _model()
+    state = model.state()
+    _place(state, above, down)
+    _place(state, below, up)
+    _place(state, beside, down)
+    solver = ParticleSolver(model, "SYMPLECTIC_EULER", substeps=1)
+    report = solver.advance(state, _inputs(0, [sheet]))
+    z, vz = state.particle_x[:, 2], state.particle_v[:, 2]
+    assert report.collisions == 2 * n
+    assert np.all(z[:n] > 0.0) and np.all(z[n:2 * n] < 0.0)
+    assert np.all(z[2 * n:] < -speed * DT / 2)
+    # reflected with restitution, gravity for the rest of the step: |vz -+ k speed| <= (1+k) g h
+    np.testing.assert_allclose(vz[:n], k * speed, rtol=0, atol=(1 + k) * G * DT)
+    np.testing.assert_allclose(vz[n:2 * n], -k * speed, rtol=0, atol=(1 + k) * G * DT)
+    np.testing.assert_allclose(state.particle_v[:2 * n, :2], np.vstack([tilt, tilt]))  # mu = 0
+    for f in range(1, 4):
+        solver.advance(state, _inputs(f, [sheet]))
+        assert np.all(state.particle_x[:n, 2] > 0.0)
+        assert np.all(state.particle_x[n:2 * n, 2] < 0.0)
+
+
+def test_fast_rotating_mesh_sweeps_resting_particles_without_crossing():
+    # A revolving door: a thin vertical sheet (local xz plane, |x| <= 2, 0 <= z <= 2) spinning
+    # 90 degrees per frame about z, through particles at rest at mid height (no gravity,
+    # friction 0). In the door's frame a particle turns back towards the half that sweeps it,
+    # so it stays on its side of the door's plane: local y keeps its sign. Pushed by the door,
+    # it moves straight outwards between hits (its radius never shrinks), so a particle that
+    # ends within the door's radius never went around its tip: its side may not change.
+    half = 2.0
+    grid = grid_mesh(9, 1.0)
+    verts = np.column_stack([(grid.vertices[:, 0] - 0.5) * 2 * half, np.zeros(len(grid.vertices)),
+                             grid.vertices[:, 1] * 2.0])
+    rng = np.random.default_rng(5)
+    n = 300
+    r = rng.uniform(0.2, 0.9 * half, n)
+    phi = rng.uniform(0.05, math.pi - 0.05, n)  # never exactly on the door at the start
+    phi += np.where(rng.random(n) < 0.5, 0.0, math.pi)
+    x0 = np.column_stack([r * np.cos(phi), r * np.sin(phi), rng.uniform(0.3, 1.7, n)])
+    model = _model()
+    state = model.state()
+    _place(state, x0, np.zeros((n, 3)))
+    solver = ParticleSolver(model, "SYMPLECTIC_EULER", substeps=1)
+    step = math.pi / 2
+    hits = 0
+    side = np.sign(x0[:, 1])
+    for f in range(12):
+        m0, m1 = _rotation([0, 0, 1], step * f), _rotation([0, 0, 1], step * (f + 1))
+        door = _mesh_collider("Door", verts, grid.triangles, m0, m1, restitution=0.3,
+                              friction=0.0)
+        hits += solver.advance(state, _inputs(f, [door], gravity=(0, 0, 0))).collisions
+        local = state.particle_x @ np.linalg.inv(m1)[:3, :3].T
+        inside_radius = np.hypot(local[:, 0], local[:, 1]) < 0.98 * half
+        crossed = inside_radius & (local[:, 1] * side <= 0.0)
+        assert not crossed.any(), f"frame {f}: {crossed.sum()} particles crossed the door"
+        side = np.sign(local[:, 1])
+        np.testing.assert_allclose(state.particle_x[:, 2], x0[:, 2])  # pushed horizontally
+    assert hits >= n  # every particle was swept at least once
+
+
+def test_deforming_mesh_lifts_resting_particles():
+    # The ground's vertices rise 0.3 m during one frame (vertices1 = vertices0 + 0.3 up): the
+    # particles resting on it are lifted (side tracking: the mesh crossed them, no segment did)
+    # and end above it, with the surface's speed 0.3 / DT plus the bounce, then land again.
+    verts, tris = _sheet(11, 10.0)
+    model = _model()
+    state = model.state()
+    rng = np.random.default_rng(7)
+    n = 50
+    _place(state, np.column_stack([rng.uniform(-4, 4, (n, 2)), np.full(n, SKIN)]),
+           np.zeros((n, 3)))
+    solver = ParticleSolver(model, "SYMPLECTIC_EULER", substeps=2)
+    flat = _mesh_collider("Ground", verts, tris, restitution=0.0, friction=0.5)
+    for f in range(3):  # resting
+        solver.advance(state, _inputs(f, [flat]))
+        np.testing.assert_allclose(state.particle_x[:, 2], SKIN, atol=1e-12)
+    raised = verts + [0.0, 0.0, 0.3]
+    lift = _mesh_collider("Ground", verts, tris, verts1=raised, restitution=0.0, friction=0.5)
+    report = solver.advance(state, _inputs(3, [lift]))
+    assert report.collisions == n
+    assert np.all(state.particle_x[:, 2] >= 0.3)
+    assert np.all(state.particle_v[:, 2] > 0.3 / DT * 0.9)  # carried at the surface's speed
+    top = _mesh_collider("Ground", raised, tris, restitution=0.0, friction=0.5)
+    for f in range(4, 40):
+        solver.advance(state, _inputs(f, [top]))
+        assert np.all(state.particle_x[:, 2] >= 0.3)
+    np.testing.assert_allclose(state.particle_x[:, 2], 0.3 + SKIN, atol=1e-9)
+
+
+# -- bounce, rest and friction ------------------------------------------------------------------
+
+@pytest.mark.parametrize("k", [0.3, 0.7, 1.0])
+def test_bounce_on_mesh_ground_reaches_restitution_squared_height(k):
+    # As for the analytic half space (test_particles_closed_forms): RK4 is exact in free flight;
+    # 0 - g h^2 <= apex - k^2 H <= k v_i h + SKIN + g h^2.
+    H, substeps = 2.0, 8
+    h = DT / substeps
+    v_i = math.sqrt(2.0 * G * H)
+    verts, tris = _sheet(5, 20.0)
+    ground = _mesh_collider("Ground", verts, tris, restitution=k, friction=0.0)
+    model = _model()
+    state = model.state()
+    _place(state, [0.3, -0.2, H], [0.0, 0.0, 0.0])
+    solver = ParticleSolver(model, "RK4", substeps=substeps)
+    apex = None
+    for f in range(40):
+        report = solver.advance(state, _inputs(f, [ground]))
+        assert state.particle_x[0, 2] >= 0.0
+        if state.particle_v[0, 2] > 0.0:
+            assert report.collisions == 1
+            z, vz = state.particle_x[0, 2], state.particle_v[0, 2]
+            apex = z + vz * vz / (2.0 * G)
+            break
+    assert apex is not None, "the particle never bounced"
+    slack = G * h * h
+    assert -slack <= apex - k * k * H <= k * v_i * h + SKIN + slack
+
+
+def test_resting_on_mesh_ground_does_not_sink_or_jitter():
+    verts, tris = _sheet(6, 20.0)
+    ground = _mesh_collider("Ground", verts, tris, restitution=0.5, friction=0.5)
+    model = _model()
+    state = model.state()
+    _place(state, [0.7, 0.4, 0.5], [0.0, 0.0, 0.0])
+    solver = ParticleSolver(model, "SYMPLECTIC_EULER", substeps=2)
+    for f in range(60):
+        solver.advance(state, _inputs(f, [ground]))
+        assert state.particle_x[0, 2] >= 0.0
+    heights = []
+    for f in range(60, 160):
+        solver.advance(state, _inputs(f, [ground]))
+        heights.append(state.particle_x[0, 2])
+        assert abs(state.particle_v[0, 2]) < 1e-9
+    heights = np.array(heights)
+    assert heights.min() >= 0.0
+    assert heights.max() - heights.min() <= SKIN
+    assert heights.max() <= 2 * SKIN
+
+
+def test_mesh_thickness_keeps_particles_that_far_from_the_surface():
+    verts, tris = _sheet(4, 20.0)
+    ground = _mesh_collider("Ground", verts, tris, m0=_translate(z=0.5), restitution=0.0,
+                            friction=0.5, thickness=0.05)
+    model = _model()
+    state = model.state()
+    _place(state, [[0.0, 0.0, 1.0], [1.0, 2.0, 3.0]], np.zeros((2, 3)))
+    solver = ParticleSolver(model, "SYMPLECTIC_EULER", substeps=4)
+    for f in range(60):
+        solver.advance(state, _inputs(f, [ground]))
+        assert np.all(state.particle_x[:, 2] >= 0.55)
+    np.testing.assert_allclose(state.particle_x[:, 2], 0.55, atol=2 * SKIN)
+    assert np.all(np.abs(state.particle_v[:, 2]) < 1e-9)
+
+
+THETA = math.radians(30.0)
+
+
+def _slope(mu):
+    m = _rotation([1, 0, 0], THETA)
+    normal = m[:3, 2]
+    downhill = np.array([0.0, -math.cos(THETA), -math.sin(THETA)])
+    verts, tris = _sheet(7, 60.0)
+    return _mesh_collider("Slope", verts, tris, m, restitution=0.0, friction=mu), normal, downhill
+
+
+def test_static_friction_holds_on_sloped_mesh():
+    # mu > tan(theta): at most one sub-step slips before friction engages (<= g sin h^2).
+    mu = 0.8
+    slope, normal, downhill = _slope(mu)
+    model = _model()
+    state = model.state()
+    _place(state, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0])
+    solver = ParticleSolver(model, "SYMPLECTIC_EULER", substeps=1)
+    heights = []
+    for f in range(100):
+        solver.advance(state, _inputs(f, [slope]))
+        x, v = state.particle_x[0], state.particle_v[0]
+        heights.append(x @ normal)
+        assert x @ normal >= -1e-12
+        assert abs(v @ normal) < 1e-9
+    assert max(heights) - min(heights) <= SKIN + 1e-12
+    assert np.linalg.norm(state.particle_x[0]) <= G * math.sin(THETA) * DT * DT
+    assert np.linalg.norm(state.particle_v[0]) < 1e-6
+
+
+def test_sliding_on_sloped_mesh_accelerates_at_coulomb_rate():
+    # mu < tan(theta): a = g (sin - mu cos) along the slope, across the mesh's interior edges
+    # (coplanar triangles: the same normal everywhere), exact to rounding.
+    mu = 0.2
+    slope, normal, downhill = _slope(mu)
+    model = _model()
+    state = model.state()
+    _place(state, -10.0 * downhill, [0.0, 0.0, 0.0])  # 10 m uphill of the centre
+    solver = ParticleSolver(model, "SYMPLECTIC_EULER", substeps=2)
+    speeds = {}
+    for f in range(50):
+        solver.advance(state, _inputs(f, [slope]))
+        v = state.particle_v[0]
+        assert -1e-12 <= state.particle_x[0] @ normal <= SKIN + 1e-12
+        assert abs(v @ normal) < 1e-9
+        speeds[f] = v @ downhill
+    expected = G * (math.sin(THETA) - mu * math.cos(THETA))
+    measured = (speeds[45] - speeds[15]) / (30 * DT)
+    assert measured == pytest.approx(expected, rel=1e-9)
+
+
+def test_large_flat_mesh_matches_the_half_space():
+    # Particles dropped and thrown onto a large flat grid and onto HALF_SPACE: the same bounces
+    # (time of impact by signed volumes vs by z: rounding apart) and the same rest.
+    rng = np.random.default_rng(11)
+    n = 40
+    x0 = np.column_stack([rng.uniform(-3, 3, (n, 2)), rng.uniform(0.1, 3.0, n)])
+    v0 = rng.normal(size=(n, 3)) * [2.0, 2.0, 4.0]
+    verts, tris = _sheet(9, 200.0)
+    results = []
+    for ground in (_mesh_collider("Ground", verts, tris, restitution=0.6, friction=0.3),
+                   ColliderFrame("Ground", "HALF_SPACE", np.eye(4), np.eye(4), restitution=0.6,
+                                 friction=0.3)):
+        model = _model()
+        state = model.state()
+        _place(state, x0, v0)
+        solver = ParticleSolver(model, "SYMPLECTIC_EULER", substeps=4)
+        track = []
+        for f in range(72):
+            solver.advance(state, _inputs(f, [ground]))
+            track.append(state.particle_x.copy())
+        results.append(np.array(track))
+    mesh_track, plane_track = results
+    assert mesh_track[:, :, 2].min() >= 0.0
+    np.testing.assert_allclose(mesh_track, plane_track, atol=1e-6)
+
+
+# -- bad input ----------------------------------------------------------------------------------
+
+def test_bad_mesh_input_is_named():
+    verts, tris = _sheet(3, 1.0)
+    bad = verts.copy()
+    bad[4, 1] = np.nan
+    with pytest.raises(ValueError, match=r'"Wall".*vertices0 vertex 4 is not finite'):
+        _mesh_collider("Wall", bad, tris)
+    with pytest.raises(ValueError, match=r"vertices1 vertex 4 is not finite: \[.*nan"):
+        _mesh_collider("Wall", verts, tris, verts1=bad)
+    with pytest.raises(ValueError, match="vertices0 has 9 vertices but vertices1 has 8"):
+        _mesh_collider("Wall", verts, tris, verts1=verts[:8])
+    with pytest.raises(ValueError, match="no triangles"):
+        _mesh_collider("Wall", verts, np.zeros((0, 3), np.int64))
+    with pytest.raises(ValueError, match=r"triangle 1 refers to vertex \[.*9.*\] but the mesh has 9"):
+        _mesh_collider("Wall", verts, np.array([[0, 1, 2], [3, 4, 9]]))
+    with pytest.raises(ValueError, match="needs vertices0"):
+        ColliderFrame("Wall", "MESH", np.eye(4), np.eye(4), triangles=tris)
+    with pytest.raises(ValueError, match="MESH colliders only"):
+        ColliderFrame("Ball", "SPHERE", np.eye(4), np.eye(4), triangles=tris)
+
+
+def test_spring_mesh_vertices_collide_with_a_mesh_ground():
+    # Spring meshes reuse the same passes: a cloth dropped on a flat mesh ground rests on it.
+    from physanim.core.springs import (SpringFrameInputs, SpringMeshBuilder, SpringMeshSettings,
+                                       SpringMeshSolver)
+    grid = grid_mesh(9, 1.0)
+    x = grid.vertices + [-0.5, -0.5, 0.3]
+    edges = np.unique(np.sort(np.concatenate([grid.triangles[:, [0, 1]], grid.triangles[:, [1, 2]],
+                                              grid.triangles[:, [2, 0]]]), axis=1), axis=0)
+    settings = SpringMeshSettings("Sheet", mass=0.3, stiffness=2000.0, damping=2.0,
+                                  shear_stiffness=500.0, bend_stiffness=0.01, drag=0.5)
+    t = grid.triangles
+    model = SpringMeshBuilder(settings, x, edges, t, 3 * np.arange(len(t)), np.full(len(t), 3),
+                              t.ravel()).finalize(1)
+    verts, tris = _sheet(5, 10.0)
+    ground = _mesh_collider("Ground", verts, tris, restitution=0.0, friction=0.5)
+    solver = SpringMeshSolver(model, "IMPLICIT", 2, frame_dt=DT, frame=1)
+    state = model.state()
+    hits = 0
+    for frame in range(1, 49):
+        hits += solver.advance(state, SpringFrameInputs(frame, frame * DT, DT, colliders=[ground]))
+        assert state.x[:, 2].min() >= -1e-6
+    assert hits > 0
+    assert state.x[:, 2].max() < 0.01
