@@ -144,6 +144,32 @@ class Extractor:
         self.fps = convert.fps(scene)
         self.index = {o.name: i for i, o in enumerate(roles.emitters)}
         self._vertex_counts: dict[str, int] = {}
+        self._collider_tris: dict[str, np.ndarray] = {}
+        self._collider_counts: dict[str, int] = {}
+
+    def _collider_mesh(self, ob, depsgraph, frame: int) -> np.ndarray:
+        """Local vertex positions of a mesh collider's evaluated (deformed) mesh at this frame;
+        its triangles are read once and the vertex count must not change."""
+        if ob.type != 'MESH':
+            raise PhysanimError(f"a Mesh collider must be a mesh object (this is a {ob.type})",
+                                obj=ob.name, frame=frame, kind="collider")
+        first = ob.name not in self._collider_tris
+        verts, tris = _mesh_arrays(ob, depsgraph, triangles=first)
+        if first:
+            if len(tris) == 0:
+                raise PhysanimError("a Mesh collider needs faces (this mesh has none)",
+                                    obj=ob.name, frame=frame, kind="collider")
+            self._collider_tris[ob.name] = tris
+            self._collider_counts[ob.name] = len(verts)
+        elif len(verts) != self._collider_counts[ob.name]:
+            raise PhysanimError(f"the mesh changed its vertex count to {len(verts)} (was "
+                                f"{self._collider_counts[ob.name]}) — mesh colliders must keep "
+                                "their topology", obj=ob.name, frame=frame, kind="collider")
+        if not np.all(np.isfinite(verts)):
+            bad = int(np.argwhere(~np.isfinite(verts))[0][0])
+            raise PhysanimError(f"vertex {bad} has a non-finite position {verts[bad].tolist()}",
+                                obj=ob.name, frame=frame, kind="collider")
+        return verts
 
     def _uses_mesh(self, ob) -> bool:
         return ob.physanim.emitter.source in MESH_SOURCES
@@ -208,8 +234,9 @@ class Extractor:
             c = ob.physanim.collider
             _check_finite(ob, frame, "collider", {"restitution": c.restitution,
                                                    "friction": c.friction, "thickness": c.thickness})
+            verts = self._collider_mesh(ob, depsgraph, frame) if c.shape == 'MESH' else None
             colliders.append((_world_matrix(ob, frame, "collider"), c.shape, c.restitution,
-                              c.friction, c.thickness))
+                              c.friction, c.thickness, verts))
         forces = []
         for ob in self.roles.forces:
             values = {k: getattr(ob.physanim.force, k) for k in (
@@ -250,8 +277,9 @@ class Extractor:
                 inherit_velocity=val["inherit_velocity"], active=val["active"],
                 matrix0=m0, matrix1=m1, matrices=keys(0, i, m0, m1), verts0=v0, verts1=v1))
         colliders = [_framed(ob, a.frame, "collider", ColliderFrame,
-                             ob.name, shape, m0, m1, rest, fric, keys(1, i, m0, m1), thick)
-                     for i, (ob, (m0, shape, rest, fric, thick), (m1, *_))
+                             ob.name, shape, m0, m1, rest, fric, keys(1, i, m0, m1), thick,
+                             v0, v1, self._collider_tris.get(ob.name))
+                     for i, (ob, (m0, shape, rest, fric, thick, v0), (m1, *_, v1))
                      in enumerate(zip(self.roles.colliders, a.colliders, b.colliders))]
         forces = [_framed(ob, a.frame, "force", self._force, ob, m, f)
                   for ob, (m, f) in zip(self.roles.forces, a.forces)]

@@ -51,6 +51,7 @@ COLLIDER_SHAPE_ITEMS = [
     ('PLANE', "Plane", "Two-sided square of Blender's plane primitive (local XY, -1..1)"),
     ('SPHERE', "Sphere", "Blender's UV/ico sphere primitive (radius 1, scaled by the object)"),
     ('BOX', "Box", "Blender's cube primitive (-1..1, scaled and rotated by the object)"),
+    ('MESH', "Mesh", "The object's own (evaluated, deforming) mesh: any shape, open or closed"),
 ]
 FORCE_ITEMS = [
     ('WIND', "Wind", "Push along the object's local Z axis, with optional gusts"),

@@ -12,7 +12,8 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-SCENES = ("fountain", "fireworks", "robot_arm", "jelly_cube", "flag", "cloth_drape")
+SCENES = ("fountain", "fireworks", "robot_arm", "jelly_cube", "flag", "cloth_drape",
+          "mesh_pour")
 
 
 def test_every_sample_scene_is_tested():
