@@ -301,9 +301,17 @@ def respond(colliders: list[ColliderPath], x0: np.ndarray, x1: np.ndarray, v0: n
             v_new = u + v_c + dv_after
             remaining = (1.0 - t) * (s_end[idx] - s_start[idx]) / max(s1 - s0, 1e-300) * h
             start[idx] = p_w + (SKIN + col.offset) * n_w
-            s_start[idx] = s_hit
             v_start[idx] = v_new
-            x[idx] = start[idx] + remaining[:, None] * (v_new - 0.5 * dv_after)
+            travel = v_new - 0.5 * dv_after
+            if getattr(col, "hits_end_surface", False):
+                # the hit point lies on the surface as it is at the sub-step's END (a deforming
+                # mesh): the restart is at that time, and the rest of the motion is relative to
+                # that surface, or its own motion would be counted twice
+                travel = travel - v_c
+                s_start[idx] = s_end[idx]
+            else:
+                s_start[idx] = s_hit
+            x[idx] = start[idx] + remaining[:, None] * travel
             v[idx] = v_new
             hits += len(idx)
         active = active[best >= 0]

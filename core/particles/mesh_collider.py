@@ -58,6 +58,8 @@ class MeshPath(ColliderPath, shapes=("MESH",)):
         self.vertices0 = frame.vertices0
         self.vertex_step = frame.vertices1 - frame.vertices0
         self.deforming = bool(np.any(self.vertex_step))
+        # hits are found on the mesh as it is at the sub-step's end (see colliders.respond)
+        self.hits_end_surface = self.deforming
         self.max_step = float(norm_rows(self.vertex_step).max())
         mesh = TriangleMesh(frame.vertices0, frame.triangles, frame.name)
         self._bvh0 = build_bvh(mesh, BVH_KIND, "topdown")
