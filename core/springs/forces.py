@@ -1,10 +1,11 @@
-"""Spring-mesh forces with the Jacobian products an implicit integrator needs.
+"""Spring-mesh forces with the Jacobians an implicit integrator needs.
 
 Each force object has ``apply(p, f_out)`` (the particle force interface of
 :mod:`physanim.core.particles.forces`) and ``linearize(p)``, which returns its Jacobian at that
-state as blocks; ``.operator(cx, cv)`` of those blocks is the matrix-free product
-``u -> (cx df/dx + cv df/dv) u`` an implicit solve applies many times — vectorised, accumulated
-with ``np.bincount`` (no per-spring Python loop).
+state as 3 x 3 blocks: ``clique`` names the vertices it couples (None: per-vertex blocks only),
+``add_to(builder, cx, cv)`` puts cx df/dx + cv df/dv into an assembled block-sparse matrix
+(:mod:`physanim.core.springs.sparse`) and ``product(cx, cv, u, out)`` applies it once
+matrix-free — vectorised, no per-spring Python loop.
 """
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..particles.forces import ParticleView
-from .topology import dihedral_angles
+from . import topology
 
 
 def flat_index(index: np.ndarray) -> np.ndarray:
@@ -28,46 +29,6 @@ def scatter_add(out: np.ndarray, index: np.ndarray, values: np.ndarray,
     if flat is None:
         flat = flat_index(index)
     out += np.bincount(flat, weights=values.ravel(), minlength=out.size).reshape(out.shape)
-
-
-class PairOperator:
-    """u -> sum over pairs of C (u_i - u_j) added to i and subtracted from j; C (s, 3, 3)."""
-
-    def __init__(self, i: np.ndarray, j: np.ndarray, blocks: np.ndarray):
-        self.i, self.j, self.blocks = i, j, blocks
-        self.index = np.concatenate([i, j])
-        self.flat = flat_index(self.index)
-
-    def __call__(self, u: np.ndarray, out: np.ndarray) -> None:
-        d = np.take(u, self.i, axis=0) - np.take(u, self.j, axis=0)  # take: faster than u[i]
-        df = np.einsum("sab,sb->sa", self.blocks, d)
-        scatter_add(out, self.index, np.concatenate([df, -df]), self.flat)
-
-
-class HingeOperator:
-    """u -> -c g (g . u) per hinge (Gauss-Newton bending), g (h, 4, 3), c scalar."""
-
-    def __init__(self, hinge: np.ndarray, grad: np.ndarray, coefficient: float):
-        self.hinge, self.grad, self.c = hinge, grad, coefficient
-        self.index = hinge.ravel()  # (h, 4) row-major: matches f.reshape(-1, 3) below
-        self.flat = flat_index(self.index)
-
-    def __call__(self, u: np.ndarray, out: np.ndarray) -> None:
-        w = self.c * np.einsum("hkc,hkc->h", self.grad, np.take(u, self.hinge, axis=0))
-        f = -w[:, None, None] * self.grad  # (h, 4, 3)
-        scatter_add(out, self.index, f.reshape(-1, 3), self.flat)
-
-
-class VertexOperator:
-    """u -> C_v u_v for per-vertex blocks C (s, 3, 3) at vertices ``index``."""
-
-    def __init__(self, index: np.ndarray, blocks: np.ndarray):
-        self.index, self.blocks = index, blocks
-        self.flat = flat_index(index)
-
-    def __call__(self, u: np.ndarray, out: np.ndarray) -> None:
-        scatter_add(out, self.index,
-                    np.einsum("sab,sb->sa", self.blocks, np.take(u, self.index, axis=0)), self.flat)
 
 
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -90,6 +51,12 @@ class SpringSet:
     stiffness: np.ndarray
     damping: np.ndarray
 
+    def __post_init__(self):
+        # (s, 2): one fixed array naming the pairs, so a solver's block pattern is built once
+        object.__setattr__(self, "pairs", np.stack([np.asarray(self.i, np.int64),
+                                                    np.asarray(self.j, np.int64)], axis=1))
+        object.__setattr__(self, "_flat", flat_index(np.concatenate([self.i, self.j])))
+
     def _geometry(self, p: ParticleView):
         l = p.x[self.i] - p.x[self.j]
         length = np.sqrt(_dot(l, l))
@@ -102,10 +69,9 @@ class SpringSet:
         u, length, _ = self._geometry(p)
         rate = _dot(p.v[self.i] - p.v[self.j], u)
         f = -(self.stiffness * (length - self.rest) + self.damping * rate)[:, None] * u
-        scatter_add(f_out, self.i, f)
-        scatter_add(f_out, self.j, -f)
+        scatter_add(f_out, None, np.concatenate([f, -f]), self._flat)
 
-    def linearize(self, p: ParticleView) -> "LinearizedPairs":
+    def linearize(self, p: ParticleView) -> LinearizedPairs:
         """Jacobian blocks at this state. The transverse stiffness (1 - r/|l|) is clamped at 0
         so a compressed spring never makes the implicit system indefinite (Choi & Ko)."""
         u, _, safe = self._geometry(p)
@@ -113,7 +79,7 @@ class SpringSet:
         transverse = np.maximum(0.0, 1.0 - self.rest / safe)[:, None, None]
         kx = -self.stiffness[:, None, None] * (uu + transverse * (np.eye(3) - uu))
         kv = -self.damping[:, None, None] * uu
-        return LinearizedPairs(self.i, self.j, kx, kv)
+        return LinearizedPairs(self.pairs, kx, kv)
 
     def max_rate(self, mass: np.ndarray) -> float:
         """Upper bound of the highest angular frequency [1/s] of the spring network: by
@@ -128,67 +94,94 @@ class SpringSet:
 
 @dataclass(frozen=True)
 class LinearizedPairs:
-    """df/dx and df/dv of pair forces as (s, 3, 3) blocks B acting on x_i - x_j:
-    out_i += B (u_i - u_j), out_j -= B (u_i - u_j)."""
+    """df/dx and df/dv of pair forces as (s, 3, 3) blocks B acting on x_i - x_j: row i gets
+    B (u_i - u_j), row j the opposite — blocks [[B, -B], [-B, B]] on the pair (i, j).
+    ``pairs`` (s, 2) is the spring set's fixed index array (the pattern cache keys on it)."""
 
-    i: np.ndarray
-    j: np.ndarray
+    pairs: np.ndarray
     kx: np.ndarray
     kv: np.ndarray
 
-    def operator(self, cx: float, cv: float) -> PairOperator:
-        return PairOperator(self.i, self.j, cx * self.kx + cv * self.kv)
+    @property
+    def clique(self) -> np.ndarray:
+        return self.pairs
 
-    def add_diagonal(self, cx: float, cv: float, out: np.ndarray) -> None:
-        """out (n, 3, 3) += the operator's diagonal blocks (C at both ends of every pair)."""
-        c = (cx * self.kx + cv * self.kv).reshape(-1, 9)
-        n = len(out)
-        flat = out.reshape(n, 9)
-        for k in range(9):
-            flat[:, k] += np.bincount(self.i, weights=c[:, k], minlength=n)
-            flat[:, k] += np.bincount(self.j, weights=c[:, k], minlength=n)
+    def add_to(self, builder, cx: float, cv: float) -> None:
+        """Blocks of cx df/dx + cv df/dv into a :class:`~.sparse.MatrixBuilder`."""
+        builder.add_pairs(self.pairs, cx * self.kx + cv * self.kv)
+
+    def product(self, cx: float, cv: float, u: np.ndarray, out: np.ndarray) -> None:
+        """out += (cx df/dx + cv df/dv) u, matrix-free (for a one-off product)."""
+        i, j = self.pairs[:, 0], self.pairs[:, 1]
+        df = np.einsum("sab,sb->sa", cx * self.kx + cv * self.kv, u[i] - u[j])
+        scatter_add(out, i, df)
+        scatter_add(out, j, -df)
 
 
 @dataclass(frozen=True)
 class LinearizedHinges:
-    """Gauss-Newton bending Jacobian: df/dx u = -k g (g . u), df/dv u = -kd g (g . u), with g
-    the dihedral gradients (h, 4, 3) — symmetric negative semi-definite, as CG needs."""
+    """Gauss-Newton bending Jacobian: df/dx = -k g g^T, df/dv = -kd g g^T over each hinge's four
+    vertices, g the dihedral gradients (h, 4, 3) — symmetric negative semi-definite, as CG
+    needs."""
 
     hinge: np.ndarray
     grad: np.ndarray
     stiffness: float
     damping: float
 
-    def operator(self, cx: float, cv: float) -> HingeOperator:
-        return HingeOperator(self.hinge, self.grad, cx * self.stiffness + cv * self.damping)
+    @property
+    def clique(self) -> np.ndarray:
+        return self.hinge
 
-    def add_diagonal(self, cx: float, cv: float, out: np.ndarray) -> None:
-        """out (n, 3, 3) += -c g_a g_a^T at each hinge vertex a."""
+    def add_to(self, builder, cx: float, cv: float) -> None:
+        """cx df/dx + cv df/dv = -(cx k + cv kd) g g^T into a :class:`~.sparse.MatrixBuilder`."""
+        builder.add_rank_one(self.hinge, self.grad, -(cx * self.stiffness + cv * self.damping))
+
+    def product(self, cx: float, cv: float, u: np.ndarray, out: np.ndarray) -> None:
+        """out += (cx df/dx + cv df/dv) u, matrix-free (for a one-off product)."""
         c = cx * self.stiffness + cv * self.damping
-        g = self.grad.reshape(-1, 3)
-        blocks = (-c * g[:, :, None] * g[:, None, :]).reshape(-1, 9)
-        index = self.hinge.ravel()
-        n = len(out)
-        flat = out.reshape(n, 9)
-        for k in range(9):
-            flat[:, k] += np.bincount(index, weights=blocks[:, k], minlength=n)
+        w = c * np.einsum("hkc,hkc->h", self.grad, u[self.hinge])
+        scatter_add(out, self.hinge.ravel(), (-w[:, None, None] * self.grad).reshape(-1, 3))
 
 
 def dihedral_gradients(x: np.ndarray, hinge: np.ndarray) -> np.ndarray:
     """d(theta)/dx of every hinge's dihedral angle: (h, 4, 3) for (e0, e1, w0, w1)."""
+    return dihedral_angles_and_gradients(x, hinge)[1]
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross product of (m, 3) arrays (np.cross has a large fixed cost)."""
+    out = np.empty_like(a)
+    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    return out
+
+
+def dihedral_angles_and_gradients(x: np.ndarray, hinge: np.ndarray):
+    """Signed dihedral angles theta (h,) [rad] (as :func:`topology.dihedral_angles`) and their
+    gradients d(theta)/dx (h, 4, 3) for (e0, e1, w0, w1), sharing the face normals."""
     x0, x1, x2, x3 = (x[hinge[:, k]] for k in range(4))
     e = x1 - x0
     length = np.sqrt(_dot(e, e))
     safe = np.where(length > 1e-12, length, 1.0)
-    n1 = np.cross(x1 - x0, x2 - x0)
-    n2 = np.cross(x3 - x0, x1 - x0)
+    n1 = _cross(e, x2 - x0)
+    n2 = _cross(x3 - x0, e)
+    theta = np.arctan2(_dot(_cross(n1, n2), e) / np.where(length > 0, length, 1.0),
+                       _dot(n1, n2))
     a1 = n1 / np.maximum(_dot(n1, n1), 1e-24)[:, None]
     a2 = n2 / np.maximum(_dot(n2, n2), 1e-24)[:, None]
-    g2 = -safe[:, None] * a1
-    g3 = -safe[:, None] * a2
-    g0 = -(_dot(x2 - x1, e) / safe)[:, None] * a1 - (_dot(x3 - x1, e) / safe)[:, None] * a2
-    g1 = (_dot(x2 - x0, e) / safe)[:, None] * a1 + (_dot(x3 - x0, e) / safe)[:, None] * a2
-    return np.stack([g0, g1, g2, g3], axis=1)
+    grad = np.empty((len(hinge), 4, 3))
+    grad[:, 2] = -safe[:, None] * a1
+    grad[:, 3] = -safe[:, None] * a2
+    grad[:, 0] = -(_dot(x2 - x1, e) / safe)[:, None] * a1 - (_dot(x3 - x1, e) / safe)[:, None] * a2
+    grad[:, 1] = (_dot(x2 - x0, e) / safe)[:, None] * a1 + (_dot(x3 - x0, e) / safe)[:, None] * a2
+    return theta, grad
+
+
+def wrap_angle(a: np.ndarray) -> np.ndarray:
+    """Angles wrapped into [-pi, pi): a hinge folded past pi still turns back the short way."""
+    return np.remainder(a + np.pi, 2.0 * np.pi) - np.pi
 
 
 @dataclass(frozen=True)
@@ -205,26 +198,38 @@ class AngularSprings:
     stiffness: float
     damping: float
 
+    def __post_init__(self):
+        object.__setattr__(self, "_flat", flat_index(np.asarray(self.hinge).ravel()))
+        object.__setattr__(self, "_last", [None, None, None])  # x copy, x, gradients
+
+    def _gradients(self, x: np.ndarray):
+        """(theta, grad) at x; the gradients of the last call are reused when asked again for
+        the same, unchanged positions (forces then the Jacobian of one implicit step)."""
+        theta, grad = dihedral_angles_and_gradients(x, self.hinge)
+        self._last[:] = [x.copy(), x, grad]
+        return theta, grad
+
     def _forces(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
-        grad = dihedral_gradients(x, self.hinge)
-        theta = dihedral_angles(x, self.hinge)
-        # wrap the difference so a hinge folded past pi still turns back the short way
-        delta = np.angle(np.exp(1j * (theta - self.rest)))
+        theta, grad = self._gradients(x)
+        delta = wrap_angle(theta - self.rest)
         rate = np.einsum("hkc,hkc->h", grad, v[self.hinge])
         torque = self.stiffness * delta + self.damping * rate
         return -torque[:, None, None] * grad
 
-    def _scatter(self, f: np.ndarray, out: np.ndarray) -> None:
-        for k in range(4):
-            scatter_add(out, self.hinge[:, k], f[:, k])
-
     def apply(self, p: ParticleView, f_out: np.ndarray) -> None:
         if len(self.hinge):
-            self._scatter(self._forces(p.x, p.v), f_out)
+            scatter_add(f_out, None, self._forces(p.x, p.v).reshape(-1, 3), self._flat)
 
     def linearize(self, p: ParticleView) -> LinearizedHinges:
-        return LinearizedHinges(self.hinge, dihedral_gradients(p.x, self.hinge), self.stiffness,
-                                self.damping)
+        copy, same, grad = self._last
+        if not (same is p.x and np.array_equal(copy, p.x)):
+            grad = self._gradients(p.x)[1]
+        return LinearizedHinges(self.hinge, grad, self.stiffness, self.damping)
+
+    def energy(self, x: np.ndarray) -> float:
+        """0.5 k sum (theta - theta0)^2 [J]."""
+        turn = wrap_angle(topology.dihedral_angles(x, self.hinge) - self.rest)
+        return 0.5 * self.stiffness * float(np.vdot(turn, turn))
 
 
 @dataclass(frozen=True)
@@ -267,7 +272,7 @@ class AnchorSprings:
         linear = -self.stiffness[:, None] * l - self.damping[:, None] * ldot
         scatter_add(f_out, self.index, np.where(zero[:, None], linear, radial))
 
-    def linearize(self, p: ParticleView) -> "LinearizedVertices":
+    def linearize(self, p: ParticleView) -> LinearizedVertices:
         a, _ = self.anchor(p.t)
         l = p.x[self.index] - a
         length = np.sqrt(_dot(l, l))
@@ -284,21 +289,21 @@ class AnchorSprings:
 
 @dataclass(frozen=True)
 class LinearizedVertices:
-    """df/dx and df/dv as per-vertex (s, 3, 3) blocks."""
+    """df/dx and df/dv as per-vertex (s, 3, 3) blocks on the diagonal."""
 
     index: np.ndarray
     kx: np.ndarray
     kv: np.ndarray
 
-    def operator(self, cx: float, cv: float) -> VertexOperator:
-        return VertexOperator(self.index, cx * self.kx + cv * self.kv)
+    clique = None  # couples no two vertices
 
-    def add_diagonal(self, cx: float, cv: float, out: np.ndarray) -> None:
-        c = (cx * self.kx + cv * self.kv).reshape(-1, 9)
-        n = len(out)
-        flat = out.reshape(n, 9)
-        for k in range(9):
-            flat[:, k] += np.bincount(self.index, weights=c[:, k], minlength=n)
+    def add_to(self, builder, cx: float, cv: float) -> None:
+        builder.add_diagonal(self.index, cx * self.kx + cv * self.kv)
+
+    def product(self, cx: float, cv: float, u: np.ndarray, out: np.ndarray) -> None:
+        """out += (cx df/dx + cv df/dv) u (for a one-off product)."""
+        scatter_add(out, self.index, np.einsum("sab,sb->sa", cx * self.kx + cv * self.kv,
+                                                u[self.index]))
 
 
 @dataclass(frozen=True)

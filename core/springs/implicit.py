@@ -6,7 +6,9 @@ spring Jacobians, with pinned vertices handled by filtering (their velocity chan
 
 The matrix is symmetric (spring Jacobians with the compressed-spring term clamped are
 symmetric negative semi-definite), so CG applies, with a block-Jacobi preconditioner (the
-exact 3 x 3 diagonal blocks) and a warm start from the previous step's dv. As in Baraff &
+exact 3 x 3 diagonal blocks) and a warm start from the previous step's dv. It is assembled
+once per linearisation into a block-sparse pattern built from the topology on the first step
+(:mod:`.sparse`), so each CG product is one gather and one batched matrix product. As in Baraff &
 Witkin, the solve is inexact: CG stops at the tolerance or the iteration cap; when the step
 gained energy, further Newton iterations re-linearise at its end.
 Every CG iterate lowers the A-norm of the error, so a capped solve is still a damped, stable
@@ -19,6 +21,8 @@ import numpy as np
 from ..errors import SimulationError
 from ..integrators import StepReport
 from ..transforms import inverse3
+from .multigrid import AggregationHierarchy
+from .sparse import BlockPattern, MatrixBuilder
 
 
 class BaraffWitkin:
@@ -26,10 +30,12 @@ class BaraffWitkin:
 
     The system must offer ``mass`` (n,), ``free`` (n,) bool, ``pinned_velocity(t)`` (n, 3),
     ``weight_norm()`` (|M g| [N], the force scale residuals are judged against),
-    ``forces_at(t, x, v) -> (n, 3)``, ``linearize(t, x, v)`` -> Jacobian blocks whose
-    ``operator(cx, cv)`` adds (cx df/dx + cv df/dv) u into ``out`` and ``add_diagonal(cx, cv,
-    out)`` its 3 x 3 diagonal blocks (for the block-Jacobi preconditioner), and ``x``/``v``
-    attributes it updates; optionally ``energy(x, v)`` and ``contact``.
+    ``forces_at(t, x, v) -> (n, 3)``, ``linearize(t, x, v)`` -> Jacobian blocks with
+    ``clique`` (the fixed (m, k) index array of vertices they couple, or None for per-vertex
+    blocks), ``add_to(builder, cx, cv)`` (puts cx df/dx + cv df/dv into a
+    :class:`~.sparse.MatrixBuilder`) and ``product(cx, cv, u, out)`` (out += that matrix times
+    u, matrix-free), and ``x``/``v`` attributes it updates; optionally
+    ``energy(x, v)`` and ``contact``.
 
     Args:
         tolerance: relative residual at which CG stops. max_iterations: CG cap.
@@ -39,8 +45,14 @@ class BaraffWitkin:
 
     TOLERANCE = 1e-3  # relative residual: Baraff & Witkin's inexact solve, visually converged
 
+    PRECONDITIONERS = ("MULTIGRID", "JACOBI")
+
     def __init__(self, tolerance: float = TOLERANCE, max_iterations: int = 200,
-                 newton_iterations: int = 4):
+                 newton_iterations: int = 4, preconditioner: str = "MULTIGRID"):
+        if preconditioner not in self.PRECONDITIONERS:
+            raise ValueError(f"preconditioner must be one of {self.PRECONDITIONERS} "
+                             f"(got {preconditioner!r})")
+        self.preconditioner = preconditioner
         self.tolerance = float(tolerance)
         self.max_iterations = int(max_iterations)
         # A second Newton iteration re-linearises at the end of the step when Baraff & Witkin's
@@ -48,6 +60,9 @@ class BaraffWitkin:
         # systems that offer ``energy(x, v)`` are checked, others always iterate.
         self.newton_iterations = int(newton_iterations)
         self._warm: np.ndarray | None = None  # last dv: the next step's first guess
+        self._energy: tuple | None = None  # (x, v, energy) at the end of the last step
+        # (cliques it was built from, BlockPattern, AggregationHierarchy or None)
+        self._pattern: tuple | None = None
         self.last_residual = 0.0
         self.last_iterations = 0
 
@@ -80,37 +95,46 @@ class BaraffWitkin:
                 u[pressed] -= un[:, None] * normal
             return u
 
-        inv_diag = None  # block-Jacobi preconditioner, from the first linearisation below
+        precondition = None  # from the first linearisation below
         # residuals are judged against the impulse gravity gives in one step (at least): near
         # equilibrium the right-hand side -> 0 and a purely relative test never stops
         floor = h * float(system.weight_norm())
         dv = given.copy()
         iterations_total, reaction = 0, None
         energy = getattr(system, "energy", None)
-        e0 = energy(x0, v0) if energy is not None else None
+        e0 = None
+        if energy is not None:
+            e0 = self._known_energy(x0, v0)
+            if e0 is None:
+                e0 = energy(x0, v0)
+        e_end = None
         for newton in range(self.newton_iterations):
-            if newton > 0 and e0 is not None and energy(x0 + h * (v0 + dv), v0 + dv) <= e0:
-                break  # the linearised step already lost energy: no need to re-linearise
+            if newton > 0 and e0 is not None:
+                e_end = energy(x0 + h * (v0 + dv), v0 + dv)
+                if e_end <= e0:
+                    break  # the linearised step already lost energy: no need to re-linearise
+                e_end = None
             if newton == 0:  # Baraff & Witkin: linearise at (x0, v0), rhs h (f0 + h df/dx v0)
                 blocks = system.linearize(t, x0, v0)
                 rhs = f0.copy()
                 for blk in blocks:
-                    blk.operator(h, 0.0)(v0, rhs)
+                    blk.product(h, 0.0, v0, rhs)
                 rhs *= h
             else:  # Newton on g(dv) = M dv - h f(x0 + h (v0 + dv), v0 + dv)
                 v1 = v0 + dv
                 x1 = x0 + h * v1
                 blocks = system.linearize(t + h, x1, v1)
                 rhs = h * system.forces_at(t + h, x1, v1) - mass * dv
-            apply_a = self._operator(blocks, mass, h)
-            if inv_diag is None:
-                inv_diag = self._block_jacobi(blocks, system.mass, system.free, h)
+            matrix = self._assemble(blocks, system.mass, h)
+            apply_a = matrix.__matmul__
+            if precondition is None:
+                precondition = self._preconditioner(matrix, system.free)
             known = dv if newton == 0 else np.zeros_like(dv)
             b = project(rhs - (apply_a(known) if np.any(known) else 0.0))
             start = self._warm if (newton == 0 and self._warm is not None
                                    and self._warm.shape == b.shape) else None
             scale = max(float(np.sqrt(np.sum(b * b))), floor)
-            delta, iterations, residual = self._pcg(apply_a, b, inv_diag, project, start, scale)
+            delta, iterations, residual = self._pcg(apply_a, b, precondition, project, start, scale)
             iterations_total += iterations
             if newton == 0:
                 self._warm = delta.copy()
@@ -125,30 +149,51 @@ class BaraffWitkin:
         if not (np.all(np.isfinite(x1)) and np.all(np.isfinite(v1))):
             raise SimulationError("state became non-finite in the implicit step")
         system.x, system.v = x1, v1
+        # the next step starts from here unless pins, strain limits or collisions move it
+        self._energy = (x1.copy(), v1.copy(), e_end) if e_end is not None and not len(pressed) \
+            else None
         return StepReport(steps=1, evaluations=iterations_total, h_last=h)
 
-    @staticmethod
-    def _block_jacobi(blocks, mass, free, h):
-        """Inverse 3 x 3 diagonal blocks of A (anisotropic: a cloth's springs are stiff only
-        along themselves), zero for pinned vertices; applied as a (n, 3, 3) batch."""
-        diag = np.zeros((len(mass), 3, 3))
+    def _known_energy(self, x: np.ndarray, v: np.ndarray):
+        """The energy computed at the end of the last step if the state is still exactly that
+        one (else None)."""
+        if self._energy is None:
+            return None
+        x1, v1, e = self._energy
+        return e if np.array_equal(x1, x) and np.array_equal(v1, v) else None
+
+    def _assemble(self, blocks, mass, h):
+        """A = M - h df/dv - h^2 df/dx on the pattern of these blocks' cliques (built on first
+        use and kept while the blocks couple the same fixed index arrays)."""
+        cliques = [blk.clique for blk in blocks if blk.clique is not None]
+        if (self._pattern is None or len(self._pattern[0]) != len(cliques)
+                or any(a is not b for a, b in zip(self._pattern[0], cliques))
+                or self._pattern[1].n != len(mass)):
+            pattern = BlockPattern(len(mass), cliques)
+            hierarchy = None
+            if self.preconditioner == "MULTIGRID":
+                # aggregate along springs (pair cliques), the strong couplings
+                pairs = [c for c in cliques if c.shape[1] == 2]
+                graph = BlockPattern(len(mass), pairs).neighbours if pairs else None
+                hierarchy = AggregationHierarchy(pattern, graph)
+            self._pattern = (cliques, pattern, hierarchy)
+        builder = MatrixBuilder(self._pattern[1])
+        builder.add_diagonal(np.arange(len(mass)), mass[:, None, None] * np.eye(3))
         for blk in blocks:
-            blk.add_diagonal(h * h, h, diag)
-        a = mass[:, None, None] * np.eye(3) - diag
+            blk.add_to(builder, -h * h, -h)
+        return builder.finish()
+
+    def _preconditioner(self, matrix, free):
+        """u -> approximately A^-1 u: one aggregation-multigrid V-cycle (:mod:`.multigrid`;
+        iterations barely grow with stiffness), or block Jacobi — the exact inverse 3 x 3
+        diagonal blocks (anisotropic: a cloth's springs are stiff only along themselves)."""
+        hierarchy = self._pattern[2]
+        if hierarchy is not None:
+            return hierarchy.preconditioner(matrix)
+        a = matrix.diagonal()
         inv = inverse3(np.where(free[:, None, None], a, np.eye(3)))
         inv[~free] = 0.0
-        return inv
-
-    @staticmethod
-    def _operator(blocks, mass, h):
-        ops = [blk.operator(h * h, h) for blk in blocks]  # h^2 df/dx + h df/dv, pre-combined
-
-        def apply_a(u: np.ndarray) -> np.ndarray:
-            out = np.zeros_like(u)
-            for op in ops:
-                op(u, out)
-            return mass * u - out
-        return apply_a
+        return lambda r: np.matmul(inv, r[:, :, None])[:, :, 0]
 
     @staticmethod
     def _friction(v1, pressed, normal, contact, reaction, mass) -> None:
@@ -163,11 +208,11 @@ class BaraffWitkin:
         stop = np.minimum(speed, mu * impulse / mass[pressed, 0])
         v1[pressed] -= (stop / np.where(speed > 1e-12, speed, np.inf))[:, None] * vt
 
-    def _pcg(self, apply_a, b, inv_diag, project, start=None, scale=None):
+    def _pcg(self, apply_a, b, precondition, project, start=None, scale=None):
         """Filtered preconditioned conjugate gradients: ``project`` removes the constrained
         directions (pinned vertices, normals of pressed ones). Stops when |r| <= tolerance *
         scale (default |b|)."""
-        b_norm = float(np.sqrt(np.sum(b * b))) if scale is None else scale
+        b_norm = float(np.sqrt(np.vdot(b, b))) if scale is None else scale
         if b_norm == 0.0:
             return np.zeros_like(b), 0, 0.0
         if start is None:
@@ -176,26 +221,27 @@ class BaraffWitkin:
         else:
             x = project(start)
             r = b - project(apply_a(x))
-        residual = float(np.sqrt(np.sum(r * r))) / b_norm
+        residual = float(np.sqrt(np.vdot(r, r))) / b_norm
         if residual <= self.tolerance:
             return x, 0, residual
-        z = project(np.einsum("nab,nb->na", inv_diag, r))
+        z = project(precondition(r))
         p = z.copy()
-        rz = float(np.sum(r * z))
+        rz = float(np.vdot(r, z))
         for it in range(1, self.max_iterations + 1):
             q = project(apply_a(p))
-            pq = float(np.sum(p * q))
+            pq = float(np.vdot(p, q))
             if not (pq > 0.0 and np.isfinite(pq)):
                 raise SimulationError("the implicit solve lost positive definiteness "
                                       f"(p.Ap = {pq:.3g}) — lower the stiffness or add substeps")
             alpha = rz / pq
             x += alpha * p
             r -= alpha * q
-            residual = float(np.sqrt(np.sum(r * r))) / b_norm
+            residual = float(np.sqrt(np.vdot(r, r))) / b_norm
             if residual <= self.tolerance:
                 return x, it, residual
-            z = project(np.einsum("nab,nb->na", inv_diag, r))
-            rz_new = float(np.sum(r * z))
-            p = z + (rz_new / rz) * p
+            z = project(precondition(r))
+            rz_new = float(np.vdot(r, z))
+            p *= rz_new / rz
+            p += z
             rz = rz_new
         return x, self.max_iterations, residual

@@ -7,8 +7,8 @@ drag, wind on faces, contact) -> integrate (any scene integrator; IMPLICIT is Ba
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
 
 import numpy as np
 
@@ -20,9 +20,8 @@ from ..particles.settings import ColliderFrame
 from ..transforms import TransformPath, inverse_affine, transform_points
 from .forces import AnchorSprings, AngularSprings, LinearDrag, SpringSet, scatter_add
 from .implicit import BaraffWitkin
-from .strain import limit_strain
-from .topology import dihedral_angles
 from .model import SpringMeshModel, SpringMeshState
+from .strain import limit_strain
 
 # explicit methods: largest stable h * omega on an undamped spring (Euler and midpoint grow at
 # any step; these keep the growth per frame small enough for damping to win)
@@ -145,12 +144,11 @@ class _MeshSystem:
             if isinstance(force, Gravity):
                 e -= float(np.sum(m * (x @ np.asarray(force.g))))
             elif isinstance(force, SpringSet) and len(force.i):
-                length = np.linalg.norm(x[force.i] - x[force.j], axis=1)
-                e += 0.5 * float(np.sum(force.stiffness * (length - force.rest) ** 2))
+                d = x[force.i] - x[force.j]
+                stretch = np.sqrt(np.einsum("ij,ij->i", d, d)) - force.rest
+                e += 0.5 * float(np.dot(force.stiffness, stretch * stretch))
             elif isinstance(force, AngularSprings) and len(force.hinge):
-                theta = dihedral_angles(x, force.hinge)
-                delta = np.angle(np.exp(1j * (theta - force.rest)))
-                e += 0.5 * force.stiffness * float(np.sum(delta * delta))
+                e += force.energy(x)
         return e
 
     def weight_norm(self) -> float:
@@ -249,7 +247,6 @@ class SpringMeshSolver:
     def advance(self, state: SpringMeshState, inputs: SpringFrameInputs) -> int:
         """Advance ``state`` (in place) by one frame interval. Returns collisions handled."""
         model = self.model
-        n = model.vertex_count
         h = inputs.frame_dt / self.substeps
         g = np.asarray(inputs.gravity, dtype=np.float64)
         rest0 = inputs.rest0 if inputs.rest0 is not None else model.rest_x
