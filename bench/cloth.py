@@ -30,10 +30,10 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-import bmesh
-import bpy
+from tools import blender_env  # noqa: E402  (sets BLENDER_USER_RESOURCES before bpy)
 
-from tools import blender_env
+import bpy  # noqa: E402
+import bmesh  # noqa: E402
 
 FPS = 24
 STIFFNESS = 6000.0  # N/m: the cloth then hangs as low as Blender's default cloth
