@@ -55,6 +55,7 @@ class _Level:
     def __init__(self, fine: BlockPattern, graph: np.ndarray | None = None):
         self.fine = fine
         self.owner, count = aggregate(fine.neighbours if graph is None else graph)
+        self.flat_owner = (self.owner[:, None] * 3 + np.arange(3)).ravel()
         n, width = fine.n, fine.width
         rows = np.repeat(np.arange(n), width)
         a, b = self.owner[rows], self.owner[fine.neighbours.ravel()]
@@ -104,8 +105,9 @@ class AggregationHierarchy:
         levels = self.levels
 
         def restrict(level: _Level, r: np.ndarray) -> np.ndarray:
-            return np.stack([np.bincount(level.owner, weights=r[:, k], minlength=level.coarse.n)
-                             for k in range(3)], axis=1)
+            """P^T r: the residuals of every aggregate summed."""
+            return np.bincount(level.flat_owner, weights=r.ravel(),
+                               minlength=3 * level.coarse.n).reshape(-1, 3)
 
         def cycle(depth: int, r: np.ndarray) -> np.ndarray:
             if depth == len(levels):
@@ -115,9 +117,11 @@ class AggregationHierarchy:
             a, level = matrices[depth], levels[depth]
             jacobi = np.matmul(inverses[depth], r[:, :, None])[:, :, 0]
             if depth == 0:  # additive: Jacobi + coarse correction, no product with A
-                return jacobi + cycle(1, restrict(level, r))[level.owner]
+                return jacobi + np.take(cycle(1, restrict(level, r)), level.owner, axis=0,
+                                        mode="clip")
             x = SMOOTHING * jacobi
-            x += cycle(depth + 1, restrict(level, r - a @ x))[level.owner]
+            x += np.take(cycle(depth + 1, restrict(level, r - a @ x)), level.owner, axis=0,
+                         mode="clip")
             x += SMOOTHING * np.matmul(inverses[depth], (r - a @ x)[:, :, None])[:, :, 0]
             return x
 
