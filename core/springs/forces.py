@@ -58,7 +58,7 @@ class SpringSet:
         object.__setattr__(self, "_flat", flat_index(np.concatenate([self.i, self.j])))
 
     def _geometry(self, p: ParticleView):
-        l = p.x[self.i] - p.x[self.j]
+        l = np.take(p.x, self.i, axis=0, mode="clip") - np.take(p.x, self.j, axis=0, mode="clip")
         length = np.sqrt(_dot(l, l))
         safe = np.where(length > 1e-12, length, 1.0)
         return l / safe[:, None], length, safe
@@ -75,11 +75,10 @@ class SpringSet:
         """Jacobian blocks at this state. The transverse stiffness (1 - r/|l|) is clamped at 0
         so a compressed spring never makes the implicit system indefinite (Choi & Ko)."""
         u, _, safe = self._geometry(p)
-        uu = u[:, :, None] * u[:, None, :]
-        transverse = np.maximum(0.0, 1.0 - self.rest / safe)[:, None, None]
-        kx = -self.stiffness[:, None, None] * (uu + transverse * (np.eye(3) - uu))
-        kv = -self.damping[:, None, None] * uu
-        return LinearizedPairs(self.pairs, kx, kv)
+        transverse = np.maximum(0.0, 1.0 - self.rest / safe)
+        # df/dx = -k [u u^T + t (I - u u^T)] = -k t I - k (1 - t) u u^T, df/dv = -kd u u^T
+        return LinearizedPairs(self.pairs, u, -self.stiffness * transverse,
+                               -self.stiffness * (1.0 - transverse), -self.damping)
 
     def max_rate(self, mass: np.ndarray) -> float:
         """Upper bound of the highest angular frequency [1/s] of the spring network: by
@@ -94,28 +93,47 @@ class SpringSet:
 
 @dataclass(frozen=True)
 class LinearizedPairs:
-    """df/dx and df/dv of pair forces as (s, 3, 3) blocks B acting on x_i - x_j: row i gets
-    B (u_i - u_j), row j the opposite — blocks [[B, -B], [-B, B]] on the pair (i, j).
+    """df/dx and df/dv of pair forces, blocks B acting on x_i - x_j (row i gets B (u_i - u_j),
+    row j the opposite — [[B, -B], [-B, B]] on the pair), kept in the compact form of a spring:
+    df/dx = x_iso I + x_axis u u^T, df/dv = v_axis u u^T per spring, u its unit direction.
     ``pairs`` (s, 2) is the spring set's fixed index array (the pattern cache keys on it)."""
 
     pairs: np.ndarray
-    kx: np.ndarray
-    kv: np.ndarray
+    u: np.ndarray
+    x_iso: np.ndarray
+    x_axis: np.ndarray
+    v_axis: np.ndarray
 
     @property
     def clique(self) -> np.ndarray:
         return self.pairs
 
+    def blocks(self, cx: float, cv: float) -> np.ndarray:
+        """(s, 3, 3) blocks of cx df/dx + cv df/dv."""
+        u = self.u
+        out = (cx * self.x_axis + cv * self.v_axis)[:, None, None] * u[:, :, None] * u[:, None, :]
+        out[:, [0, 1, 2], [0, 1, 2]] += (cx * self.x_iso)[:, None]
+        return out
+
+    @property
+    def kx(self) -> np.ndarray:
+        return self.blocks(1.0, 0.0)
+
+    @property
+    def kv(self) -> np.ndarray:
+        return self.blocks(0.0, 1.0)
+
     def add_to(self, builder, cx: float, cv: float) -> None:
         """Blocks of cx df/dx + cv df/dv into a :class:`~.sparse.MatrixBuilder`."""
-        builder.add_pairs(self.pairs, cx * self.kx + cv * self.kv)
+        builder.add_pairs(self.pairs, self.blocks(cx, cv))
 
-    def product(self, cx: float, cv: float, u: np.ndarray, out: np.ndarray) -> None:
-        """out += (cx df/dx + cv df/dv) u, matrix-free (for a one-off product)."""
+    def product(self, cx: float, cv: float, w: np.ndarray, out: np.ndarray) -> None:
+        """out += (cx df/dx + cv df/dv) w, matrix-free (for a one-off product)."""
         i, j = self.pairs[:, 0], self.pairs[:, 1]
-        df = np.einsum("sab,sb->sa", cx * self.kx + cv * self.kv, u[i] - u[j])
-        scatter_add(out, i, df)
-        scatter_add(out, j, -df)
+        d = np.take(w, i, axis=0, mode="clip") - np.take(w, j, axis=0, mode="clip")
+        along = (cx * self.x_axis + cv * self.v_axis) * _dot(self.u, d)
+        df = (cx * self.x_iso)[:, None] * d + along[:, None] * self.u
+        scatter_add(out, None, np.concatenate([df, -df]), flat_index(self.pairs.T.ravel()))
 
 
 @dataclass(frozen=True)
@@ -149,26 +167,11 @@ def dihedral_gradients(x: np.ndarray, hinge: np.ndarray) -> np.ndarray:
     return dihedral_angles_and_gradients(x, hinge)[1]
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise cross product of (m, 3) arrays (np.cross has a large fixed cost)."""
-    out = np.empty_like(a)
-    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
-    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
-    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
-    return out
-
-
 def dihedral_angles_and_gradients(x: np.ndarray, hinge: np.ndarray):
     """Signed dihedral angles theta (h,) [rad] (as :func:`topology.dihedral_angles`) and their
     gradients d(theta)/dx (h, 4, 3) for (e0, e1, w0, w1), sharing the face normals."""
-    x0, x1, x2, x3 = (x[hinge[:, k]] for k in range(4))
-    e = x1 - x0
-    length = np.sqrt(_dot(e, e))
+    (x0, x1, x2, x3), e, length, n1, n2, theta = topology.hinge_geometry(x, hinge)
     safe = np.where(length > 1e-12, length, 1.0)
-    n1 = _cross(e, x2 - x0)
-    n2 = _cross(x3 - x0, e)
-    theta = np.arctan2(_dot(_cross(n1, n2), e) / np.where(length > 0, length, 1.0),
-                       _dot(n1, n2))
     a1 = n1 / np.maximum(_dot(n1, n1), 1e-24)[:, None]
     a2 = n2 / np.maximum(_dot(n2, n2), 1e-24)[:, None]
     grad = np.empty((len(hinge), 4, 3))

@@ -91,7 +91,8 @@ class BaraffWitkin:
         free_scale = free.astype(np.float64)
 
         def project(u: np.ndarray) -> np.ndarray:
-            u = u * free_scale
+            """Remove the constrained directions, in place (callers pass fresh arrays)."""
+            u *= free_scale
             if len(pressed):
                 un = np.einsum("ij,ij->i", u[pressed], normal)
                 u[pressed] -= un[:, None] * normal
@@ -161,7 +162,7 @@ class BaraffWitkin:
         warm = [w for w in self._warm if w.shape == shape]
         if len(warm) == 2:
             return 2.0 * warm[0] - warm[1]
-        return warm[0] if warm else None
+        return warm[0].copy() if warm else None
 
     def _known_energy(self, x: np.ndarray, v: np.ndarray):
         """The energy computed at the end of the last step if the state is still exactly that

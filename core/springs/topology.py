@@ -68,16 +68,33 @@ def distance2_pairs(hinge: np.ndarray) -> np.ndarray:
     return unique_pairs(hinge[:, 2:4]) if len(hinge) else np.zeros((0, 2), np.int64)
 
 
+def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross product of (m, 3) arrays (np.cross has a large fixed cost)."""
+    out = np.empty_like(a)
+    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    return out
+
+
+def hinge_geometry(x: np.ndarray, hinge: np.ndarray):
+    """Per hinge: corners x0..x3 (e0, e1, w0, w1), edge e = x1 - x0, its length, the face
+    normals n1 = e x (x2 - x0), n2 = (x3 - x0) x e (unnormalised) and the signed dihedral angle
+    (0 for a flat pair of triangles)."""
+    corners = [np.take(x, hinge[:, k], axis=0, mode="clip") for k in range(4)]
+    x0 = corners[0]
+    e = corners[1] - x0
+    length = np.sqrt(np.einsum("ij,ij->i", e, e))
+    n1 = cross_rows(e, corners[2] - x0)
+    n2 = cross_rows(corners[3] - x0, e)
+    sin = np.einsum("ij,ij->i", cross_rows(n1, n2), e) / np.where(length > 0, length, 1.0)
+    theta = np.arctan2(sin, np.einsum("ij,ij->i", n1, n2))
+    return corners, e, length, n1, n2, theta
+
+
 def dihedral_angles(x: np.ndarray, hinge: np.ndarray) -> np.ndarray:
     """Signed dihedral angle (h,) [rad] of each hinge: 0 for a flat pair of triangles."""
-    x0, x1, x2, x3 = (x[hinge[:, k]] for k in range(4))
-    e = x1 - x0
-    n1 = np.cross(x1 - x0, x2 - x0)
-    n2 = np.cross(x3 - x0, x1 - x0)
-    e_len = np.linalg.norm(e, axis=1)
-    sin = np.einsum("ij,ij->i", np.cross(n1, n2), e) / np.where(e_len > 0, e_len, 1.0)
-    cos = np.einsum("ij,ij->i", n1, n2)
-    return np.arctan2(sin, cos)
+    return hinge_geometry(x, np.asarray(hinge))[5]
 
 
 def vertex_areas(x: np.ndarray, triangles: np.ndarray) -> np.ndarray:
