@@ -53,11 +53,19 @@ class BlockPattern:
         self._slot = row * self.width + column
         self.diagonal_slot = self._slot[np.searchsorted(key, np.arange(self.n) * (self.n + 1))]
         self._tables: dict = {}
+        self._scratch: dict = {}
         # mirror map: block (c, r) = block (r, c)^T for every stored r < c
         upper = row < col
         mirror = np.searchsorted(key, col[upper] * self.n + row[upper])
         self._upper = self.flat_positions(self._slot[upper]).ravel()
         self._lower = self.flat_positions(self._slot[mirror])[:, (BLOCK % 3) * 3 + BLOCK // 3].ravel()
+
+    def scratch(self, key, shape) -> np.ndarray:
+        """A reusable work array of ``shape`` (float64) kept with the pattern."""
+        buffer = self._scratch.get(key)
+        if buffer is None or buffer.shape != tuple(shape):
+            buffer = self._scratch[key] = np.empty(shape)
+        return buffer
 
     @property
     def size(self) -> int:
@@ -151,11 +159,21 @@ class MatrixBuilder:
         for flat_end in ends:
             self.add_diagonal(None, blocks, flat_end)
         flat = blocks.reshape(-1, 9)
-        for positions, springs in groups:
+        for k, (positions, springs) in enumerate(groups):
             if springs.shape[1] == 1:  # one spring per block: no sum needed
-                self._data[positions] -= np.take(flat, springs[:, 0], axis=0, mode="clip")
+                values = np.take(flat, springs[:, 0], axis=0, mode="clip",
+                                 out=self.pattern.scratch(("pairs", k), positions.shape))
             else:
-                self._data[positions] -= np.take(flat, springs, axis=0, mode="clip").sum(axis=1)
+                values = np.take(flat, springs, axis=0, mode="clip").sum(axis=1)
+            self._subtract(positions, values)
+
+    def _subtract(self, positions: np.ndarray, values: np.ndarray) -> None:
+        """data[positions] -= values for unique positions, through reused buffers (fresh
+        megabyte temporaries cost more in page faults than the arithmetic)."""
+        current = np.take(self._data, positions, mode="clip",
+                          out=self.pattern.scratch(("data", positions.shape), positions.shape))
+        current -= values
+        np.put(self._data, positions, current, mode="clip")
 
     def add_rank_one(self, clique: np.ndarray, grad: np.ndarray, coefficient: float) -> None:
         """Rank-one terms c g g^T, g (m, k, 3) on the k vertices of each clique row (the
