@@ -273,6 +273,47 @@ def test_animated_object_carries_its_pinned_vertices(physanim_ext, tmp_path):
     assert lag.max() < -0.02, lag
 
 
+# ------------------------------------------------------------------------ mesh colliders
+
+def test_cloth_drapes_over_a_mesh_collider_and_never_enters_it(physanim_ext, tmp_path):
+    """A free 9 x 9 cloth falls onto an icosphere mesh collider (shape Mesh, 2 cm thickness) at
+    the origin. Over every baked frame no vertex gets inside the mesh (its faces are at least
+    0.98 r from the centre; the thickness keeps vertices 2 cm outside them), and at the end the
+    middle rests on top while the free corners hang down beside the sphere."""
+    end = FRAME_START + 30
+    scene = _scene(end=end)
+    radius = 0.5
+    me = bpy.data.meshes.new("Ball")
+    bm = bmesh.new()
+    try:
+        bmesh.ops.create_icosphere(bm, subdivisions=3, radius=radius)
+        bm.to_mesh(me)
+    finally:
+        bm.free()
+    ball = bpy.data.objects.new("Ball", me)
+    scene.collection.objects.link(ball)
+    c = ball.physanim.collider
+    c.enabled, c.shape, c.restitution, c.friction, c.thickness = True, 'MESH', 0.0, 0.5, 0.02
+    cloth = _grid(segments=8, pin=False, stiffness=300.0, shear_stiffness=100.0)
+    cloth.location.z = 0.8
+    scene.frame_set(FRAME_START)
+    _save(tmp_path)
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+
+    samples = _samples(physanim_ext, cloth)
+    m = np.array(cloth.matrix_world, dtype=np.float64)
+    inner = min(abs(np.dot(f.center, f.normal)) for f in me.polygons)  # nearest face plane
+    assert inner > 0.98 * radius
+    for k, local in enumerate(samples):
+        distance = np.linalg.norm(_world(m, local), axis=1)
+        assert distance.min() > 0.98 * radius, f"frame {FRAME_START + k}: a vertex is inside"
+    world = _world(m, samples[-1])
+    middle = np.argmin(np.linalg.norm(world[:, :2], axis=1))
+    assert abs(world[middle, 2] - (radius + 0.02)) < 0.03  # resting on top, not sinking
+    corners = np.argsort(np.linalg.norm(world[:, :2], axis=1))[-4:]
+    assert world[corners, 2].max() < 0.3  # the free corners fell past the top
+
+
 # -------------------------------------------------------------------------- virtual springs
 
 def test_attach_springs_follow_an_animated_target(physanim_ext, tmp_path):
