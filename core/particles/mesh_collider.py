@@ -164,24 +164,28 @@ class MeshPath(ColliderPath, shapes=("MESH",)):
             hit[g] = sh.hit & ~((sh.t == 0.0) & ~sh.front)
             normal[g], point[g], tri[g], front[g] = sh.normal, sh.point, sh.triangle, sh.front
             t[g] = np.where(sh.hit, sh.t, 1.0)
+        r = float(reach.max())
+        side0 = None if self._still else self._closest(l0, sa, r)[6]
         if self.deforming and hit.any():
             # the segment is tested against the mesh at the end time: a particle riding a
             # deforming surface crosses where that surface will be from behind. Such a hit is
-            # real only if the particle started on the side of the triangle it hits from;
-            # otherwise the triangle moved past it and side tracking decides.
+            # real only if the particle started on the side it hits from — judged on the mesh
+            # at the start time near the particle (the plane of the triangle hit may pass on
+            # the wrong side of a particle sitting on its neighbour across a ridge); otherwise
+            # the surface moved past it and side tracking decides. Without a side there (an
+            # open boundary), the hit triangle's plane at the start time judges.
             g = np.nonzero(hit)[0]
             c = self._corners(tri[g], sa[g])
             face = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
-            side = np.sign(np.einsum("ij,ij->i", l0[g] - c[:, 0], face))
+            side = np.where(side0[g] != 0.0, side0[g],
+                            np.sign(np.einsum("ij,ij->i", l0[g] - c[:, 0], face)))
             hit[g[side * np.where(front[g], 1.0, -1.0) < 0.0]] = False
         if self._still and self.frame.thickness == 0.0:
             return Hits(cand[hit], t[hit], normal[hit], point[hit], tri[hit])
-        r = float(reach.max())
         f1, q1, diff1, d1, face1, tri1, side1 = self._closest(l1, sb, r)
         late = np.zeros(k, bool)  # hits at t = 1 on the end-time surface
         late_n = np.zeros((k, 3))
         if not self._still:  # the mesh moving over a particle: a side change without a hit
-            _, _, _, _, _, _, side0 = self._closest(l0, sa, r)
             crossed = ~hit & (side0 * side1 < 0.0)
             late |= crossed
             late_n[crossed] = face1[crossed] * side0[crossed, None]
