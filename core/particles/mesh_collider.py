@@ -61,12 +61,10 @@ class MeshPath(ColliderPath, shapes=("MESH",)):
         # hits are found on the mesh as it is at the sub-step's end (see colliders.respond)
         self.hits_end_surface = self.deforming
         self.max_step = float(norm_rows(self.vertex_step).max())
-        mesh = TriangleMesh(frame.vertices0, frame.triangles, frame.name)
-        self._bvh0 = build_bvh(mesh, BVH_KIND, "topdown")
+        self._bvh0, self._boundary = _hierarchy(frame)
         self._bvhs: dict[float, BVH] = {}
         both = np.concatenate([frame.vertices0, frame.vertices1])
         self._lo, self._hi = both.min(axis=0), both.max(axis=0)
-        self._boundary = _boundary_features(mesh)
         # the most local units a world metre can span over the interval (distance conversions)
         self._local_metre = max(float(np.linalg.norm(inverse_affine(m)[:3, :3], axis=1).max())
                                 for m in self.path.samples)
@@ -241,6 +239,35 @@ class MeshPath(ColliderPath, shapes=("MESH",)):
         if local_v is None and self.path.static:
             return np.zeros_like(l)
         return self.path.point_velocities(l, s, self.frame_dt, local_velocity=local_v)
+
+
+_HIERARCHIES: dict = {}  # collider name -> (triangles, vertices, BVH, boundary features)
+HIERARCHY_CACHE = 32  # colliders remembered between frame intervals
+
+
+def _hierarchy(frame: ColliderFrame) -> tuple[BVH, np.ndarray]:
+    """The hierarchy and open-boundary features of a collider mesh at the interval's start.
+
+    Consecutive frame intervals of one collider usually share its mesh: the same vertices (a
+    rigid collider: only the object matrix moves) reuse the hierarchy, moved vertices over the
+    same triangles (a deforming mesh) refit it — building one costs ~100x a refit. Reuse is
+    decided by comparing the arrays, never by name alone."""
+    tris, verts = frame.triangles, frame.vertices0
+    known = _HIERARCHIES.get(frame.name)
+    if known is not None and known[0].shape == tris.shape and np.array_equal(known[0], tris):
+        if known[1].shape == verts.shape and np.array_equal(known[1], verts):
+            return known[2], known[3]
+        if known[1].shape == verts.shape:
+            bvh, _ = known[2].refit(verts)
+            boundary = _boundary_features(bvh.mesh)  # welding may change as vertices move
+            _HIERARCHIES[frame.name] = (known[0], verts.copy(), bvh, boundary)
+            return bvh, boundary
+    bvh = build_bvh(TriangleMesh(verts, tris, frame.name), BVH_KIND, "topdown")
+    boundary = _boundary_features(bvh.mesh)
+    if len(_HIERARCHIES) >= HIERARCHY_CACHE:
+        _HIERARCHIES.clear()
+    _HIERARCHIES[frame.name] = (tris.copy(), verts.copy(), bvh, boundary)
+    return bvh, boundary
 
 
 def _boundary_features(mesh: TriangleMesh) -> np.ndarray:

@@ -409,3 +409,33 @@ def _ride_the_waves(seed: int):
         assert not above.hit.any(), \
             f"seed {seed}, frame {frame + 1}: {int(above.hit.sum())} of {int(inner.sum())} " \
             "under the waves"
+
+
+def test_hierarchy_is_reused_for_the_same_mesh_and_refitted_for_a_deformed_one():
+    """Frame intervals of one collider share its hierarchy: the same vertices reuse it, moved
+    vertices over the same triangles refit it (answers equal to a fresh build), other triangles
+    or a same-named other mesh rebuild it."""
+    from physanim.core.collision import TriangleMesh, build_bvh
+    from physanim.core.collision.raycast import segment_hits
+    from physanim.core.particles import mesh_collider
+
+    verts, tris = _sheet(12, 4.0)
+    first = _mesh_collider("Reuse", verts, tris)
+    bvh, boundary = mesh_collider._hierarchy(first)
+    again, boundary_again = mesh_collider._hierarchy(_mesh_collider("Reuse", verts.copy(), tris))
+    assert again is bvh and boundary_again is boundary
+
+    moved = verts.copy()
+    moved[:, 2] = 0.3 * np.sin(2.0 * moved[:, 0]) + 0.1 * moved[:, 1]
+    refit, _ = mesh_collider._hierarchy(_mesh_collider("Reuse", moved, tris))
+    fresh = build_bvh(TriangleMesh(moved, tris), mesh_collider.BVH_KIND, "topdown")
+    rng = np.random.default_rng(7)
+    a = np.column_stack([rng.uniform(-2, 2, (500, 2)), np.full(500, 2.0)])
+    b = a - [0.0, 0.0, 4.0]
+    ours, theirs = segment_hits(refit, a, b), segment_hits(fresh, a, b)
+    assert ours.hit.all() and np.array_equal(ours.triangle, theirs.triangle)
+    np.testing.assert_allclose(ours.point, theirs.point, atol=1e-12)
+
+    other_tris = tris[::-1, ::-1].copy()
+    rebuilt, _ = mesh_collider._hierarchy(_mesh_collider("Reuse", moved, other_tris))
+    assert rebuilt is not refit and np.array_equal(rebuilt.mesh.triangles, other_tris)
