@@ -260,12 +260,17 @@ def _first_hits(colliders, start, x, s_start, s_end):
 
 
 def respond(colliders: list[ColliderPath], x0: np.ndarray, x1: np.ndarray, v0: np.ndarray,
-            v1: np.ndarray, s0: float, s1: float, h: float, rest_speed: float):
+            v1: np.ndarray, s0: float, s1: float, h: float, rest_speed: float,
+            record: dict | None = None):
     """Continuous collision response for a sub-step [s0, s1] of the frame interval.
 
     Args:
         x0, v0: (n, 3) state before the sub-step; x1, v1: after integration (collision-free).
         h: sub-step length [s]. rest_speed: bounces slower than this become contact [m/s].
+        record: if given, filled with each hit particle's first collision as arrays:
+            ``index``, ``normal`` (world), ``surface_velocity``, ``restitution``, ``friction``,
+            and ``landing``, the point it was placed at (outside the surface) carried to the
+            sub-step's end with the surface's velocity.
 
     Returns:
         (x, v, hits): corrected positions and velocities, and the number of collisions handled.
@@ -314,6 +319,12 @@ def respond(colliders: list[ColliderPath], x0: np.ndarray, x1: np.ndarray, v0: n
             x[idx] = start[idx] + remaining[:, None] * travel
             v[idx] = v_new
             hits += len(idx)
+            if record is not None:
+                # where the surface carries the placed point by the sub-step's end (a deforming
+                # mesh's hit point already lies on its end-of-step surface)
+                end = start[idx] if getattr(col, "hits_end_surface", False) \
+                    else start[idx] + remaining[:, None] * v_c
+                _record(record, idx, n_w, v_c, col, end)
         active = active[best >= 0]
         touched.append(active)
     if touched:
@@ -321,7 +332,35 @@ def respond(colliders: list[ColliderPath], x0: np.ndarray, x1: np.ndarray, v0: n
         xs, vs = x[moved], v[moved]
         hits += _push_out(colliders, xs, vs, s_end[moved], start[moved], s_start[moved])
         x[moved], v[moved] = xs, vs
+    if record is not None:
+        parts = record.pop("_parts", {})
+        record.pop("_seen", None)
+        for key in ("index", "normal", "surface_velocity", "restitution", "friction", "landing"):
+            chunks = parts.get(key, [])
+            empty = np.zeros((0, 3)) if key in _VECTORS else np.zeros(0, np.int64 if key == "index"
+                                                                            else np.float64)
+            record[key] = np.concatenate(chunks) if chunks else empty
     return x, v, hits
+
+
+_VECTORS = ("normal", "surface_velocity", "landing")
+
+
+def _record(record: dict, idx, n_w, v_c, col, landing) -> None:
+    """Note the first collision of particles ``idx`` (later passes' hits are not recorded)."""
+    parts = record.setdefault("_parts", {k: [] for k in ("index", "normal", "surface_velocity",
+                                                           "restitution", "friction", "landing")})
+    seen = record.setdefault("_seen", set())
+    new = np.array([i not in seen for i in idx.tolist()], dtype=bool)
+    if not new.any():
+        return
+    seen.update(idx[new].tolist())
+    k = int(new.sum())
+    for key, value in (("index", idx[new]), ("normal", n_w[new]),
+                       ("surface_velocity", v_c[new]),
+                       ("restitution", np.full(k, col.frame.restitution)),
+                       ("friction", np.full(k, col.frame.friction)), ("landing", landing[new])):
+        parts[key].append(value)
 
 
 def _push_out(colliders: list[ColliderPath], x: np.ndarray, v: np.ndarray, s: np.ndarray,
@@ -352,6 +391,7 @@ def contacts(colliders: list[ColliderPath], x: np.ndarray, v: np.ndarray, s: flo
     normal = np.zeros((count, 3))
     surf_v = np.zeros((count, 3))
     mu = np.zeros(count)
+    k_r = np.zeros(count)
     for col in colliders if count else ():
         surf = col.near_surface(x, s)
         d = np.abs(surf.gap)
@@ -363,5 +403,6 @@ def contacts(colliders: list[ColliderPath], x: np.ndarray, v: np.ndarray, s: flo
         normal[idx] = surf.normal[ok]
         surf_v[idx] = surf.velocity[ok]
         mu[idx] = col.frame.friction
+        k_r[idx] = col.frame.restitution
     idx = np.nonzero(np.isfinite(best_d))[0]
-    return ContactForce(idx, normal[idx], surf_v[idx], mu[idx], h)
+    return ContactForce(idx, normal[idx], surf_v[idx], mu[idx], h, k_r[idx])

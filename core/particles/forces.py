@@ -213,7 +213,8 @@ class ContactForce:
     Built per sub-step by the collision pass from the particles found in resting contact.
 
     Args: index: (c,) particle indices. normal: (c, 3) surface normals. surface_velocity: (c, 3).
-    friction: (c,) mu. h: sub-step [s] (for the stopping cap).
+    friction: (c,) mu. h: sub-step [s] (for the stopping cap). restitution: (c,) k_r of the
+    surface (None: not needed by the caller).
     """
 
     index: np.ndarray
@@ -221,6 +222,7 @@ class ContactForce:
     surface_velocity: np.ndarray
     friction: np.ndarray
     h: float
+    restitution: np.ndarray | None = None
 
     def apply(self, p: ParticleView, f_out: np.ndarray) -> None:
         if len(self.index) == 0:

@@ -23,7 +23,7 @@ from ..errors import SimulationError
 from ..integrators import StepReport
 from ..transforms import inverse3
 from .multigrid import AggregationHierarchy
-from .sparse import BlockPattern, MatrixBuilder
+from .sparse import BlockMatrix, BlockPattern, MatrixBuilder
 
 
 class BaraffWitkin:
@@ -82,7 +82,11 @@ class BaraffWitkin:
         pressed, normal = np.zeros(0, np.int64), np.zeros((0, 3))
         if contact is not None and len(contact.index):
             push = np.einsum("ij,ij->i", f0[contact.index], contact.normal)
-            keep = (push < 0.0) & system.free[contact.index]  # only where forces press inwards
+            # only where forces press inwards, or where the vertex is landing (the solver's
+            # re-solve of a step in which it hit the surface: see SpringMeshSolver.advance)
+            landing = getattr(contact, "landing", None)
+            inwards = push < 0.0 if landing is None else (push < 0.0) | landing
+            keep = inwards & system.free[contact.index]
             pressed, normal = contact.index[keep], contact.normal[keep]
             surface_vn = np.einsum("ij,ij->i", contact.surface_velocity[keep], normal)
             vn = np.einsum("ij,ij->i", v0[pressed], normal)
@@ -98,7 +102,6 @@ class BaraffWitkin:
                 u[pressed] -= un[:, None] * normal
             return u
 
-        precondition = None  # from the first linearisation below
         # residuals are judged against the impulse gravity gives in one step (at least): near
         # equilibrium the right-hand side -> 0 and a purely relative test never stops
         floor = h * float(system.weight_norm())
@@ -130,8 +133,11 @@ class BaraffWitkin:
                 rhs = h * system.forces_at(t + h, x1, v1) - mass * dv
             matrix = self._assemble(blocks, system.mass, h)
             apply_a = matrix.__matmul__
-            if precondition is None:
-                precondition = self._preconditioner(matrix, system.free)
+            # rebuilt for every linearisation: a stiff mesh turning within the step changes its
+            # matrix enough that the first one's preconditioner would cost hundreds of
+            # iterations in the later Newton iterations
+            precondition = self._preconditioner(
+                self._filtered(matrix, system.free, pressed, normal), system.free)
             known = dv if newton == 0 else np.zeros_like(dv)
             b = project(rhs - (apply_a(known) if np.any(known) else 0.0))
             start = self._first_guess(b.shape) if newton == 0 else None
@@ -143,10 +149,19 @@ class BaraffWitkin:
                 reaction = apply_a(delta + known) - rhs  # the constraints' impulses
             dv = dv + delta
             self.last_residual = residual
-        self.last_iterations = iterations_total
         v1 = v0 + dv
         if len(pressed):
-            self._friction(v1, pressed, normal, contact, reaction, mass)
+            # Coulomb friction is an impulse on the pressed vertices; the mesh takes it as a
+            # whole (one more filtered solve), so a vertex that friction slows drags its
+            # neighbours along instead of stretching the springs to them
+            stop = self._friction(v1, pressed, normal, contact, reaction, mass)
+            if np.any(stop):
+                b = project(mass * stop)
+                scale = max(float(np.sqrt(np.vdot(b, b))), floor)
+                delta, iterations, _ = self._pcg(apply_a, b, precondition, project, None, scale)
+                iterations_total += iterations
+                v1 = v1 + delta
+        self.last_iterations = iterations_total
         x1 = x0 + h * v1
         if not (np.all(np.isfinite(x1)) and np.all(np.isfinite(v1))):
             raise SimulationError("state became non-finite in the implicit step")
@@ -193,6 +208,31 @@ class BaraffWitkin:
             blk.add_to(builder, -h * h, -h)
         return builder.finish()
 
+    @staticmethod
+    def _filtered(matrix, free, pressed, normal):
+        """The matrix CG really solves with: S A S + (I - S), S removing each vertex's
+        constrained directions (all three for a pinned vertex, the normal for a pressed one) —
+        what the preconditioner must approximate; a hierarchy built on A itself would move
+        constrained vertices with their aggregates and lose most of its power when many are
+        constrained (cloth landing on a collider)."""
+        constrained = ~free
+        constrained[pressed] = True
+        if not constrained.any():
+            return matrix
+        p = matrix.pattern
+        s = np.where(free[:, None, None], np.eye(3), 0.0)
+        if len(pressed):
+            s[pressed] -= normal[:, :, None] * normal[:, None, :]
+        # only blocks in a constrained vertex's row or column change
+        row, col = np.nonzero(constrained[:, None] | constrained[p.neighbours])
+        data = matrix.data.copy()
+        blocks = data.reshape(p.n, 3, p.width, 3)
+        other = p.neighbours[row, col]
+        blocks[row, :, col, :] = np.matmul(np.matmul(s[row], blocks[row, :, col, :]), s[other])
+        fixed = np.nonzero(constrained)[0]
+        blocks[fixed, :, p.diagonal_slot[fixed] % p.width, :] += np.eye(3) - s[fixed]
+        return BlockMatrix(p, data)
+
     def _preconditioner(self, matrix, free):
         """u -> approximately A^-1 u: one aggregation-multigrid V-cycle (:mod:`.multigrid`;
         iterations barely grow with stiffness), or block Jacobi — the exact inverse 3 x 3
@@ -206,9 +246,10 @@ class BaraffWitkin:
         return lambda r: np.matmul(inv, r[:, :, None])[:, :, 0]
 
     @staticmethod
-    def _friction(v1, pressed, normal, contact, reaction, mass) -> None:
-        """Coulomb friction on pressed vertices: the constraint's normal impulse (the residual
-        of the unfiltered system along n) caps how much tangential sliding it can stop."""
+    def _friction(v1, pressed, normal, contact, reaction, mass) -> np.ndarray:
+        """Coulomb friction on pressed vertices: the velocity change (n, 3) that would stop
+        each one's sliding, capped by mu times the constraint's normal impulse (the residual of
+        the unfiltered system along n)."""
         row = np.searchsorted(contact.index, pressed)  # contact.index is sorted
         mu = contact.friction[row]
         impulse = np.maximum(0.0, np.einsum("ij,ij->i", reaction[pressed], normal))
@@ -216,7 +257,9 @@ class BaraffWitkin:
         vt = rel - np.einsum("ij,ij->i", rel, normal)[:, None] * normal
         speed = np.sqrt(np.einsum("ij,ij->i", vt, vt))
         stop = np.minimum(speed, mu * impulse / mass[pressed, 0])
-        v1[pressed] -= (stop / np.where(speed > 1e-12, speed, np.inf))[:, None] * vt
+        out = np.zeros_like(v1)
+        out[pressed] = -(stop / np.where(speed > 1e-12, speed, np.inf))[:, None] * vt
+        return out
 
     def _pcg(self, apply_a, b, precondition, project, start=None, scale=None):
         """Filtered preconditioned conjugate gradients: ``project`` removes the constrained

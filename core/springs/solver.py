@@ -3,7 +3,9 @@
 Per sub-step: collide (resting contacts) -> forces (gravity, springs, bending, virtual springs,
 drag, wind on faces, contact) -> integrate (any scene integrator; IMPLICIT is Baraff-Witkin)
 -> pins (exactly on their animated targets) -> limit strain (optional, Provot) -> respond
-(continuous collisions, as particles) -> check (finite, not torn apart).
+(continuous collisions, as particles) -> with IMPLICIT, when vertices hit a collider, the
+sub-step again with them as landing constraints (up to LANDING_ROUNDS times) -> check (finite,
+not torn apart).
 """
 from __future__ import annotations
 
@@ -27,6 +29,7 @@ from .strain import limit_strain
 # any step; these keep the growth per frame small enough for damping to win)
 STABLE_H_OMEGA = {"EULER": 0.1, "MIDPOINT": 0.5, "SYMPLECTIC_EULER": 1.9, "RK4": 2.5}
 TEAR_FACTOR = 50.0  # a spring stretched past this many rest lengths means the solve blew up
+LANDING_ROUNDS = 3  # re-solves of a sub-step whose vertices hit colliders (implicit only)
 
 
 @dataclass
@@ -49,6 +52,43 @@ class SpringFrameInputs:
     targets: dict = field(default_factory=dict)
     colliders: Sequence[ColliderFrame] = ()
     winds: Sequence[Wind] = ()
+
+
+@dataclass(frozen=True)
+class LandingContacts:
+    """The contacts of a re-solved step: resting ones and landing ones (``landing`` True: a
+    vertex that hit the surface during the step, constrained whatever the forces; its
+    ``surface_velocity`` carries, along the normal, the velocity that lands it, and
+    ``surface_vn`` the surface's own normal speed). Fields as
+    :class:`~..particles.forces.ContactForce`, index sorted."""
+
+    index: np.ndarray
+    normal: np.ndarray
+    surface_velocity: np.ndarray
+    friction: np.ndarray
+    restitution: np.ndarray
+    landing: np.ndarray
+    surface_vn: np.ndarray
+    h: float
+
+
+def _restitution(contact) -> np.ndarray:
+    r = getattr(contact, "restitution", None)
+    return np.zeros(len(contact.index)) if r is None else r
+
+
+def _bounce(v: np.ndarray, landing: LandingContacts, rest_speed: float) -> None:
+    """After a re-solved step the landing vertices are on the surface, still approaching it at
+    their landing speed: they leave it at restitution times that speed (relative to the
+    surface; a bounce slower than ``rest_speed`` ends in contact), as the collision pass would
+    have made them."""
+    sel = landing.landing
+    idx, n = landing.index[sel], landing.normal[sel]
+    approach = np.einsum("ij,ij->i", landing.surface_velocity[sel], n) - landing.surface_vn[sel]
+    out = -landing.restitution[sel] * np.minimum(approach, 0.0)
+    out = np.where(out < rest_speed, 0.0, out)
+    vn = np.einsum("ij,ij->i", v[idx], n)
+    v[idx] += (landing.surface_vn[sel] + out - vn)[:, None] * n
 
 
 @dataclass(frozen=True)
@@ -271,25 +311,88 @@ class SpringMeshSolver:
                                  rest0 + s0 * (rest1 - rest0), pin_v, t)
             system.contact = contact if implicit else None
             x0, v0 = state.x.copy(), state.v.copy()
-            try:
-                self.integrator.step(system, t, h)
-            except SimulationError as exc:
-                raise self._fail(f"the simulation blew up ({exc}) — use the IMPLICIT integrator, "
-                                 "more substeps or lower stiffness", inputs.frame,
-                                 SimulationError) from exc
-            state.x[~self.free] = pin_x1[~self.free]
-            state.v[~self.free] = pin_v[~self.free]
-            if model.settings.max_stretch > 0.0:
-                limited = model.spring_family < 2  # edge and shear springs, not bending ones
-                limit_strain(state.x, state.v, model.spring_i[limited], model.spring_j[limited],
-                             model.spring_rest[limited], self._inv_mass,
-                             model.settings.max_stretch, h)
+            landing, collided, first = None, 0, None
+            for round_ in range(LANDING_ROUNDS + 1):
+                if round_:
+                    # vertices hit a surface during the step: solve the step again with them
+                    # as constraints landing on it, so their neighbours feel the stop through
+                    # the springs instead of a projection after the fact (which stretches stiff
+                    # springs: energy from nowhere)
+                    state.x, state.v = x0.copy(), v0.copy()
+                    system.contact = landing
+                self._step(system, t, h, pin_x1, pin_v, inputs.frame)
+                if landing is not None:
+                    _bounce(state.v, landing, rest_speed)
+                if not paths:
+                    break
+                record = {} if implicit and round_ < LANDING_ROUNDS else None
+                x, v, count = coll.respond(paths, x0, state.x, v0, state.v, s0, s1, h,
+                                           rest_speed, record)
+                collided = max(collided, count)  # the first round finds the step's collisions
+                first = (x, v) if first is None else first
+                more = None if record is None else \
+                    self._landing(landing if landing is not None else contact, record, x0, h)
+                if more is None:
+                    break
+                landing = more
+            if landing is not None and system.energy(*first) < system.energy(x, v):
+                # a safeguard: landing constraints must not end with more energy than
+                # projecting the hits after the first solve (a stiff mesh whose landing
+                # vertices are forced apart can store more spring energy than that)
+                x, v = first
             if paths:
-                x, v, count = coll.respond(paths, x0, state.x, v0, state.v, s0, s1, h, rest_speed)
                 x[~self.free], v[~self.free] = pin_x1[~self.free], pin_v[~self.free]
-                state.x, state.v, hits = x, v, hits + count
+                state.x, state.v, hits = x, v, hits + collided
             self._check(state, inputs.frame)
         return hits
+
+    def _step(self, system, t: float, h: float, pin_x1, pin_v, frame) -> None:
+        """One integrator step, then pins exactly on their targets and the strain limit."""
+        state = system.state
+        try:
+            self.integrator.step(system, t, h)
+        except SimulationError as exc:
+            raise self._fail(f"the simulation blew up ({exc}) — use the IMPLICIT integrator, "
+                             "more substeps or lower stiffness", frame, SimulationError) from exc
+        state.x[~self.free] = pin_x1[~self.free]
+        state.v[~self.free] = pin_v[~self.free]
+        model = self.model
+        if model.settings.max_stretch > 0.0:
+            limited = model.spring_family < 2  # edge and shear springs, not bending ones
+            limit_strain(state.x, state.v, model.spring_i[limited], model.spring_j[limited],
+                         model.spring_rest[limited], self._inv_mass, model.settings.max_stretch, h)
+
+    def _landing(self, base, record: dict, x0, h: float):
+        """Contacts for re-solving a step in which free vertices hit a collider (``record``
+        from :func:`~..particles.colliders.respond`): each becomes a landing constraint — its
+        normal velocity is the one that takes it from its start to where the collision put it
+        — merged with ``base`` (the step's resting contacts, or the last round's set). None
+        when no vertex that is not landing already was hit."""
+        idx = record["index"]
+        keep = self.free[idx]
+        if base is not None and len(base.index):
+            already = getattr(base, "landing", np.zeros(len(base.index), bool))
+            keep &= ~np.isin(idx, base.index[already])
+        if not keep.any():
+            return None
+        idx, n = idx[keep], record["normal"][keep]
+        sv = record["surface_velocity"][keep]
+        own_vn = np.einsum("ij,ij->i", sv, n)
+        land_vn = np.einsum("ij,ij->i", record["landing"][keep] - x0[idx], n) / h
+        sv = sv + (land_vn - own_vn)[:, None] * n
+        parts = []
+        if base is not None and len(base.index):
+            stay = ~np.isin(base.index, idx)  # a resting vertex that was hit lands instead
+            parts.append((base.index[stay], base.normal[stay], base.surface_velocity[stay],
+                          base.friction[stay], _restitution(base)[stay],
+                          getattr(base, "landing", np.zeros(len(base.index), bool))[stay],
+                          getattr(base, "surface_vn", np.einsum(
+                              "ij,ij->i", base.surface_velocity, base.normal))[stay]))
+        parts.append((idx, n, sv, record["friction"][keep], record["restitution"][keep],
+                      np.ones(len(idx), bool), own_vn))
+        fields = [np.concatenate([p[k] for p in parts]) for k in range(7)]
+        order = np.argsort(fields[0], kind="stable")
+        return LandingContacts(*(f[order] for f in fields), h)
 
     def _check(self, state: SpringMeshState, frame) -> None:
         if not (np.all(np.isfinite(state.x)) and np.all(np.isfinite(state.v))):

@@ -274,3 +274,27 @@ def test_fast_spinning_collider_never_swallows_particles(shape):
         local = _local(m1, state.particle_x)
         assert np.all(_outside(shape, local)), f"frame {f}: particle inside the spinning {shape}"
     assert hits > 50
+
+
+def test_respond_records_each_hit_for_the_spring_solver():
+    """``respond(record=...)`` notes every hit particle's first collision: a particle falling
+    through a ground rising at 1 m/s is recorded with the ground's normal and velocity, its
+    collider's restitution and friction, and a landing point SKIN above the surface where the
+    ground has carried it at the sub-step's end; a particle that misses is not recorded."""
+    from physanim.core.particles import colliders as coll
+
+    m0, m1 = np.eye(4), np.eye(4)
+    m1[2, 3] = DT  # the ground rises 1 m/s
+    ground = ColliderFrame("Ground", "HALF_SPACE", m0, m1, restitution=0.25, friction=0.6)
+    paths = [coll.ColliderPath.of(ground, DT)]
+    x0 = np.array([[0.0, 0.0, 0.05], [2.0, 0.0, 3.0]])
+    v0 = np.array([[0.0, 0.0, -4.0], [0.0, 0.0, -1.0]])
+    x1 = x0 + DT * v0
+    record = {}
+    coll.respond(paths, x0, x1, v0, v0.copy(), 0.0, 1.0, DT, 0.01, record)
+    np.testing.assert_array_equal(record["index"], [0])
+    np.testing.assert_allclose(record["normal"], [[0.0, 0.0, 1.0]], atol=1e-12)
+    np.testing.assert_allclose(record["surface_velocity"], [[0.0, 0.0, 1.0]], atol=1e-9)
+    np.testing.assert_allclose(record["restitution"], [0.25])
+    np.testing.assert_allclose(record["friction"], [0.6])
+    np.testing.assert_allclose(record["landing"][0, 2], DT + SKIN, atol=1e-9)

@@ -184,7 +184,7 @@ def test_multigrid_solves_a_stiff_sheet_block_jacobi_cannot_within_the_cap():
     agree, and block Jacobi needs over 3x the iterations. At the default tolerance and cap,
     multigrid meets the tolerance and stays within a few tolerances of the reference (a
     relative residual rho moves the step by about rho of the distance travelled), while block
-    Jacobi stops at its cap far from it."""
+    Jacobi runs into its cap, short of the tolerance and over 5x farther from the reference."""
     model = _stiff_grid(30, 1e5)
     tight = {"tolerance": 1e-7, "max_iterations": 20000}
     reference, jacobi_tight, _ = _run(model, 8, preconditioner="JACOBI", **tight)
@@ -194,12 +194,14 @@ def test_multigrid_solves_a_stiff_sheet_block_jacobi_cannot_within_the_cap():
     assert np.abs(multigrid_ref - reference).max() < 1e-5 * fallen
     assert 3 * multigrid_tight <= jacobi_tight, (multigrid_tight, jacobi_tight)
 
-    x, _, residual = _run(model, 8, preconditioner="MULTIGRID")
+    x, iterations, residual = _run(model, 8, preconditioner="MULTIGRID")
     assert residual <= 3 * BaraffWitkin.TOLERANCE
-    assert np.abs(x - reference).max() < 5 * BaraffWitkin.TOLERANCE * fallen
-    capped, _, residual = _run(model, 8, preconditioner="JACOBI")
-    assert residual > 10 * BaraffWitkin.TOLERANCE  # what multigrid is for
-    assert np.abs(capped - reference).max() > 0.05 * fallen
+    error = np.abs(x - reference).max()
+    assert error < 5 * BaraffWitkin.TOLERANCE * fallen
+    capped, capped_iterations, residual = _run(model, 8, preconditioner="JACOBI")
+    assert residual > 5 * BaraffWitkin.TOLERANCE  # what multigrid is for
+    assert capped_iterations >= 3 * iterations
+    assert np.abs(capped - reference).max() > 5 * error
 
 
 def test_unknown_preconditioner_is_refused():
