@@ -10,10 +10,11 @@ import pytest
 
 from physanim.core.particles import (
     ColliderFrame, DampedSprings, Drag, EmitterFrame, EmitterSettings, FrameInputs,
-    ParticleModelBuilder, ParticleSolver, SpringLink,
+    ParticleSolver, SpringLink,
 )
 from physanim.core.particles.colliders import SKIN
 from physanim.core.particles.forces import ParticleView
+from physanim.tests.core.helpers import particle_model as _model
 
 G = 9.81
 FPS = 24
@@ -21,13 +22,6 @@ DT = 1.0 / FPS
 
 
 # -- helpers ------------------------------------------------------------------------------------
-
-def _model(*settings, seed=0):
-    builder = ParticleModelBuilder(seed)
-    for s in settings:
-        builder.add_emitter(s)
-    return builder.finalize()
-
 
 def _place(state, x, v, emitter=0, mass=1.0, life=1e9):
     """Put particles straight into a State (exact initial conditions, no emission randomness)."""

@@ -9,29 +9,14 @@ import numpy as np
 import pytest
 
 from physanim.core.particles import (
-    ColliderFrame, EmitterFrame, EmitterSettings, FrameInputs, ParticleModelBuilder,
-    ParticleSolver,
+    ColliderFrame, EmitterFrame, EmitterSettings, FrameInputs, ParticleSolver,
 )
 from physanim.core.particles.colliders import SKIN
+from physanim.tests.core.helpers import particle_model as _model, place as _place
 
 G = 9.81
 FPS = 24
 DT = 1.0 / FPS
-
-
-def _model(*settings, seed=0):
-    builder = ParticleModelBuilder(seed)
-    for s in settings:
-        builder.add_emitter(s)
-    return builder.finalize()
-
-
-def _place(state, x, v, emitter=0, mass=1.0, life=1e9):
-    x = np.atleast_2d(np.asarray(x, dtype=np.float64))
-    v = np.atleast_2d(np.asarray(v, dtype=np.float64))
-    n = len(x)
-    return state.append(emitter, x, v, np.full(n, mass), np.zeros(n), np.full(n, life),
-                        np.full(n, 0.05))
 
 
 def _inputs(frame, colliders, gravity=(0.0, 0.0, -G), dt=DT):

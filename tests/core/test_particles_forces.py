@@ -11,29 +11,14 @@ import pytest
 
 from physanim.core.errors import SimulationError
 from physanim.core.particles import (
-    Attractor, Drag, EmitterFrame, EmitterSettings, FrameInputs, ParticleModelBuilder,
-    ParticleSolver, Vortex, Wind,
+    Attractor, Drag, EmitterFrame, EmitterSettings, FrameInputs, ParticleSolver, Vortex, Wind,
 )
 from physanim.core.particles.forces import ParticleView
+from physanim.tests.core.helpers import particle_model as _model, place as _place
 
 FPS = 24
 DT = 1.0 / FPS
 ZERO_G = (0.0, 0.0, 0.0)
-
-
-def _model(*settings, seed=0):
-    builder = ParticleModelBuilder(seed)
-    for s in settings:
-        builder.add_emitter(s)
-    return builder.finalize()
-
-
-def _place(state, x, v, emitter=0, mass=1.0, life=1e9):
-    x = np.atleast_2d(np.asarray(x, dtype=np.float64))
-    v = np.atleast_2d(np.asarray(v, dtype=np.float64))
-    n = len(x)
-    return state.append(emitter, x, v, np.full(n, mass), np.zeros(n), np.full(n, life),
-                        np.full(n, 0.05))
 
 
 def _inputs(frame, forces=(), emitter_count=1, dt=DT, gravity=ZERO_G):

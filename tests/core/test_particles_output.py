@@ -9,9 +9,10 @@ import pytest
 from physanim.core.curves import LifeCurve
 from physanim.core.errors import PhysanimError
 from physanim.core.particles import (
-    EmitterFrame, EmitterSettings, FrameInputs, ParticleModelBuilder, ParticleSolver,
+    EmitterFrame, EmitterSettings, FrameInputs, ParticleSolver,
     emitter_arrays,
 )
+from physanim.tests.core.helpers import particle_model as _model
 
 KEYS = {
     "id": (np.int32, ()), "position": (np.float32, (3,)), "velocity": (np.float32, (3,)),
@@ -20,13 +21,6 @@ KEYS = {
 }
 # only with shape-from-velocity (stretch > 0); round particles are scaled by ``size``
 STRETCH_KEYS = {"instance_scale": (np.float32, (3,)), "instance_rotation": (np.float32, (3,))}
-
-
-def _model(*settings, seed=0):
-    builder = ParticleModelBuilder(seed)
-    for s in settings:
-        builder.add_emitter(s)
-    return builder.finalize()
 
 
 def _place(state, x, v, emitter=0, age=0.0, life=1.0, size=0.1):

@@ -11,18 +11,12 @@ import pytest
 
 from physanim.core.errors import PhysanimError
 from physanim.core.particles import (
-    EmitterFrame, EmitterSettings, FrameInputs, ParticleModelBuilder, ParticleSolver,
+    EmitterFrame, EmitterSettings, FrameInputs, ParticleSolver,
 )
+from physanim.tests.core.helpers import particle_model as _model
 
 DT = 1.0 / 24
 ZERO_G = (0.0, 0.0, 0.0)
-
-
-def _model(*settings, seed=0):
-    builder = ParticleModelBuilder(seed)
-    for s in settings:
-        builder.add_emitter(s)
-    return builder.finalize()
 
 
 def _inputs(frame, emitters, gravity=ZERO_G, dt=DT):

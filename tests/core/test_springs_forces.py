@@ -13,18 +13,7 @@ import pytest
 from physanim.core.particles.forces import ParticleView
 from physanim.core.springs import SpringMeshBuilder, SpringMeshSettings, topology
 from physanim.core.springs.forces import AngularSprings, SpringSet, dihedral_gradients
-
-
-def _grid(nx: int, ny: int, size: float = 1.0):
-    """Flat grid of nx * ny vertices in z = 0: positions, edges, triangles and quad loops."""
-    xs, ys = np.meshgrid(np.linspace(0.0, size, nx), np.linspace(0.0, size, ny))
-    x = np.stack([xs.ravel(), ys.ravel(), np.zeros(nx * ny)], axis=1)
-    i, j = np.meshgrid(np.arange(nx - 1), np.arange(ny - 1))
-    a = (j * nx + i).ravel()
-    quads = np.stack([a, a + 1, a + nx + 1, a + nx], axis=1)
-    triangles = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
-    edges = np.concatenate([quads[:, [0, 1]], quads[:, [1, 2]], quads[:, [2, 3]], quads[:, [3, 0]]])
-    return x, edges, triangles, 4 * np.arange(len(quads)), np.full(len(quads), 4), quads.ravel()
+from physanim.tests.core.helpers import grid as _grid
 
 
 def _model(nx: int = 7, ny: int = 6):

@@ -21,17 +21,7 @@ from physanim.core.springs.multigrid import (
     aggregate,
 )
 from physanim.core.springs.sparse import BlockPattern, MatrixBuilder
-
-
-def _grid(nx: int, ny: int, size: float = 1.0):
-    xs, ys = np.meshgrid(np.linspace(0.0, size, nx), np.linspace(0.0, size, ny))
-    x = np.stack([xs.ravel(), ys.ravel(), np.zeros(nx * ny)], axis=1)
-    i, j = np.meshgrid(np.arange(nx - 1), np.arange(ny - 1))
-    a = (j * nx + i).ravel()
-    quads = np.stack([a, a + 1, a + nx + 1, a + nx], axis=1)
-    triangles = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
-    edges = np.concatenate([quads[:, [0, 1]], quads[:, [1, 2]], quads[:, [2, 3]], quads[:, [3, 0]]])
-    return x, edges, triangles, 4 * np.arange(len(quads)), np.full(len(quads), 4), quads.ravel()
+from physanim.tests.core.helpers import grid as _grid
 
 
 def _symmetric(rng, count: int) -> np.ndarray:

@@ -1,0 +1,36 @@
+"""Helpers shared by the core test files (imported as ``physanim.tests.core.helpers``)."""
+from __future__ import annotations
+
+import numpy as np
+
+from physanim.core.particles import ParticleModelBuilder
+
+
+def grid(nx: int, ny: int, size: float = 1.0):
+    """Flat grid of nx * ny vertices in z = 0: positions, edges, triangles and quad loops
+    (loop_start, loop_total, loop_vertices)."""
+    xs, ys = np.meshgrid(np.linspace(0.0, size, nx), np.linspace(0.0, size, ny))
+    x = np.stack([xs.ravel(), ys.ravel(), np.zeros(nx * ny)], axis=1)
+    i, j = np.meshgrid(np.arange(nx - 1), np.arange(ny - 1))
+    a = (j * nx + i).ravel()
+    quads = np.stack([a, a + 1, a + nx + 1, a + nx], axis=1)
+    triangles = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+    edges = np.concatenate([quads[:, [0, 1]], quads[:, [1, 2]], quads[:, [2, 3]], quads[:, [3, 0]]])
+    return x, edges, triangles, 4 * np.arange(len(quads)), np.full(len(quads), 4), quads.ravel()
+
+
+def particle_model(*settings, seed=0):
+    """A particle model with one emitter per :class:`EmitterSettings` given."""
+    builder = ParticleModelBuilder(seed)
+    for s in settings:
+        builder.add_emitter(s)
+    return builder.finalize()
+
+
+def place(state, x, v, emitter=0, mass=1.0, life=1e9):
+    """Put particles at x with velocities v (size 0.05 m) into ``state``."""
+    x = np.atleast_2d(np.asarray(x, dtype=np.float64))
+    v = np.atleast_2d(np.asarray(v, dtype=np.float64))
+    n = len(x)
+    return state.append(emitter, x, v, np.full(n, mass), np.zeros(n), np.full(n, life),
+                        np.full(n, 0.05))
