@@ -34,6 +34,7 @@ from .mesh import check_points
 from .predicates import orient3d, orient3d_value
 
 CHUNK = 1 << 18  # (segment, node) or (segment, triangle) pairs per batch
+SHORT = 0.01  # a segment this short relative to the mesh is culled by its box (AABB trees)
 
 
 @dataclass(frozen=True)
@@ -152,12 +153,27 @@ def _first_hits(bvh: BVH, p0: np.ndarray, p1: np.ndarray):
     flat = bvh.mesh.degenerate[bvh.tri_order]
     seg, node = np.arange(n), np.zeros(n, dtype=np.int64)
     n_v = n_p = 0
+    # axis-aligned boxes: a segment's own box culls with comparisons only; for a short one it
+    # is nearly as selective as the exact slab test, which only long segments add
+    boxes = getattr(bvh.kind, "_is_box", False)
+    if boxes:
+        lo, hi = np.minimum(p0, p1) - margin, np.maximum(p0, p1) + margin
+        short = norm_rows(d) <= SHORT * bvh.mesh.scale
     while len(seg):
         keep = np.zeros(len(seg), dtype=bool)
         for s in range(0, len(seg), CHUNK):
             sl = slice(s, s + CHUNK)
-            t0, t1 = bvh.kind.ray_interval(bvh.node_bv[node[sl]], p0[seg[sl]], d[seg[sl]], margin)
-            keep[sl] = (t0 <= t1) & (t1 >= 0.0) & (t0 <= np.minimum(best_t[seg[sl]], 1.0))
+            ss, nn = seg[sl], node[sl]
+            bv = bvh.node_bv[nn]
+            if boxes:
+                k = np.all((lo[ss] <= bv[:, 3:]) & (bv[:, :3] <= hi[ss]), axis=1)
+                slab = np.nonzero(k & ~short[ss])[0]
+            else:
+                k, slab = np.ones(len(ss), dtype=bool), np.arange(len(ss))
+            if len(slab):
+                t0, t1 = bvh.kind.ray_interval(bv[slab], p0[ss[slab]], d[ss[slab]], margin)
+                k[slab] = (t0 <= t1) & (t1 >= 0.0) & (t0 <= np.minimum(best_t[ss[slab]], 1.0))
+            keep[sl] = k
         n_v += len(seg)
         seg, node = seg[keep], node[keep]
         leaf = bvh.node_is_leaf[node]
