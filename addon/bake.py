@@ -19,6 +19,7 @@ import numpy as np
 from ..core.cache import CacheWriter
 from ..core.errors import PhysanimError, SimulationError
 from ..core.particles import ParticleSolver, emitter_arrays
+from ..core.particles.mesh_collider import forget_hierarchies
 from . import convert, extract, springs
 
 STREAM = "points"
@@ -263,6 +264,7 @@ class BakeJob:
                 "fps": convert.fps(self.scene), "kind": "particles"}
         for mesh in self.meshes:
             mesh.close()
+        forget_hierarchies()
         for writer in [*self.writers.values(), *self.mesh_writers.values()]:
             writer.flush()  # every frame on disk before any bake is swapped in
         paths = {ob.name: self.writers[ob.name].commit(dict(meta, emitter=ob.name,
@@ -299,6 +301,7 @@ class BakeJob:
 
         for mesh in self.meshes:
             mesh.close()
+        forget_hierarchies()
         for writer in [*self.writers.values(), *getattr(self, "mesh_writers", {}).values()]:
             writer.abort()
         self.writers.clear()

@@ -242,7 +242,13 @@ class MeshPath(ColliderPath, shapes=("MESH",)):
 
 
 _HIERARCHIES: dict = {}  # collider name -> (triangles, vertices, BVH, boundary features)
-HIERARCHY_CACHE = 32  # colliders remembered between frame intervals
+HIERARCHY_CACHE = 8  # colliders remembered between frame intervals
+
+
+def forget_hierarchies() -> None:
+    """Drop the hierarchies kept between frame intervals (a bake calls this when it ends, so
+    large meshes do not stay in memory)."""
+    _HIERARCHIES.clear()
 
 
 def _hierarchy(frame: ColliderFrame) -> tuple[BVH, np.ndarray]:
