@@ -44,7 +44,7 @@ class KDOP(BoundingVolume):
         families = FAMILIES[k]
         self.directions = np.array([d for fam in families for d in fam], dtype=np.float64)
         self.norms = np.linalg.norm(self.directions, axis=1)
-        self._is_box = k == 6
+        self.is_box = k == 6  # an axis-aligned box: the layout is [lo (3), hi (3)]
         # parallelepipeds bounding the DOP for transforms: independent triples within a family
         triples, start = [], 0
         for fam in families:
@@ -60,7 +60,7 @@ class KDOP(BoundingVolume):
     # --- fitting ---------------------------------------------------------------------------
     def project(self, points: np.ndarray) -> np.ndarray:
         """(m, k/2) projections of points on the DOP's directions."""
-        if self._is_box:
+        if self.is_box:
             return points
         return points @ self.directions.T
 
@@ -85,7 +85,7 @@ class KDOP(BoundingVolume):
         h = self.half
         p = self.project(points)
         gap = np.maximum(np.maximum(bv[:, :h] - p, p - bv[:, h:]), 0.0) / self.norms
-        if self._is_box:
+        if self.is_box:
             return np.sqrt(np.einsum("ij,ij->i", gap, gap))
         return gap.max(axis=1)
 
@@ -133,7 +133,7 @@ class KDOP(BoundingVolume):
         return bv[:, :3], bv[:, h:h + 3]
 
     def split_frame(self, tri, starts, counts):
-        if not self._is_box:
+        if not self.is_box:
             return super().split_frame(tri, starts, counts)
         bv = self.fit_triangles(tri, starts, counts)
         return box_axes_by_extent(bv[:, :3], bv[:, 3:])

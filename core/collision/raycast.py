@@ -34,7 +34,7 @@ from .mesh import check_points
 from .predicates import orient3d, orient3d_value
 
 CHUNK = 1 << 18  # (segment, node) or (segment, triangle) pairs per batch
-SHORT = 0.01  # a segment this short relative to the mesh is culled by its box (AABB trees)
+SHORT = 0.01  # segments shorter than this times the mesh's diameter are culled by their box
 
 
 @dataclass(frozen=True)
@@ -155,10 +155,10 @@ def _first_hits(bvh: BVH, p0: np.ndarray, p1: np.ndarray):
     n_v = n_p = 0
     # axis-aligned boxes: a segment's own box culls with comparisons only; for a short one it
     # is nearly as selective as the exact slab test, which only long segments add
-    boxes = getattr(bvh.kind, "_is_box", False)
+    boxes = getattr(bvh.kind, "is_box", False)
     if boxes:
         lo, hi = np.minimum(p0, p1) - margin, np.maximum(p0, p1) + margin
-        short = norm_rows(d) <= SHORT * bvh.mesh.scale
+        short = norm_rows(d) <= SHORT * float(bvh.node_size[0])  # relative to the mesh's size
     while len(seg):
         keep = np.zeros(len(seg), dtype=bool)
         for s in range(0, len(seg), CHUNK):

@@ -62,6 +62,7 @@ class MeshPath(ColliderPath, shapes=("MESH",)):
         self.hits_end_surface = self.deforming
         self.max_step = float(norm_rows(self.vertex_step).max())
         self._bvh0, self._boundary = _hierarchy(frame)
+        self._welded = self._bvh0.mesh.welded[frame.triangles]  # corners, duplicates merged
         self._bvhs: dict[float, BVH] = {}
         both = np.concatenate([frame.vertices0, frame.vertices1])
         self._lo, self._hi = both.min(axis=0), both.max(axis=0)
@@ -117,6 +118,11 @@ class MeshPath(ColliderPath, shapes=("MESH",)):
         side = np.where(found & ~on_boundary, np.sign(np.einsum("ij,ij->i", diff, face)), 0.0)
         return found, q, diff, dist, face, tri, side
 
+    def _touching(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """(k,) whether triangles a and b are the same or share a (welded) corner."""
+        w = self._welded
+        return np.any(w[a][:, :, None] == w[b][:, None, :], axis=(1, 2))
+
     @staticmethod
     def _facing(diff, dist, face, side, prefer) -> np.ndarray:
         """Local unit normals facing the query points: the face normal turned to ``side`` (or
@@ -163,20 +169,24 @@ class MeshPath(ColliderPath, shapes=("MESH",)):
             normal[g], point[g], tri[g], front[g] = sh.normal, sh.point, sh.triangle, sh.front
             t[g] = np.where(sh.hit, sh.t, 1.0)
         r = float(reach.max())
-        side0 = None if self._still else self._closest(l0, sa, r)[6]
+        side0 = tri0 = None
+        if not self._still:
+            _, _, _, _, _, tri0, side0 = self._closest(l0, sa, r)
         if self.deforming and hit.any():
             # the segment is tested against the mesh at the end time: a particle riding a
             # deforming surface crosses where that surface will be from behind. Such a hit is
-            # real only if the particle started on the side it hits from — judged on the mesh
-            # at the start time near the particle (the plane of the triangle hit may pass on
-            # the wrong side of a particle sitting on its neighbour across a ridge); otherwise
-            # the surface moved past it and side tracking decides. Without a side there (an
-            # open boundary), the hit triangle's plane at the start time judges.
+            # real only if the particle started on the side it hits from; otherwise the
+            # surface moved past it and side tracking decides. The side is judged on the mesh
+            # at the start time nearest the particle when that is the triangle hit or one
+            # touching it (across a ridge the hit triangle's plane may pass on the wrong side
+            # of a particle sitting on its neighbour); otherwise — another sheet of the mesh,
+            # or no side (an open boundary) — on the hit triangle's own plane.
             g = np.nonzero(hit)[0]
             c = self._corners(tri[g], sa[g])
             face = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
-            side = np.where(side0[g] != 0.0, side0[g],
-                            np.sign(np.einsum("ij,ij->i", l0[g] - c[:, 0], face)))
+            plane = np.sign(np.einsum("ij,ij->i", l0[g] - c[:, 0], face))
+            near = (side0[g] != 0.0) & self._touching(tri0[g], tri[g])
+            side = np.where(near, side0[g], plane)
             hit[g[side * np.where(front[g], 1.0, -1.0) < 0.0]] = False
         if self._still and self.frame.thickness == 0.0:
             return Hits(cand[hit], t[hit], normal[hit], point[hit], tri[hit])
@@ -241,8 +251,10 @@ class MeshPath(ColliderPath, shapes=("MESH",)):
         return self.path.point_velocities(l, s, self.frame_dt, local_velocity=local_v)
 
 
-_HIERARCHIES: dict = {}  # collider name -> (triangles, vertices, BVH, boundary features)
+_HIERARCHIES: dict = {}  # collider name -> (triangles, vertices, BVH, boundary features, refits)
 HIERARCHY_CACHE = 8  # colliders remembered between frame intervals
+REBUILD_AFTER = 24  # refits before a deforming mesh's hierarchy is built afresh (its splits
+#                     were chosen for the shape it had then)
 
 
 def forget_hierarchies() -> None:
@@ -256,23 +268,24 @@ def _hierarchy(frame: ColliderFrame) -> tuple[BVH, np.ndarray]:
 
     Consecutive frame intervals of one collider usually share its mesh: the same vertices (a
     rigid collider: only the object matrix moves) reuse the hierarchy, moved vertices over the
-    same triangles (a deforming mesh) refit it — building one costs ~100x a refit. Reuse is
-    decided by comparing the arrays, never by name alone."""
+    same triangles (a deforming mesh) refit it — building one costs ~100x a refit — and every
+    REBUILD_AFTER refits it is built afresh for the current shape. Reuse is decided by
+    comparing the arrays, never by name alone."""
     tris, verts = frame.triangles, frame.vertices0
     known = _HIERARCHIES.get(frame.name)
     if known is not None and known[0].shape == tris.shape and np.array_equal(known[0], tris):
         if known[1].shape == verts.shape and np.array_equal(known[1], verts):
             return known[2], known[3]
-        if known[1].shape == verts.shape:
+        if known[1].shape == verts.shape and known[4] < REBUILD_AFTER:
             bvh, _ = known[2].refit(verts)
             boundary = _boundary_features(bvh.mesh)  # welding may change as vertices move
-            _HIERARCHIES[frame.name] = (known[0], verts.copy(), bvh, boundary)
+            _HIERARCHIES[frame.name] = (known[0], verts.copy(), bvh, boundary, known[4] + 1)
             return bvh, boundary
     bvh = build_bvh(TriangleMesh(verts, tris, frame.name), BVH_KIND, "topdown")
     boundary = _boundary_features(bvh.mesh)
     if len(_HIERARCHIES) >= HIERARCHY_CACHE:
         _HIERARCHIES.clear()
-    _HIERARCHIES[frame.name] = (tris.copy(), verts.copy(), bvh, boundary)
+    _HIERARCHIES[frame.name] = (tris.copy(), verts.copy(), bvh, boundary, 0)
     return bvh, boundary
 
 

@@ -206,8 +206,8 @@ class AngularSprings:
         object.__setattr__(self, "_last", [None, None, None])  # x copy, x, gradients
 
     def _gradients(self, x: np.ndarray):
-        """(theta, grad) at x; the gradients of the last call are reused when asked again for
-        the same, unchanged positions (forces then the Jacobian of one implicit step)."""
+        """(theta, grad) at x, remembered so that :meth:`linearize` at the same, unchanged
+        positions reuses the gradients (forces, then the Jacobian, of one implicit step)."""
         theta, grad = dihedral_angles_and_gradients(x, self.hinge)
         self._last[:] = [x.copy(), x, grad]
         return theta, grad

@@ -187,7 +187,9 @@ class BaraffWitkin:
 
     def _known_energy(self, x: np.ndarray, v: np.ndarray):
         """The energy computed at the end of the last step if the state is still exactly that
-        one (else None)."""
+        one (else None). It only decides whether a step needs more Newton iterations; a force
+        that changed between the steps (keyed gravity) makes that decision from a slightly
+        stale start, never the step itself."""
         if self._energy is None:
             return None
         x1, v1, e = self._energy
@@ -208,7 +210,10 @@ class BaraffWitkin:
                 graph = BlockPattern(len(mass), pairs).neighbours if pairs else None
                 hierarchy = AggregationHierarchy(pattern, graph)
             self._pattern = (cliques, pattern, hierarchy)
-        builder = MatrixBuilder(self._pattern[1])
+        pattern = self._pattern[1]
+        # one buffer for every linearisation: the previous matrix is not used after the next
+        # is assembled (each Newton iteration rebuilds its preconditioner)
+        builder = MatrixBuilder(pattern, out=pattern.scratch("matrix", (pattern.size,)))
         builder.add_diagonal(np.arange(len(mass)), mass[:, None, None] * np.eye(3))
         for blk in blocks:
             blk.add_to(builder, -h * h, -h)
@@ -281,11 +286,15 @@ class BaraffWitkin:
             x = project(start)
             r = b - project(apply_a(x))
         residual = float(np.sqrt(np.vdot(r, r))) / b_norm
-        if residual <= self.tolerance and start is None:
+        # a warm start gets at least one iteration (an accepted guess would err systematically
+        # by up to the tolerance), unless it is exact already
+        if residual <= self.tolerance and (start is None or residual == 0.0):
             return x, 0, residual
         z = project(precondition(r))
         p = z.copy()
         rz = float(np.vdot(r, z))
+        if rz == 0.0:  # nothing the filter leaves free to correct
+            return x, 0, residual
         for it in range(1, self.max_iterations + 1):
             q = project(apply_a(p))
             pq = float(np.vdot(p, q))

@@ -7,7 +7,7 @@ mesh removes that long-wave error in one go. The coarse meshes come from the top
 vertices are grouped into aggregates (a vertex and its untaken neighbours along springs, once
 per topology), an aggregate moves as one (piecewise-constant prolongation P), and the coarse
 matrix is the Galerkin product P^T A P — the fine blocks summed by aggregate pair, one
-``np.bincount`` per level and linearisation — recursively down to a few hundred vertices,
+``np.bincount`` per level and linearisation — recursively down to about a hundred vertices,
 solved exactly.
 
 On the fine level the two parts are added (block Jacobi + P (coarse solve) P^T: no extra

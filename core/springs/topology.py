@@ -80,7 +80,8 @@ def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def hinge_geometry(x: np.ndarray, hinge: np.ndarray):
     """Per hinge: corners x0..x3 (e0, e1, w0, w1), edge e = x1 - x0, its length, the face
     normals n1 = e x (x2 - x0), n2 = (x3 - x0) x e (unnormalised) and the signed dihedral angle
-    (0 for a flat pair of triangles)."""
+    (0 for a flat pair of triangles). Hinge indices must be valid for x (the model builder
+    checks them): the gathers clip rather than check, for speed."""
     corners = [np.take(x, hinge[:, k], axis=0, mode="clip") for k in range(4)]
     x0 = corners[0]
     e = corners[1] - x0

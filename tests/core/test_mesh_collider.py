@@ -439,3 +439,31 @@ def test_hierarchy_is_reused_for_the_same_mesh_and_refitted_for_a_deformed_one()
     other_tris = tris[::-1, ::-1].copy()
     rebuilt, _ = mesh_collider._hierarchy(_mesh_collider("Reuse", moved, other_tris))
     assert rebuilt is not refit and np.array_equal(rebuilt.mesh.triangles, other_tris)
+
+    # a mesh that keeps deforming is refitted REBUILD_AFTER times, then built afresh
+    refits = []
+    for k in range(mesh_collider.REBUILD_AFTER + 1):
+        shape = moved + [0.0, 0.0, 0.01 * (k + 1)]
+        mesh_collider._hierarchy(_mesh_collider("Reuse", shape, other_tris))
+        refits.append(mesh_collider._HIERARCHIES["Reuse"][4])
+    assert refits == list(range(1, mesh_collider.REBUILD_AFTER + 1)) + [0]
+
+
+def test_deforming_mesh_with_two_sheets_stops_a_particle_at_the_far_one():
+    """Two stacked plates in one deforming mesh (both facing up; a corner of the lower one
+    moves): a particle just above the lower plate, rising fast, hits the upper plate from
+    behind. Its side must be judged on the plate it hits, not on the nearest sheet (the lower
+    plate, which it is in front of), or the hit is discarded and it passes through."""
+    from physanim.core.particles import colliders as coll
+
+    quad = np.array([[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]])
+    v0 = np.concatenate([quad, quad + [0.0, 0.0, 0.1]])
+    v1 = v0.copy()
+    v1[0, 2] -= 1e-3  # deforming, far from the particle
+    tris = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
+    shelves = _mesh_collider("Shelves", v0, tris, verts1=v1, restitution=0.0, friction=0.0)
+    path = coll.ColliderPath.of(shelves, DT)
+    x0, v = np.array([[0.3, 0.2, 0.03]]), np.array([[0.0, 0.0, 6.0]])
+    x, v_after, count = coll.respond([path], x0, x0 + DT * v, v, v.copy(), 0.0, 1.0, DT, 0.1)
+    assert count == 1
+    assert 0.09 < x[0, 2] < 0.1 and v_after[0, 2] <= 0.0

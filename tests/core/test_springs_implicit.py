@@ -113,3 +113,22 @@ def test_symplectic_euler_with_the_substeps_the_message_asks_for_runs():
     length = np.linalg.norm(state.x[model.spring_i] - state.x[model.spring_j], axis=1)
     assert np.all(length < 1.01 * model.spring_rest)
     assert state.x[:, 2].min() < -0.02  # it is falling (freely: g t^2 / 2 = 0.034 m)
+
+
+@pytest.mark.parametrize("case", ["all pinned", "weightless at rest"])
+def test_steps_with_nothing_to_solve_pass_quietly(case):
+    """A mesh whose every vertex is pinned, or one at rest with no force on it (no gravity, no
+    wind yet): the right-hand side is exactly zero; every step must pass (the state stays put)
+    rather than be mistaken for a solve that lost positive definiteness."""
+    x, edges, tris, ls, lt, lv = _grid(4, 4)
+    pin = np.ones(16) if case == "all pinned" else None
+    settings = SpringMeshSettings("Still", mass=1.0, stiffness=K, damping=1.0)
+    model = SpringMeshBuilder(settings, x, edges, tris, ls, lt, lv, pin_weight=pin).finalize(1)
+    solver = SpringMeshSolver(model, "IMPLICIT", 1, frame_dt=1 / FPS, frame=1)
+    state = model.state()
+    gravity = (0.0, 0.0, -G) if case == "all pinned" else (0.0, 0.0, 0.0)
+    for frame in range(1, 5):
+        solver.advance(state, SpringFrameInputs(frame, (frame - 1) / FPS, 1 / FPS,
+                                                gravity=gravity))
+    np.testing.assert_array_equal(state.x, model.rest_x)
+    np.testing.assert_array_equal(state.v, 0.0)
