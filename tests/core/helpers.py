@@ -1,6 +1,8 @@
 """Helpers shared by the core test files (imported as ``physanim.tests.core.helpers``)."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from physanim.core.particles import ParticleModelBuilder
@@ -34,3 +36,20 @@ def place(state, x, v, emitter=0, mass=1.0, life=1e9):
     n = len(x)
     return state.append(emitter, x, v, np.full(n, mass), np.zeros(n), np.full(n, life),
                         np.full(n, 0.05))
+
+
+def translation(x=0.0, y=0.0, z=0.0) -> np.ndarray:
+    """4 x 4 translation matrix."""
+    m = np.eye(4)
+    m[:3, 3] = (x, y, z)
+    return m
+
+
+def rotation(axis, angle) -> np.ndarray:
+    """4 x 4 rotation about an axis (Rodrigues)."""
+    a = np.asarray(axis, dtype=np.float64)
+    a = a / np.linalg.norm(a)
+    k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    m = np.eye(4)
+    m[:3, :3] = np.eye(3) + math.sin(angle) * k + (1 - math.cos(angle)) * k @ k
+    return m

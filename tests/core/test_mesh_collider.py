@@ -13,6 +13,10 @@ from physanim.core.collision.shapes import grid_mesh
 from physanim.core.particles import (ColliderFrame, EmitterFrame, EmitterSettings, FrameInputs,
                                      ParticleModelBuilder, ParticleSolver)
 from physanim.core.particles.colliders import SKIN
+from physanim.tests.core.helpers import (
+    place as _place, rotation as _rotation,
+    translation as _translate,
+)
 
 G = 9.81
 DT = 1.0 / 24.0
@@ -24,31 +28,9 @@ def _model():
     return builder.finalize()
 
 
-def _place(state, x, v):
-    x = np.atleast_2d(np.asarray(x, dtype=np.float64))
-    v = np.atleast_2d(np.asarray(v, dtype=np.float64))
-    n = len(x)
-    state.append(0, x, v, np.ones(n), np.zeros(n), np.full(n, 1e9), np.full(n, 0.05))
-
-
 def _inputs(frame, colliders, gravity=(0.0, 0.0, -G)):
     return FrameInputs(frame=frame, t0=frame * DT, frame_dt=DT, gravity=gravity,
                        emitters=[EmitterFrame(active=False)], colliders=colliders)
-
-
-def _translate(x=0.0, y=0.0, z=0.0):
-    m = np.eye(4)
-    m[:3, 3] = (x, y, z)
-    return m
-
-
-def _rotation(axis, angle):
-    a = np.asarray(axis, dtype=np.float64)
-    a = a / np.linalg.norm(a)
-    k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
-    m = np.eye(4)
-    m[:3, :3] = np.eye(3) + math.sin(angle) * k + (1 - math.cos(angle)) * k @ k
-    return m
 
 
 def _sheet(n, size):

@@ -14,7 +14,7 @@ from physanim.core.particles import (
 )
 from physanim.core.particles.colliders import SKIN
 from physanim.core.particles.forces import ParticleView
-from physanim.tests.core.helpers import particle_model as _model
+from physanim.tests.core.helpers import particle_model as _model, translation as _translate
 
 G = 9.81
 FPS = 24
@@ -44,12 +44,6 @@ def _rot_x(theta):
     c, s = math.cos(theta), math.sin(theta)
     m = np.eye(4)
     m[1:3, 1:3] = [[c, -s], [s, c]]
-    return m
-
-
-def _translate(x=0.0, y=0.0, z=0.0):
-    m = np.eye(4)
-    m[:3, 3] = (x, y, z)
     return m
 
 

@@ -12,7 +12,10 @@ from physanim.core.particles import (
     ColliderFrame, EmitterFrame, EmitterSettings, FrameInputs, ParticleSolver,
 )
 from physanim.core.particles.colliders import SKIN
-from physanim.tests.core.helpers import particle_model as _model, place as _place
+from physanim.tests.core.helpers import (
+    particle_model as _model, place as _place,
+    rotation as _rotation, translation as _translate,
+)
 
 G = 9.81
 FPS = 24
@@ -22,22 +25,6 @@ DT = 1.0 / FPS
 def _inputs(frame, colliders, gravity=(0.0, 0.0, -G), dt=DT):
     return FrameInputs(frame=frame, t0=frame * dt, frame_dt=dt, gravity=gravity,
                        emitters=[EmitterFrame(active=False)], colliders=colliders)
-
-
-def _translate(x=0.0, y=0.0, z=0.0):
-    m = np.eye(4)
-    m[:3, 3] = (x, y, z)
-    return m
-
-
-def _rotation(axis, angle):
-    """4x4 rotation about a unit axis (Rodrigues)."""
-    a = np.asarray(axis, dtype=np.float64)
-    a = a / np.linalg.norm(a)
-    k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
-    m = np.eye(4)
-    m[:3, :3] = np.eye(3) + math.sin(angle) * k + (1 - math.cos(angle)) * k @ k
-    return m
 
 
 def _scale(x, y, z):

@@ -13,7 +13,7 @@ from physanim.core.errors import PhysanimError
 from physanim.core.particles import (
     EmitterFrame, EmitterSettings, FrameInputs, ParticleModelBuilder, ParticleSolver,
 )
-from physanim.tests.core.helpers import particle_model as _model
+from physanim.tests.core.helpers import particle_model as _model, translation as _translate
 
 FPS = 24
 DT = 1.0 / FPS
@@ -23,12 +23,6 @@ ZERO_G = (0.0, 0.0, 0.0)
 def _inputs(frame, emitters, gravity=ZERO_G, dt=DT, forces=()):
     return FrameInputs(frame=frame, t0=frame * dt, frame_dt=dt, gravity=gravity,
                        emitters=list(emitters), forces=forces)
-
-
-def _translate(x=0.0, y=0.0, z=0.0):
-    m = np.eye(4)
-    m[:3, 3] = (x, y, z)
-    return m
 
 
 def _rot_z(angle):
