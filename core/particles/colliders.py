@@ -276,7 +276,10 @@ def respond(colliders: list[ColliderPath], x0: np.ndarray, x1: np.ndarray, v0: n
         (x, v, hits): corrected positions and velocities, and the number of collisions handled.
     """
     x, v = x1.copy(), v1.copy()
+    first = None if record is None else _FirstHits(len(x))
     if not colliders or len(x) == 0:
+        if first is not None:
+            first.into(record)
         return x, v, 0
     start = x0.copy()
     s_start = np.full(len(x), float(s0))
@@ -319,12 +322,12 @@ def respond(colliders: list[ColliderPath], x0: np.ndarray, x1: np.ndarray, v0: n
             x[idx] = start[idx] + remaining[:, None] * travel
             v[idx] = v_new
             hits += len(idx)
-            if record is not None:
+            if first is not None:
                 # where the surface carries the placed point by the sub-step's end (a deforming
                 # mesh's hit point already lies on its end-of-step surface)
                 end = start[idx] if getattr(col, "hits_end_surface", False) \
                     else start[idx] + remaining[:, None] * v_c
-                _record(record, idx, n_w, v_c, col, end)
+                first.note(idx, n_w, v_c, col, end)
         active = active[best >= 0]
         touched.append(active)
     if touched:
@@ -332,35 +335,36 @@ def respond(colliders: list[ColliderPath], x0: np.ndarray, x1: np.ndarray, v0: n
         xs, vs = x[moved], v[moved]
         hits += _push_out(colliders, xs, vs, s_end[moved], start[moved], s_start[moved])
         x[moved], v[moved] = xs, vs
-    if record is not None:
-        parts = record.pop("_parts", {})
-        record.pop("_seen", None)
-        for key in ("index", "normal", "surface_velocity", "restitution", "friction", "landing"):
-            chunks = parts.get(key, [])
-            empty = np.zeros((0, 3)) if key in _VECTORS else np.zeros(0, np.int64 if key == "index"
-                                                                            else np.float64)
-            record[key] = np.concatenate(chunks) if chunks else empty
+    if first is not None:
+        first.into(record)
     return x, v, hits
 
 
-_VECTORS = ("normal", "surface_velocity", "landing")
+_VECTORS = ("normal", "surface_velocity", "landing")  # recorded per hit, (k, 3) each
 
 
-def _record(record: dict, idx, n_w, v_c, col, landing) -> None:
-    """Note the first collision of particles ``idx`` (later passes' hits are not recorded)."""
-    parts = record.setdefault("_parts", {k: [] for k in ("index", "normal", "surface_velocity",
-                                                           "restitution", "friction", "landing")})
-    seen = record.setdefault("_seen", set())
-    new = np.array([i not in seen for i in idx.tolist()], dtype=bool)
-    if not new.any():
-        return
-    seen.update(idx[new].tolist())
-    k = int(new.sum())
-    for key, value in (("index", idx[new]), ("normal", n_w[new]),
-                       ("surface_velocity", v_c[new]),
-                       ("restitution", np.full(k, col.frame.restitution)),
-                       ("friction", np.full(k, col.frame.friction)), ("landing", landing[new])):
-        parts[key].append(value)
+class _FirstHits:
+    """Each particle's first collision in one :func:`respond` call (for ``record``)."""
+
+    def __init__(self, count: int):
+        self.seen = np.zeros(count, dtype=bool)
+        self.vectors = {k: np.zeros((count, 3)) for k in _VECTORS}
+        self.scalars = {k: np.zeros(count) for k in ("restitution", "friction")}
+
+    def note(self, idx, n_w, v_c, col, landing) -> None:
+        new = ~self.seen[idx]
+        i = idx[new]
+        self.seen[i] = True
+        for key, value in zip(_VECTORS, (n_w, v_c, landing)):
+            self.vectors[key][i] = value[new]
+        self.scalars["restitution"][i] = col.frame.restitution
+        self.scalars["friction"][i] = col.frame.friction
+
+    def into(self, record: dict) -> None:
+        idx = np.nonzero(self.seen)[0]
+        record["index"] = idx
+        for table in (self.vectors, self.scalars):
+            record.update({k: v[idx] for k, v in table.items()})
 
 
 def _push_out(colliders: list[ColliderPath], x: np.ndarray, v: np.ndarray, s: np.ndarray,

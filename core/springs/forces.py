@@ -78,7 +78,7 @@ class SpringSet:
         transverse = np.maximum(0.0, 1.0 - self.rest / safe)
         # df/dx = -k [u u^T + t (I - u u^T)] = -k t I - k (1 - t) u u^T, df/dv = -kd u u^T
         return LinearizedPairs(self.pairs, u, -self.stiffness * transverse,
-                               -self.stiffness * (1.0 - transverse), -self.damping)
+                               -self.stiffness * (1.0 - transverse), -self.damping, self._flat)
 
     def max_rate(self, mass: np.ndarray) -> float:
         """Upper bound of the highest angular frequency [1/s] of the spring network: by
@@ -103,6 +103,7 @@ class LinearizedPairs:
     x_iso: np.ndarray
     x_axis: np.ndarray
     v_axis: np.ndarray
+    flat: np.ndarray  # flat_index of [i, j]: the spring set's, computed once
 
     @property
     def clique(self) -> np.ndarray:
@@ -133,7 +134,7 @@ class LinearizedPairs:
         d = np.take(w, i, axis=0, mode="clip") - np.take(w, j, axis=0, mode="clip")
         along = (cx * self.x_axis + cv * self.v_axis) * _dot(self.u, d)
         df = (cx * self.x_iso)[:, None] * d + along[:, None] * self.u
-        scatter_add(out, None, np.concatenate([df, -df]), flat_index(self.pairs.T.ravel()))
+        scatter_add(out, None, np.concatenate([df, -df]), self.flat)
 
 
 @dataclass(frozen=True)

@@ -71,10 +71,25 @@ class LandingContacts:
     surface_vn: np.ndarray
     h: float
 
+    @classmethod
+    def resting(cls, contact) -> "LandingContacts":
+        """A step's resting contacts (a ContactForce, or already these), none landing."""
+        if isinstance(contact, cls):
+            return contact
+        c = len(contact.index)
+        restitution = np.zeros(c) if contact.restitution is None else contact.restitution
+        return cls(contact.index, contact.normal, contact.surface_velocity, contact.friction,
+                   restitution, np.zeros(c, bool),
+                   np.einsum("ij,ij->i", contact.surface_velocity, contact.normal), contact.h)
 
-def _restitution(contact) -> np.ndarray:
-    r = getattr(contact, "restitution", None)
-    return np.zeros(len(contact.index)) if r is None else r
+    def merged(self, other: "LandingContacts") -> "LandingContacts":
+        """These contacts with ``other``'s vertices replaced or added, index sorted."""
+        stay = ~np.isin(self.index, other.index)
+        names = ("index", "normal", "surface_velocity", "friction", "restitution", "landing",
+                 "surface_vn")
+        fields = [np.concatenate([getattr(self, k)[stay], getattr(other, k)]) for k in names]
+        order = np.argsort(fields[0], kind="stable")
+        return LandingContacts(*(f[order] for f in fields), self.h)
 
 
 def _bounce(v: np.ndarray, landing: LandingContacts, rest_speed: float) -> None:
@@ -368,11 +383,9 @@ class SpringMeshSolver:
         normal velocity is the one that takes it from its start to where the collision put it
         — merged with ``base`` (the step's resting contacts, or the last round's set). None
         when no vertex that is not landing already was hit."""
+        base = LandingContacts.resting(base)
         idx = record["index"]
-        keep = self.free[idx]
-        if base is not None and len(base.index):
-            already = getattr(base, "landing", np.zeros(len(base.index), bool))
-            keep &= ~np.isin(idx, base.index[already])
+        keep = self.free[idx] & ~np.isin(idx, base.index[base.landing])
         if not keep.any():
             return None
         idx, n = idx[keep], record["normal"][keep]
@@ -380,19 +393,10 @@ class SpringMeshSolver:
         own_vn = np.einsum("ij,ij->i", sv, n)
         land_vn = np.einsum("ij,ij->i", record["landing"][keep] - x0[idx], n) / h
         sv = sv + (land_vn - own_vn)[:, None] * n
-        parts = []
-        if base is not None and len(base.index):
-            stay = ~np.isin(base.index, idx)  # a resting vertex that was hit lands instead
-            parts.append((base.index[stay], base.normal[stay], base.surface_velocity[stay],
-                          base.friction[stay], _restitution(base)[stay],
-                          getattr(base, "landing", np.zeros(len(base.index), bool))[stay],
-                          getattr(base, "surface_vn", np.einsum(
-                              "ij,ij->i", base.surface_velocity, base.normal))[stay]))
-        parts.append((idx, n, sv, record["friction"][keep], record["restitution"][keep],
-                      np.ones(len(idx), bool), own_vn))
-        fields = [np.concatenate([p[k] for p in parts]) for k in range(7)]
-        order = np.argsort(fields[0], kind="stable")
-        return LandingContacts(*(f[order] for f in fields), h)
+        # a resting vertex that was hit lands instead
+        return base.merged(LandingContacts(idx, n, sv, record["friction"][keep],
+                                           record["restitution"][keep],
+                                           np.ones(len(idx), bool), own_vn, h))
 
     def _check(self, state: SpringMeshState, frame) -> None:
         if not (np.all(np.isfinite(state.x)) and np.all(np.isfinite(state.v))):
