@@ -72,14 +72,15 @@ def relative_path(path: str) -> str:
 
 def estimate(scene, roles: extract.Roles) -> tuple[float, float]:
     """Peak alive particles and cache bytes of a bake, from rates and lifetimes (upper bounds)."""
-    frames = max(0, scene.physanim.frame_end - scene.physanim.frame_start)
+    frames = max(0, scene.physanim.frame_end - scene.physanim.frame_start) + 1
     peak_by_name: dict[str, float] = {}
     total_bytes = 0.0
     for ob in roles.emitters:  # parents first is not guaranteed: resolve sub-emitters after
         p = ob.physanim.emitter
         if p.source == 'DEATHS':
             continue
-        active = max(0, min(p.frame_end, scene.physanim.frame_end) - max(p.frame_start, scene.physanim.frame_start))
+        active = max(0, min(p.frame_end, scene.physanim.frame_end)
+                     - max(p.frame_start, scene.physanim.frame_start) + 1)  # inclusive window
         life = p.lifetime + p.lifetime_random
         peak_by_name[ob.name] = (p.rate + p.rate_random) * min(life, active) if active else 0.0
         total_bytes += (p.rate + p.rate_random) * active * min(life, frames) * BYTES_PER_PARTICLE_FRAME
@@ -155,10 +156,10 @@ class BakeJob:
             self.model = self.extractor.build_model(depsgraph, self.frame_start)
             self.solver = ParticleSolver(self.model, self.settings.integrator,
                                          self.settings.substeps, self.settings.tolerance)
-            self.state = self.model.state(convert.frame_time(self.scene, self.frame_start))
             self.sample = self.extractor.sample(depsgraph, self.frame_start)
             self.objects_limit = {ob.name for ob in self.roles.emitters
                                   if ob.physanim.emitter.output == 'OBJECTS'}
+            self._first_births()
             self._write_frame(self.frame_start)
         except BaseException:
             self.abort()
@@ -218,30 +219,53 @@ class BakeJob:
             self.writers[ob.name].write_frame(STREAM, frame, arrays)
         self.stats["peak"] = max(self.stats["peak"], self.state.particle_count)
 
+    def _interval(self, frame: int, start):
+        """Core inputs for the interval ``frame`` -> ``frame + 1`` from the sample ``start`` at
+        ``frame``; leaves the scene at ``frame + 1``. Returns (inputs, sample at frame + 1)."""
+        between = []
+        substeps = self.settings.substeps
+        for k in range(1, substeps):  # sub-frame motion keys: one per sub-step boundary
+            self.scene.frame_set(frame, subframe=k / substeps)
+            between.append(self.extractor.sample_motion())
+        self.scene.frame_set(frame + 1)
+        end = self.extractor.sample(self.view_layer.depsgraph, frame + 1)
+        return self.extractor.inputs(start, end, between), end
+
+    def _first_births(self) -> None:
+        """Births of frame f happen during the interval f - 1 -> f, so they show at frame f
+        (emission windows are inclusive: start = end is a one-frame burst). For an emitter
+        whose window holds the bake's first frame, that interval lies before the bake: it is
+        simulated for the particles alone, which start the bake with ages up to one frame."""
+        s = self.frame_start
+        if not any(values["active"] for *_, values in self.sample.emitters):
+            self.state = self.model.state(convert.frame_time(self.scene, s))
+            return
+        self.state = self.model.state(convert.frame_time(self.scene, s - 1))
+        self.scene.frame_set(s - 1)
+        before = self.extractor.sample(self.view_layer.depsgraph, s - 1)
+        inputs, self.sample = self._interval(s - 1, before)
+        self._record(self.solver.advance(self.state, inputs), s)
+
     def step(self, context) -> bool:
         """Simulate and write the next frame. Returns True when the bake has reached its end."""
         if self.frame >= self.frame_end:
             return True
         nxt = self.frame + 1
-        between = []
-        substeps = self.settings.substeps
-        for k in range(1, substeps):  # sub-frame motion keys: one per sub-step boundary
-            self.scene.frame_set(self.frame, subframe=k / substeps)
-            between.append(self.extractor.sample_motion())
-        self.scene.frame_set(nxt)
-        sample = self.extractor.sample(self.view_layer.depsgraph, nxt)
-        inputs = self.extractor.inputs(self.sample, sample, between)
+        inputs, sample = self._interval(self.frame, self.sample)
         report = self.solver.advance(self.state, inputs)
         for mesh in self.meshes:
             mesh.advance(mesh.read(self.view_layer.depsgraph, nxt), inputs.colliders,
                          inputs.forces, inputs.t0, inputs.frame_dt, inputs.gravity)
-        self.stats["births"] += report.births
-        self.stats["collisions"] += report.collisions
-        self._count_births(report, nxt)
+        self._record(report, nxt)
         self.sample = sample
         self.frame = nxt
         self._write_frame(nxt)
         return self.frame >= self.frame_end
+
+    def _record(self, report, frame: int) -> None:
+        self.stats["births"] += report.births
+        self.stats["collisions"] += report.collisions
+        self._count_births(report, frame)
 
     def _count_births(self, report, frame: int) -> None:
         """Fail early (before anything is replaced) when the Objects output would get too many

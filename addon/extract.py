@@ -227,7 +227,7 @@ class Extractor:
                         f"{key}_random {values[key + '_random']:g} {unit} is larger than {key} "
                         f"{values[key]:g} {unit}: values would become negative — lower "
                         f"{key}_random or raise {key}", obj=ob.name, frame=frame, kind="emitter")
-            values["active"] = p.frame_start <= frame < p.frame_end
+            values["active"] = p.frame_start <= frame <= p.frame_end  # births of this frame
             emitters.append((_world_matrix(ob, frame, "emitter"), verts, values))
         colliders = []
         for ob in self.roles.colliders:
@@ -268,7 +268,8 @@ class Extractor:
             return np.stack([m0] + [mid[kind][i] for mid in between] + [m1])
 
         emitters = []
-        for i, ((m0, v0, val), (m1, v1, _)) in enumerate(zip(a.emitters, b.emitters)):
+        # the interval's births are frame b's: they use the emitter's values at b
+        for i, ((m0, v0, _), (m1, v1, val)) in enumerate(zip(a.emitters, b.emitters)):
             emitters.append(EmitterFrame(
                 rate=val["rate"], rate_random=val["rate_random"], speed=val["speed"],
                 speed_random=val["speed_random"], lifetime=val["lifetime"] * to_s,

@@ -102,9 +102,11 @@ class PHYSANIM_PG_emitter(bpy.types.PropertyGroup):
     rate_random: FloatProperty(name="Rate Random", min=0.0, max=1.0e6, soft_max=1000.0,
                                description="Births per frame = rate + Rand()*this, Rand in [-1, 1]")
     frame_start: IntProperty(name="Start", default=1, min=-1_000_000, max=1_000_000,
-                             description="First frame that gives births")
+                             description="First frame whose births show (births of frame f happen "
+                                         "during the frame before it)")
     frame_end: IntProperty(name="End", default=200, min=-1_000_000, max=1_000_000,
-                           description="Births stop at this frame")
+                           description="Last frame that gives births (inclusive: Start = End is "
+                                       "a one-frame burst)")
     lifetime: FloatProperty(name="Lifetime", min=0.0, max=1.0e6, soft_max=1000.0, default=50.0,
                             description="Life span in frames")
     lifetime_random: FloatProperty(name="Lifetime Random", min=0.0, max=1.0e6, soft_max=1000.0,

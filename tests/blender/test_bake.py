@@ -235,7 +235,7 @@ def test_result_follows_frames_after_save_and_reload(physanim_ext, tmp_path):
 
 def test_headless_animation_render_shows_the_particles(physanim_ext, tmp_path):
     scene = _setup(frame_end=6)
-    ob = _emitter("Spray", rate=3.0, speed=3.0, spread=0.3, size=0.35, lifetime=40.0)
+    ob = _emitter("Spray", rate=3.0, speed=6.0, spread=0.3, size=0.35, lifetime=40.0)
     for stop in ob.physanim.emitter.color_stops:
         stop.color = (1.0, 0.2, 0.1, 1.0)
     camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
@@ -329,9 +329,8 @@ def test_keyframed_rate_is_sampled_per_frame(physanim_ext, tmp_path):
         ids = set(_cached(physanim_ext, ob, frame)["id"].tolist())
         assert previous <= ids  # nothing dies
         born = len(ids - previous)
-        if frame > 1:
-            rate = 10.0 * min(frame - 2, 9)  # births of [f-1, f] use the rate at frame f-1
-            assert math.floor(rate) <= born <= math.ceil(rate) + 1e-9, (frame, born, rate)
+        rate = 10.0 * min(frame - 1, 9)  # births shown at frame f use the rate at frame f
+        assert math.floor(rate) <= born <= math.ceil(rate) + 1e-9, (frame, born, rate)
         previous = ids
     assert len(previous) > 300
 
@@ -343,9 +342,8 @@ def test_emitter_frame_range_limits_births(physanim_ext, tmp_path):
     _save(tmp_path)
     assert bpy.ops.physanim.bake() == {'FINISHED'}
     counts = [len(_cached(physanim_ext, ob, f)["id"]) for f in range(1, 13)]
-    assert counts[:4] == [0, 0, 0, 0]  # frames 1-4: births start in [4, 5]
-    assert counts[4] == 5 and counts[5] == 10 and counts[6] == 15
-    assert counts[6:] == [15] * 6
+    # inclusive window: births show at frames 4, 5, 6 and 7 (those of frame f happen in [f-1, f])
+    assert counts == [0, 0, 0, 5, 10, 15, 20, 20, 20, 20, 20, 20]
 
 
 def test_keyframed_frame_start_is_sampled_per_frame(physanim_ext, tmp_path):
@@ -358,8 +356,9 @@ def test_keyframed_frame_start_is_sampled_per_frame(physanim_ext, tmp_path):
     _save(tmp_path)
     assert bpy.ops.physanim.bake() == {'FINISHED'}
     counts = [len(_cached(physanim_ext, ob, f)["id"]) for f in range(1, 11)]
-    # active in [1, 2] (start 1), then not until frame 6 (start keyed to 6 from frame 2 on)
-    assert counts == [0, 4, 4, 4, 4, 4, 8, 12, 16, 20]
+    # frame 1 gives births (start 1: they happen in [0, 1], before the bake, and show at
+    # frame 1), then none until frame 6 (start keyed to 6 from frame 2 on)
+    assert counts == [4, 4, 4, 4, 4, 8, 12, 16, 20, 24]
 
 
 # ---------------------------------------------------------------------------------- free
@@ -524,7 +523,7 @@ def test_particles_ride_a_rising_animated_ground(physanim_ext, tmp_path):
     drop = scene.objects["Drop"]
     for frame in range(6, 25):
         z = _cached(physanim_ext, drop, frame)["position"][:, 2]
-        assert len(z) == 10
+        assert len(z) == 15  # frames 1-3 at 5 births each
         assert z.min() >= ground_z(frame) - 2e-3, (frame, z.min(), ground_z(frame))
         if 8 <= frame <= 20:  # riding the ground (afterwards they may hop off as it stops)
             np.testing.assert_allclose(z, ground_z(frame), atol=0.03, err_msg=f"frame {frame}")
