@@ -253,8 +253,10 @@ class PHYSANIM_PG_spring_mesh(bpy.types.PropertyGroup):
                                  default=1000.0, options=STATIC,
                                  description="Springs of partly weighted pins, N/m")
     virtual_springs: CollectionProperty(type=PHYSANIM_PG_virtual)
-    integrator: EnumProperty(name="Integrator", items=SPRING_INTEGRATOR_ITEMS, default='SCENE',
-                             options=STATIC)
+    integrator: EnumProperty(name="Integrator", items=SPRING_INTEGRATOR_ITEMS, default='IMPLICIT',
+                             options=STATIC,
+                             description="Implicit Euler (default) is stable for every stiffness "
+                                         "at any step; explicit methods need small steps")
     substeps: IntProperty(name="Substeps", min=0, max=1000, default=0, options=STATIC,
                           description="Steps per frame (0 = the scene's)")
     bake_hash: StringProperty(name="Bake Hash", options={'HIDDEN'})

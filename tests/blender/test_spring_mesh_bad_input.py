@@ -8,6 +8,7 @@ Each failing test bakes a small grid successfully first, records it, then makes 
 from __future__ import annotations
 
 import math
+import re
 import sys
 from pathlib import Path
 
@@ -215,9 +216,17 @@ def test_stiff_springs_with_explicit_euler_ask_for_implicit(physanim_ext, tmp_pa
     if where == "object":
         p.integrator = 'EULER'
     else:
+        p.integrator = 'SCENE'  # spring meshes default to IMPLICIT; this one follows the scene
         scene.physanim.integrator = 'EULER'
-    _bake_fails('spring mesh "Cloth"', f"frame {FRAME_START}", "EULER", "1e+06", "IMPLICIT")
+    message = _bake_fails('spring mesh "Cloth"', f"frame {FRAME_START}", "EULER", "1e+06",
+                          "IMPLICIT")
     baked.assert_intact()
+    # the step it would need is a real number, consistent with the substeps it asks for
+    h, need = re.search(r"h = ([0-9.e+-]+) s\).*needs h < ([0-9.e+-]+) s", message).groups()
+    now = int(re.search(r"with ([0-9]+) substep", message)[1])
+    substeps = int(re.search(r"about ([0-9,]+) substeps", message)[1].replace(",", ""))
+    assert 0.0 < float(need) < float(h)
+    assert substeps == pytest.approx(now * float(h) / float(need), rel=0.01, abs=1.0)
 
     p.integrator = 'IMPLICIT'  # the same stiffness is stable implicitly, at one step per frame
     p.substeps = 1
