@@ -15,6 +15,7 @@ from ..core.errors import PhysanimError
 from ..core.particles import (Attractor, ColliderFrame, Drag, EmitterFrame, EmitterSettings,
                               FrameInputs, ParticleModel, ParticleModelBuilder, SpringLink,
                               Vortex, Wind)
+from ..core.particles.collider_fit import fit_analytic_shape
 from . import convert
 
 MESH_SOURCES = ("VERTS", "FACES", "VOLUME")
@@ -146,6 +147,34 @@ class Extractor:
         self._vertex_counts: dict[str, int] = {}
         self._collider_tris: dict[str, np.ndarray] = {}
         self._collider_counts: dict[str, int] = {}
+        self._collider_shapes: dict[str, tuple[str, np.ndarray]] = {}
+
+    def _collider_shape(self, ob, depsgraph, frame: int) -> tuple[str, np.ndarray]:
+        """(core shape, local fit matrix) of a collider, decided on its first frame. Automatic
+        collides with what the user sees: a mesh that may deform (modifiers, shape keys) or is
+        no exact box or rectangle collides as its own evaluated mesh; an empty is the ground."""
+        known = self._collider_shapes.get(ob.name)
+        if known is not None:
+            return known
+        shape, fit = ob.physanim.collider.shape, np.eye(4)
+        if shape == 'AUTO':
+            if ob.type == 'EMPTY':
+                shape = 'HALF_SPACE'
+            elif ob.type != 'MESH':
+                raise PhysanimError(f"an Automatic collider must be a mesh or an empty (this is "
+                                    f"a {ob.type}) — convert it to a mesh or pick a shape",
+                                    obj=ob.name, frame=frame, kind="collider")
+            elif any(True for m in ob.modifiers if not _made_by_bake(m)) or ob.data.shape_keys:
+                shape = 'MESH'
+            else:
+                verts, tris = _mesh_arrays(ob, depsgraph, triangles=True)
+                if len(tris) == 0:
+                    raise PhysanimError("a collider needs faces (this mesh has none) — add "
+                                        "faces or pick the Ground shape", obj=ob.name,
+                                        frame=frame, kind="collider")
+                shape, fit = fit_analytic_shape(verts, tris)
+        self._collider_shapes[ob.name] = (shape, fit)
+        return shape, fit
 
     def _collider_mesh(self, ob, depsgraph, frame: int) -> np.ndarray:
         """Local vertex positions of a mesh collider's evaluated (deformed) mesh at this frame;
@@ -234,8 +263,9 @@ class Extractor:
             c = ob.physanim.collider
             _check_finite(ob, frame, "collider", {"restitution": c.restitution,
                                                    "friction": c.friction, "thickness": c.thickness})
-            verts = self._collider_mesh(ob, depsgraph, frame) if c.shape == 'MESH' else None
-            colliders.append((_world_matrix(ob, frame, "collider"), c.shape, c.restitution,
+            shape, fit = self._collider_shape(ob, depsgraph, frame)
+            verts = self._collider_mesh(ob, depsgraph, frame) if shape == 'MESH' else None
+            colliders.append((_world_matrix(ob, frame, "collider") @ fit, shape, c.restitution,
                               c.friction, c.thickness, verts))
         forces = []
         for ob in self.roles.forces:
@@ -250,7 +280,8 @@ class Extractor:
         """World matrices of emitters and colliders at the current (sub-)frame."""
         frame = self.scene.frame_current_final
         return ([_world_matrix(ob, frame, "emitter") for ob in self.roles.emitters],
-                [_world_matrix(ob, frame, "collider") for ob in self.roles.colliders])
+                [_world_matrix(ob, frame, "collider") @ self._collider_shapes[ob.name][1]
+                 for ob in self.roles.colliders])
 
     def inputs(self, a: FrameSample, b: FrameSample, between: list | None = None) -> FrameInputs:
         """Core inputs for the interval from sample ``a`` to sample ``b`` (the next frame).

@@ -47,6 +47,9 @@ OUTPUT_ITEMS = [
     ('OBJECTS', "Objects", "One keyframed object per particle (small counts)"),
 ]
 COLLIDER_SHAPE_ITEMS = [
+    ('AUTO', "Automatic", "What you see: a mesh that is exactly a box or a filled rectangle "
+     "collides as that analytic shape (fastest), any other or deforming mesh as itself (Mesh), "
+     "an empty as the ground"),
     ('HALF_SPACE', "Ground", "Infinite plane through the origin along local XY; below it is solid"),
     ('PLANE', "Plane", "Two-sided square of Blender's plane primitive (local XY, -1..1)"),
     ('SPHERE', "Sphere", "Blender's UV/ico sphere primitive (radius 1, scaled by the object)"),
@@ -150,7 +153,7 @@ class PHYSANIM_PG_emitter(bpy.types.PropertyGroup):
 
 class PHYSANIM_PG_collider(bpy.types.PropertyGroup):
     enabled: BoolProperty(name="Collider", description="Particles bounce off this object")
-    shape: EnumProperty(name="Shape", items=COLLIDER_SHAPE_ITEMS, default='HALF_SPACE', options=STATIC)
+    shape: EnumProperty(name="Shape", items=COLLIDER_SHAPE_ITEMS, default='AUTO', options=STATIC)
     restitution: FloatProperty(name="Restitution", min=0.0, max=1.0, default=0.5,
                                subtype='FACTOR', description="Normal speed kept after a bounce")
     friction: FloatProperty(name="Friction", min=0.0, max=100.0, soft_max=2.0, default=0.3,
