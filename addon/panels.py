@@ -192,6 +192,9 @@ class PHYSANIM_PT_force(_PhysicsPanel, bpy.types.Panel):
         layout = self.layout
         layout.use_property_split = True
         layout.prop(p, "type")
+        layout.label(text="Acts on particles and on spring meshes " + (
+            "(pressure on their faces)" if p.type == 'WIND' else "(a whole mesh as one particle)"),
+            icon='INFO')
         if p.type == 'DRAG':
             layout.prop(p, "linear")
             layout.prop(p, "quadratic")

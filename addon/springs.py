@@ -183,7 +183,8 @@ class SpringMeshBake:
         inputs = SpringFrameInputs(
             frame=a["frame"], t0=t0, frame_dt=frame_dt, gravity=gravity, rest0=a["rest"],
             rest1=nxt["rest"], targets={n: (a["targets"][n], nxt["targets"][n]) for n in self.targets},
-            colliders=colliders, winds=[f for f in forces if isinstance(f, Wind)])
+            colliders=colliders, winds=[f for f in forces if isinstance(f, Wind)],
+            fields=[f for f in forces if not isinstance(f, Wind)])
         self.solver.advance(self.state, inputs)
         self.sample = nxt
         self.write()

@@ -324,3 +324,23 @@ class LinearDrag:
         n = len(p.mass)
         kv = -(self.k * p.mass)[:, None, None] * np.eye(3)
         return LinearizedVertices(np.arange(n), np.zeros((n, 3, 3)), kv)
+
+
+@dataclass(frozen=True)
+class MassShared:
+    """A particle force object (drag, attractor, vortex, ...) acting on a whole spring mesh as
+    on one particle: each vertex gets the force at its own position and velocity times its share
+    of the mesh's mass, so the mesh as a whole feels what one particle there would, however
+    finely it is subdivided.
+
+    Args:
+        force: anything with ``apply(p, f_out)``. share: (n,) vertex mass / total mass.
+    """
+
+    force: object
+    share: np.ndarray
+
+    def apply(self, p: ParticleView, f_out: np.ndarray) -> None:
+        f = np.zeros_like(f_out)
+        self.force.apply(p, f)
+        f_out += self.share[:, None] * f

@@ -20,7 +20,8 @@ from ..particles import colliders as coll
 from ..particles.forces import Gravity, ParticleView, Wind
 from ..particles.settings import ColliderFrame
 from ..transforms import TransformPath, inverse_affine, transform_points
-from .forces import AnchorSprings, AngularSprings, LinearDrag, SpringSet, scatter_add
+from .forces import (AnchorSprings, AngularSprings, LinearDrag, MassShared, SpringSet,
+                     scatter_add)
 from .implicit import BaraffWitkin
 from .model import SpringMeshModel, SpringMeshState
 from .strain import limit_strain
@@ -41,6 +42,8 @@ class SpringFrameInputs:
         rest0, rest1: (n, 3) animated rest positions (world) at start/end — pin targets.
         targets: object name -> (m0, m1) world matrices of virtual-spring targets.
         colliders: analytic or mesh colliders. winds: wind force objects (pressure on faces).
+        fields: other force objects (drag, attractor, vortex, ...): they act on the whole mesh
+            as on one particle, shared by the vertices in proportion to their mass.
     """
 
     frame: int
@@ -52,6 +55,7 @@ class SpringFrameInputs:
     targets: dict = field(default_factory=dict)
     colliders: Sequence[ColliderFrame] = ()
     winds: Sequence[Wind] = ()
+    fields: Sequence = ()
 
 
 @dataclass(frozen=True)
@@ -246,6 +250,7 @@ class SpringMeshSolver:
                                       s.bend_damping)
         self.free = ~model.pinned
         self._inv_mass = np.where(self.free, 1.0 / model.vertex_mass, 0.0)
+        self._mass_share = model.vertex_mass / model.vertex_mass.sum()
         self._check_stability(frame_dt / self.substeps, frame)
         self._attach_local = self._attachments()
 
@@ -319,6 +324,7 @@ class SpringMeshSolver:
                       LinearDrag(model.settings.drag)]
             forces += self._virtual(inputs, t, h, s0, s1)
             forces += [FaceWind(model.triangles, w) for w in inputs.winds if len(model.triangles)]
+            forces += [MassShared(f, self._mass_share) for f in inputs.fields]
             implicit = isinstance(self.integrator, BaraffWitkin)
             if not implicit:  # the implicit step enforces contacts as constraints instead
                 forces.append(contact)
