@@ -20,7 +20,7 @@ from ..core.cache import CacheWriter
 from ..core.errors import PhysanimError, SimulationError
 from ..core.particles import ParticleSolver, emitter_arrays
 from ..core.particles.mesh_collider import forget_hierarchies
-from . import convert, extract, springs
+from . import convert, extract, limits, springs
 
 STREAM = "points"
 BYTES_PER_PARTICLE_FRAME = 4 * (1 + 3 + 3 + 1 + 1 + 1 + 4 + 3 + 3)  # cache arrays of output.py
@@ -121,6 +121,7 @@ class BakeJob:
         if self.frame_end < self.frame_start:
             raise PhysanimError(f"frame end {self.frame_end} is before frame start {self.frame_start}",
                                 obj=self.scene.name, kind="scene")
+        limits.check_scene(self.scene, self.frame_start, self.frame_end)
         self._check_budget()
         self.writers: dict[str, CacheWriter] = {}
         self.frame = self.frame_start
@@ -155,7 +156,8 @@ class BakeJob:
                 bake.prepare(depsgraph, self.frame_start)
             self.model = self.extractor.build_model(depsgraph, self.frame_start)
             self.solver = ParticleSolver(self.model, self.settings.integrator,
-                                         self.settings.substeps, self.settings.tolerance)
+                                         self.settings.substeps, self.settings.tolerance,
+                                         limits.bounds(self.scene))
             self.sample = self.extractor.sample(depsgraph, self.frame_start)
             self.objects_limit = {ob.name for ob in self.roles.emitters
                                   if ob.physanim.emitter.output == 'OBJECTS'}
@@ -197,6 +199,17 @@ class BakeJob:
         """Positions and velocities must fit the float32 cache: a value beyond it would be
         written as inf (silently) although the float64 simulation is still finite."""
         state = self.state
+        for what, values in (("position", state.particle_x), ("velocity", state.particle_v),
+                             ("size", state.particle_size[:, None]),
+                             ("age", state.particle_age[:, None])):
+            bad = ~np.isfinite(values).all(axis=1)
+            if bad.any():
+                i = int(np.argmax(bad))
+                raise SimulationError(
+                    f"particle {int(state.particle_id[i])} {what} became "
+                    f"{np.array2string(values[i], precision=4)} — nothing non-finite is ever "
+                    "written to a bake", obj=self.model.emitters[int(state.particle_emitter[i])].name,
+                    frame=frame, kind="emitter")
         for what, values, unit in (("position", state.particle_x, "m"),
                                    ("velocity", state.particle_v, "m/s")):
             big = (np.abs(values) > FLOAT32_MAX).any(axis=1)

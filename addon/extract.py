@@ -16,7 +16,7 @@ from ..core.particles import (Attractor, ColliderFrame, Drag, EmitterFrame, Emit
                               FrameInputs, ParticleModel, ParticleModelBuilder, SpringLink,
                               Vortex, Wind)
 from ..core.particles.collider_fit import fit_analytic_shape
-from . import convert
+from . import convert, limits
 
 MESH_SOURCES = ("VERTS", "FACES", "VOLUME")
 
@@ -101,6 +101,7 @@ def _world_matrix(ob, frame: float, kind: str) -> np.ndarray:
                             f"{tuple(round(v, 4) for v in location)}, scale "
                             f"{tuple(round(v, 4) for v in scale)} — check its animation, "
                             "drivers and parents", obj=ob.name, frame=frame, kind=kind)
+    limits.check_scale(ob, m, frame, kind)
     return m
 
 

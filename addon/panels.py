@@ -300,6 +300,9 @@ class PHYSANIM_PT_scene(bpy.types.Panel):
         if s.integrator == 'RK45':
             layout.prop(s, "tolerance")
         layout.prop(s, "seed")
+        col = layout.column(align=True, heading="Limits")
+        col.prop(s, "world_bound")
+        col.prop(s, "speed_limit")
         layout.prop(s, "cache_dir")
         draw_bake_buttons(layout.box(), context.scene)
 

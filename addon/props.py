@@ -12,6 +12,7 @@ import bpy
 from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProperty,
                        FloatVectorProperty, IntProperty, PointerProperty, StringProperty)
 
+from ..core.bounds import DEFAULT_POSITION, DEFAULT_SPEED
 from ..core.integrators import INTEGRATORS
 from .compat import BLEND_RELATIVE_PATH_OPTIONS
 
@@ -294,6 +295,14 @@ class PHYSANIM_PG_scene(bpy.types.PropertyGroup):
     tolerance: FloatProperty(name="Tolerance", default=1.0e-4, min=1.0e-10, max=1.0,
                              precision=6, description="Error tolerance of the adaptive RK45", options=STATIC)
     seed: IntProperty(name="Seed", min=0, max=2**31 - 1, options=STATIC)
+    world_bound: FloatProperty(name="World Bound", default=DEFAULT_POSITION, min=1.0, max=1.0e7,
+                               unit='LENGTH', options=STATIC,
+                               description="A particle or vertex farther than this from the world "
+                                           "origin (in any axis) stops the bake with an error")
+    speed_limit: FloatProperty(name="Speed Limit", default=DEFAULT_SPEED, min=1.0, max=1.0e7,
+                               unit='VELOCITY', options=STATIC,
+                               description="A particle or vertex faster than this stops the bake "
+                                           "with an error")
     cache_dir: StringProperty(name="Cache", subtype='DIR_PATH', default="//physanim_cache",
                               options=BLEND_RELATIVE_PATH_OPTIONS,
                               description="Folder for bake caches ('//' = next to the .blend)")

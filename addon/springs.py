@@ -20,7 +20,7 @@ from ..core.pc2 import Pc2Writer
 from ..core.springs import (SpringFrameInputs, SpringMeshBuilder, SpringMeshSettings,
                             SpringMeshSolver, VirtualSprings)
 from ..core.transforms import inverse_affine, transform_points
-from . import convert
+from . import convert, limits
 from .extract import _world_matrix
 
 MODIFIER = "physanim"
@@ -135,7 +135,8 @@ class SpringMeshBake:
         integrator = s.integrator if p.integrator == 'SCENE' else p.integrator
         substeps = p.substeps or s.substeps
         self.solver = SpringMeshSolver(self.model, integrator, substeps, s.tolerance,
-                                       1.0 / convert.fps(self.scene), frame)
+                                       1.0 / convert.fps(self.scene), frame,
+                                       limits.bounds(self.scene))
         self.state = self.model.state()
         self.vertex_count = len(rest)
         self.pc2 = Pc2Writer(self.writer.file_path(CACHE_FILE), self.vertex_count, frame)
@@ -192,6 +193,11 @@ class SpringMeshBake:
     def write(self) -> None:
         """Append this frame's object-space positions to the PC2 file."""
         local = transform_points(inverse_affine(self.sample["matrix"]), self.state.x)
+        if not np.isfinite(local).all():  # nothing non-finite is ever written to a bake
+            bad = int(np.argmax(~np.isfinite(local).all(axis=1)))
+            raise PhysanimError(f"vertex {bad} became {local[bad].tolist()} in object space — "
+                                "check the object's scale and animation", obj=self.ob.name,
+                                frame=self.sample["frame"], kind="spring mesh")
         self.pc2.append(local)
 
     def close(self) -> None:

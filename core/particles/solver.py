@@ -18,6 +18,7 @@ from typing import Sequence
 
 import numpy as np
 
+from ..bounds import StateBounds
 from ..errors import PhysanimError, SimulationError
 from ..integrators import Integrator, make_integrator
 from . import colliders as coll
@@ -110,13 +111,15 @@ class ParticleSolver:
             :class:`Integrator`.
         substeps: sub-steps per frame (>= 1).
         tolerance: error tolerance of the adaptive integrator.
+        bounds: a particle beyond them (position or speed) stops the bake with an error.
     """
 
     def __init__(self, model: ParticleModel, integrator: str | Integrator = "SYMPLECTIC_EULER",
-                 substeps: int = 1, tolerance: float = 1e-4):
+                 substeps: int = 1, tolerance: float = 1e-4, bounds: StateBounds = StateBounds()):
         if int(substeps) != substeps or substeps < 1:
             raise ValueError(f"substeps must be an integer >= 1 (got {substeps})")
         self.model = model
+        self.bounds = bounds
         self.integrator = (make_integrator(integrator, tolerance) if isinstance(integrator, str)
                            else integrator)
         self.substeps = int(substeps)
@@ -154,6 +157,7 @@ class ParticleSolver:
             deaths = self._age_kill(state, h)
             report.deaths += sum(len(d[0]) for d in deaths)
             self._emit(state, inputs, births, deaths, s0, s1, g, report)
+            self._check_bounds(state, inputs)
             state.t = t + h
         report.alive = state.particle_count
         return report
@@ -206,6 +210,16 @@ class ParticleSolver:
         x, v = state.particle_x, state.particle_v
         if not (np.isfinite(x).all() and np.isfinite(v).all()):
             raise self._blame(state, inputs, "", x, v)
+
+    def _check_bounds(self, state, inputs) -> None:
+        bad = self.bounds.violation(state.particle_x, state.particle_v)
+        if bad is not None:
+            i, what = bad
+            raise SimulationError(
+                f"particle {int(state.particle_id[i])} {what} — check gravity, forces and "
+                "emitter speeds, or raise the limits in Scene > PhysAnim > Limits",
+                obj=self.model.emitters[int(state.particle_emitter[i])].name, frame=inputs.frame,
+                kind="emitter")
 
     def _blame(self, state, inputs, detail, x, v) -> SimulationError:
         """An error naming the emitter, frame, particle and value that went wrong."""

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..bounds import StateBounds
 from ..errors import PhysanimError, SimulationError
 from ..integrators import make_integrator
 from ..particles import colliders as coll
@@ -231,14 +232,16 @@ class SpringMeshSolver:
         model: the frozen model. integrator: name from the scene menu. substeps: per frame.
         tolerance: RK45 tolerance (the implicit solve has its own, BaraffWitkin.TOLERANCE).
         frame_dt: frame length [s] (used to check explicit stability up front). frame: start
-        frame (messages).
+        frame (messages). bounds: a vertex beyond them (position or speed) is an error.
     """
 
     def __init__(self, model: SpringMeshModel, integrator: str = "IMPLICIT", substeps: int = 1,
-                 tolerance: float = 1e-4, frame_dt: float = 1 / 24, frame: int | None = None):
+                 tolerance: float = 1e-4, frame_dt: float = 1 / 24, frame: int | None = None,
+                 bounds: StateBounds = StateBounds()):
         if int(substeps) != substeps or substeps < 1:
             raise ValueError(f"substeps must be an integer >= 1 (got {substeps})")
         self.model = model
+        self.bounds = bounds
         self.substeps = int(substeps)
         self.integrator_name = integrator
         self.integrator = (BaraffWitkin() if integrator == "IMPLICIT"
@@ -409,6 +412,11 @@ class SpringMeshSolver:
             bad = int(np.argwhere(~np.isfinite(state.x).all(1) | ~np.isfinite(state.v).all(1))[0][0])
             raise self._fail(f"vertex {bad} became non-finite (x = {state.x[bad].tolist()}) — "
                              f"{self._advice()}", frame, SimulationError)
+        bad = self.bounds.violation(state.x, state.v)
+        if bad is not None:
+            raise self._fail(f"vertex {bad[0]} {bad[1]} — check gravity, forces and pins, or "
+                             "raise the limits in Scene > PhysAnim > Limits", frame,
+                             SimulationError)
         m = self.model
         if len(m.spring_i):
             length = np.linalg.norm(state.x[m.spring_i] - state.x[m.spring_j], axis=1)

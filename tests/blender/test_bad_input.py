@@ -272,14 +272,15 @@ def test_keyed_nan_property_names_object_frame_and_value(physanim_ext, tmp_path,
 
 def test_emitter_thrown_beyond_float_range_is_an_error(physanim_ext, tmp_path):
     """Blender clamps an infinite location key to the float maximum (3.4e38 m); a particle
-    inheriting that jump gets a speed the float32 cache cannot hold."""
+    born during the jump (frame 5 -> 6) is beyond the world bound and inherits a speed beyond
+    the speed limit: the bake fails naming the emitter and the frame the interval starts at."""
     _scene()
     ob = _emitter("Jumper", inherit_velocity=1.0)
     _save(tmp_path)
     baked = _bake_first()
 
     _keys(ob, "location", 0, [(1, 0.0), (5, 0.0), (6, math.inf)])
-    _bake_fails('"Jumper"', "frame 6")
+    _bake_fails('"Jumper"', "frame 5", "beyond the world bound")
     baked.assert_intact()
 
 
@@ -386,3 +387,53 @@ def test_lifetime_random_beyond_lifetime_is_named_in_frames(tmp_path):
     with pytest.raises(RuntimeError, match=r'emitter "Short" at frame 1: lifetime_random 12 frames '
                                            r'is larger than lifetime 10 frames'):
         bpy.ops.physanim.bake()
+
+
+# ------------------------------------------------------------- limits on what Blender owns
+
+@pytest.mark.parametrize("change, parts", [
+    (lambda sc, ob: setattr(sc, "gravity", (0.0, 0.0, -1e35)),
+     ('scene "Scene"', "gravity", "-1e+35", "limit")),
+    (lambda sc, ob: setattr(sc.render, "fps_base", 1e-5),
+     ('scene "Scene"', "frame rate", "2.4e+06 fps")),
+    (lambda sc, ob: setattr(ob, "scale", (1e9, 1.0, 1.0)),
+     ('"Fountain"', f"frame {FRAME_START}", "scale", "1e+09")),
+    (lambda sc, ob: setattr(sc.physanim, "frame_end", FRAME_START + 200_000),
+     ('scene "Scene"', "200,001 frames", "100,000")),
+])
+def test_absurd_blender_values_fail_before_baking(physanim_ext, tmp_path, change, parts):
+    scene = _scene()
+    ob = _emitter("Fountain")
+    _save(tmp_path)
+    baked = _bake_first()
+    change(scene, ob)
+    _bake_fails(*parts)
+    baked.assert_intact()
+
+
+def test_particles_beyond_the_world_bound_or_speed_limit_fail(physanim_ext, tmp_path):
+    scene = _scene()
+    ob = _emitter("Fountain", speed=3.0)
+    _save(tmp_path)
+    baked = _bake_first()
+    scene.physanim.speed_limit = 2.0  # the launch speed is 3 m/s
+    _bake_fails('emitter "Fountain"', "speed 2.8", "beyond the speed limit (2 m/s)")
+    baked.assert_intact()
+    scene.physanim.speed_limit = 1e5
+    scene.physanim.world_bound = 1.0
+    ob.location = (0.0, 0.0, 0.99)  # launched upwards at 3 m/s
+    _bake_fails('emitter "Fountain"', "beyond the world bound (±1 m)")
+    baked.assert_intact()
+
+
+def test_spring_mesh_beyond_the_speed_limit_fails(physanim_ext, tmp_path):
+    scene = _scene()
+    _emitter("Fountain", speed=0.2, lifetime=1.0, lifetime_random=0.0)  # never reaches 1 m/s
+    cloth = bpy.data.objects.new("Cloth", _mesh("Cloth", _grid))
+    scene.collection.objects.link(cloth)
+    cloth.physanim.spring_mesh.enabled = True
+    _save(tmp_path)
+    baked = _bake_first()
+    scene.physanim.speed_limit = 1.0  # it falls faster than 1 m/s after about 4 frames
+    _bake_fails('spring mesh "Cloth"', "beyond the speed limit (1 m/s)")
+    baked.assert_intact()

@@ -9,6 +9,7 @@ import re
 import numpy as np
 import pytest
 
+from physanim.core.bounds import StateBounds
 from physanim.core.errors import SimulationError
 from physanim.core.particles import (
     Attractor, Drag, EmitterFrame, EmitterSettings, FrameInputs, ParticleSolver, Vortex, Wind,
@@ -236,8 +237,14 @@ def test_overflow_from_huge_drag_raises_simulation_error():
     model = _model(EmitterSettings("Sparks"))
     state = model.state()
     _place(state, [0.0, 0.0, 0.0], [1.0, 0.0, 0.0])
-    solver = ParticleSolver(model, "EULER")
     drag = Drag("Tar", linear=1e300)
+    # at the default bounds the first step already stops: 4e298 m/s is beyond the speed limit
+    with pytest.raises(SimulationError, match=r'"Sparks" at frame 0: particle 0 speed 4\.\d+e\+298 '
+                                              r"m/s is beyond the speed limit"):
+        ParticleSolver(model, "EULER").advance(state, _inputs(0, [drag]))
+    state = model.state()
+    _place(state, [0.0, 0.0, 0.0], [1.0, 0.0, 0.0])
+    solver = ParticleSolver(model, "EULER", bounds=StateBounds(1e308, 1e308))  # no bounds
     solver.advance(state, _inputs(0, [drag]))
     assert np.isfinite(state.particle_v).all()
     with pytest.raises(SimulationError) as info:
