@@ -7,6 +7,7 @@ previous bake stays exactly as it was.
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import re
@@ -130,6 +131,8 @@ class BakeJob:
         self.births = {ob.name: 0 for ob in self.roles.emitters}
         self.meshes: list[springs.SpringMeshBake] = []
         self.mesh_writers: dict[str, CacheWriter] = {}
+        # systems that failed: (what, message); the others still bake (see _system)
+        self.failures: list[tuple[str, str]] = []
         from . import results
 
         results.suspend_refresh(self.scene)  # our own frame changes must not reload old bakes
@@ -150,22 +153,62 @@ class BakeJob:
             self.scene.frame_set(self.frame_start)
             depsgraph = context.evaluated_depsgraph_get()
             for ob in self.roles.spring_meshes:
-                bake = springs.SpringMeshBake(self.scene, ob, self.mesh_writers[ob.name],
-                                              self.frame_start)
-                self.meshes.append(bake)
-                bake.prepare(depsgraph, self.frame_start)
-            self.model = self.extractor.build_model(depsgraph, self.frame_start)
-            self.solver = ParticleSolver(self.model, self.settings.integrator,
-                                         self.settings.substeps, self.settings.tolerance,
-                                         limits.bounds(self.scene))
-            self.sample = self.extractor.sample(depsgraph, self.frame_start)
+                with self._system(ob.name):
+                    bake = springs.SpringMeshBake(self.scene, ob, self.mesh_writers[ob.name],
+                                                  self.frame_start)
+                    self.meshes.append(bake)
+                    bake.prepare(depsgraph, self.frame_start)
             self.objects_limit = {ob.name for ob in self.roles.emitters
                                   if ob.physanim.emitter.output == 'OBJECTS'}
-            self._first_births()
-            self._write_frame(self.frame_start)
+            with self._system(None):
+                self.model = self.extractor.build_model(depsgraph, self.frame_start)
+                self.solver = ParticleSolver(self.model, self.settings.integrator,
+                                             self.settings.substeps, self.settings.tolerance,
+                                             limits.bounds(self.scene))
+            self.sample = self.extractor.sample(depsgraph, self.frame_start)
+            if self.particles_live:
+                with self._system(None):
+                    self._first_births()
+                    self._write_frame(self.frame_start)
         except BaseException:
             self.abort()
             raise
+
+    @contextlib.contextmanager
+    def _system(self, mesh: str | None):
+        """Run one system's work (the spring mesh named ``mesh``, or the particles when None):
+        when it fails, that system is dropped — its partial cache deleted, its previous bake
+        kept — and the others go on; the bake reports every failure at its end. Only when no
+        system is left does the error stop the whole bake."""
+        try:
+            yield
+        except (PhysanimError, ValueError) as exc:
+            if mesh is None:
+                what = ", ".join(f'"{ob.name}"' for ob in self.roles.emitters)
+                what = f"particles (emitter{'s' if len(self.roles.emitters) > 1 else ''} {what})"
+                for writer in self.writers.values():
+                    writer.abort()
+                self.writers.clear()
+            else:
+                what = f'spring mesh "{mesh}"'
+                for bake in [b for b in self.meshes if b.ob.name == mesh]:
+                    bake.close()
+                    self.meshes.remove(bake)
+                self.mesh_writers.pop(mesh).abort()
+                springs.restore_modifier(bpy.data.objects[mesh], self.suspended.pop(mesh, None))
+            self.failures.append((what, str(exc)))
+            if not self.writers and not self.mesh_writers:
+                raise
+
+    @property
+    def particles_live(self) -> bool:
+        """Whether the particle system is still baking (it has emitters and has not failed)."""
+        return bool(self.writers)
+
+    @property
+    def alive(self) -> int:
+        """Particles alive now (0 once the particle system failed)."""
+        return self.state.particle_count if self.particles_live else 0
 
     @property
     def total_frames(self) -> int:
@@ -265,14 +308,16 @@ class BakeJob:
             return True
         nxt = self.frame + 1
         inputs, sample = self._interval(self.frame, self.sample)
-        report = self.solver.advance(self.state, inputs)
-        for mesh in self.meshes:
-            mesh.advance(mesh.read(self.view_layer.depsgraph, nxt), inputs.colliders,
-                         inputs.forces, inputs.t0, inputs.frame_dt, inputs.gravity)
-        self._record(report, nxt)
+        if self.particles_live:
+            with self._system(None):
+                self._record(self.solver.advance(self.state, inputs), nxt)
+                self._write_frame(nxt)
+        for mesh in list(self.meshes):
+            with self._system(mesh.ob.name):
+                mesh.advance(mesh.read(self.view_layer.depsgraph, nxt), inputs.colliders,
+                             inputs.forces, inputs.t0, inputs.frame_dt, inputs.gravity)
         self.sample = sample
         self.frame = nxt
-        self._write_frame(nxt)
         return self.frame >= self.frame_end
 
     def _record(self, report, frame: int) -> None:
@@ -304,33 +349,46 @@ class BakeJob:
         forget_hierarchies()
         for writer in [*self.writers.values(), *self.mesh_writers.values()]:
             writer.flush()  # every frame on disk before any bake is swapped in
+        emitters = [ob for ob in self.roles.emitters if ob.name in self.writers]
+        meshes = [ob for ob in self.roles.spring_meshes if ob.name in self.mesh_writers]
         paths = {ob.name: self.writers[ob.name].commit(dict(meta, emitter=ob.name,
                                                             hash=self.hashes[ob.name]))
-                 for ob in self.roles.emitters}
+                 for ob in emitters}
         mesh_paths = {ob.name: self.mesh_writers[ob.name].commit(
             dict(meta, kind="spring_mesh", object=ob.name, hash=self.mesh_hashes[ob.name]))
-            for ob in self.roles.spring_meshes}
+            for ob in meshes}
         self.writers.clear()
         self.mesh_writers.clear()
         results.resume_refresh(self.scene)
-        for ob in self.roles.emitters:
+        for ob in emitters:
             results.attach(context, self.scene, ob,
                            relative_path(os.path.join(paths[ob.name], STREAM)),
                            self.frame_start, self.frame_end, self.hashes[ob.name])
-        for ob in self.roles.spring_meshes:
+        for ob in meshes:
             springs.attach(ob, relative_path(os.path.join(mesh_paths[ob.name], springs.CACHE_FILE)),
                            self.frame_start, self.mesh_hashes[ob.name], self.suspended.get(ob.name))
         self.suspended.clear()
         self.scene.frame_set(self.original_frame)
         self.settings.bake_hash = extract.scene_hash(
-            [*self.hashes.values(), *self.mesh_hashes.values()])
+            [*(self.hashes[ob.name] for ob in emitters),
+             *(self.mesh_hashes[ob.name] for ob in meshes)])
         took = time.perf_counter() - self.started
-        meshes = f", {len(self.meshes)} spring mesh(es)" if self.meshes else ""
-        info = (f"baked {len(self.roles.emitters)} emitter(s){meshes}, frames {self.frame_start}-"
+        what = f", {len(meshes)} spring mesh(es)" if meshes else ""
+        info = (f"baked {len(emitters)} emitter(s){what}, frames {self.frame_start}-"
                 f"{self.frame_end}: {self.stats['births']:,} births, peak {self.stats['peak']:,} "
                 f"alive, {took:.2f} s")
         self.settings.bake_info = info
         return info
+
+    def failure_report(self, info: str) -> str | None:
+        """One message naming every system that failed (each keeps its previous bake) and what
+        did bake; None when nothing failed."""
+        if not self.failures:
+            return None
+        failed = "; ".join(message for _, message in self.failures)
+        names = ", ".join(what for what, _ in self.failures)
+        return (f"{failed} — not baked (previous bake kept): {names}; the rest baked "
+                f"({info.removeprefix('baked ')})")
 
     def abort(self) -> None:
         """Delete partial caches and restore the frame; the previous bake is untouched."""
@@ -351,11 +409,12 @@ class BakeJob:
             self.scene.frame_set(self.original_frame)
 
 
-def run(context, only: set[str] | None = None, on_frame=None) -> str:
+def run(context, only: set[str] | None = None, on_frame=None) -> tuple[str, str | None]:
     """Bake synchronously. ``on_frame(job)`` is called after each frame (progress, logging).
 
-    Returns the summary line; raises PhysanimError/OSError/ValueError after aborting, leaving
-    the previous bake intact.
+    Returns the summary line and the failure report of systems that failed while others baked
+    (None when none failed); raises PhysanimError/OSError/ValueError after aborting, leaving
+    the previous bake intact, when nothing could bake.
     """
     job = BakeJob(context, only)
     try:
@@ -366,7 +425,8 @@ def run(context, only: set[str] | None = None, on_frame=None) -> str:
                 on_frame(job)
         if on_frame is not None:
             on_frame(job)
-        return job.finish(context)
+        info = job.finish(context)
+        return info, job.failure_report(info)
     except BaseException:
         job.abort()
         raise

@@ -84,12 +84,16 @@ def _bake(scene, only) -> set:
     def log_frame(job):
         if job.frame == job.frame_start:
             _log(f'baking frames {job.frame_start}-{job.frame_end} of scene "{scene.name}"')
-        _log(f"frame {job.frame}: {job.state.particle_count:,} particles")
+        _log(f"frame {job.frame}: {job.alive:,} particles")
 
     try:
-        _log(bake.run(bpy.context, only, log_frame))
+        info, failed = bake.run(bpy.context, only, log_frame)
     except (PhysanimError, OSError, ValueError) as exc:
         _log(f"error: {exc}")
+        return {'CANCELLED'}
+    _log(info)
+    if failed:  # the other systems baked; the exit code still says something failed
+        _log(f"error: {failed}")
         return {'CANCELLED'}
     return {'FINISHED'}
 

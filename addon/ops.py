@@ -52,19 +52,19 @@ class PHYSANIM_OT_bake(bpy.types.Operator):
             wm.progress_update(job.frame - job.frame_start)
             if bpy.app.background:
                 print(f"PhysAnim: frame {job.frame}/{job.frame_end} "
-                      f"({job.state.particle_count:,} particles)", flush=True)
+                      f"({job.alive:,} particles)", flush=True)
 
         try:
             if only is not None and not only:
                 raise PhysanimError("no selected object is a PhysAnim emitter",
                                     obj=context.scene.name, kind="scene")
-            info = bake.run(context, only, progress)
+            info, failed = bake.run(context, only, progress)
         except (PhysanimError, OSError, ValueError) as exc:
             self.report({'ERROR'}, str(exc))
             return {'CANCELLED'}
         finally:
             wm.progress_end()
-        self.report({'INFO'}, info)
+        self.report({'ERROR'} if failed else {'INFO'}, failed or info)
         return {'FINISHED'}
 
     def invoke(self, context, event):
@@ -99,7 +99,7 @@ class PHYSANIM_OT_bake(bpy.types.Operator):
             context.window_manager.progress_update(job.frame - job.frame_start)
             context.workspace.status_text_set(
                 f"PhysAnim: baking frame {job.frame}/{job.frame_end} — "
-                f"{job.state.particle_count:,} particles (Esc to cancel)")
+                f"{job.alive:,} particles (Esc to cancel)")
             if not done:
                 return {'RUNNING_MODAL'}
             info = job.finish(context)
@@ -108,7 +108,8 @@ class PHYSANIM_OT_bake(bpy.types.Operator):
             self.report({'ERROR'}, str(exc))
             return {'CANCELLED'}
         self._end(context)
-        self.report({'INFO'}, info)
+        failed = job.failure_report(info)
+        self.report({'ERROR'} if failed else {'INFO'}, failed or info)
         return {'FINISHED'}
 
     def cancel(self, context):

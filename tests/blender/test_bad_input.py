@@ -434,6 +434,34 @@ def test_spring_mesh_beyond_the_speed_limit_fails(physanim_ext, tmp_path):
     cloth.physanim.spring_mesh.enabled = True
     _save(tmp_path)
     baked = _bake_first()
+    mesh_files = {k: v for k, v in baked.files.items() if k.split("/")[1] == "spring_meshes"}
+    particle_files = {k: v for k, v in baked.files.items() if k not in mesh_files}
+    assert mesh_files and particle_files
+    modifier = cloth.modifiers["physanim"].filepath
     scene.physanim.speed_limit = 1.0  # it falls faster than 1 m/s after about 4 frames
-    _bake_fails('spring mesh "Cloth"', "beyond the speed limit (1 m/s)")
-    baked.assert_intact()
+    # the spring mesh fails and keeps its previous bake; the emitter is fine and bakes anyway
+    _bake_fails('spring mesh "Cloth" at frame', "beyond the speed limit (1 m/s)",
+                'not baked (previous bake kept): spring mesh "Cloth"', "the rest baked (1 emitter")
+    now = _files(baked.root)
+    assert {k: v for k, v in now.items() if k in mesh_files} == mesh_files
+    assert cloth.modifiers["physanim"].filepath == modifier
+    rebaked = {k: v for k, v in now.items() if k.split("/")[1] != "spring_meshes"}
+    assert rebaked.keys() == particle_files.keys()
+    assert all(rebaked[k][1] != particle_files[k][1] for k in rebaked)  # written again
+    assert not _leftovers(baked.root)
+
+
+def test_a_failing_emitter_does_not_stop_a_spring_mesh(physanim_ext, tmp_path):
+    scene = _scene()
+    orphan = _emitter("Orphan")
+    orphan.physanim.emitter.source = 'DEATHS'  # no parent emitter: the particles cannot bake
+    cloth = bpy.data.objects.new("Cloth", _mesh("Cloth", _grid))
+    scene.collection.objects.link(cloth)
+    cloth.physanim.spring_mesh.enabled = True
+    _save(tmp_path)
+    message = _bake_fails('emitter "Orphan"', "parent", 'not baked (previous bake kept): '
+                          'particles (emitter "Orphan")', "the rest baked (0 emitter(s), 1 spring")
+    assert cloth.modifiers["physanim"].type == 'MESH_CACHE'  # the cloth baked all the same
+    assert orphan.physanim.emitter.result is None
+    assert message.count("Orphan") == 2
+    assert not _leftovers(_cache_root(scene))
