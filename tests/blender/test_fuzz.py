@@ -1,0 +1,18 @@
+"""A few random scenes of the fuzzer (tools/fuzz.py; `tools/fuzz.sh 200` runs 200): each bakes
+or fails with a message naming an object, never lets another exception escape, never writes a
+non-finite value, and a failed system keeps its previous bake."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+from tools import fuzz  # noqa: E402  (the repository root on sys.path first)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_random_scene_bakes_or_fails_cleanly(physanim_ext, tmp_path, seed):
+    outcomes = fuzz.run_scene(physanim_ext, seed, tmp_path)
+    assert len(outcomes) == 2 and set(outcomes) <= {"finished", "failed", "partial"}
