@@ -88,6 +88,36 @@ def _mesh_arrays(ob, depsgraph, triangles: bool):
         ob_eval.to_mesh_clear()
 
 
+def automatic_collider(ob) -> tuple[str | None, np.ndarray]:
+    """What an Automatic collider collides as: (core shape, local fit matrix); shape None when
+    the object cannot collide (no faces, not a mesh). A mesh that may deform (modifiers, shape
+    keys) is its own Mesh; otherwise its data *is* its evaluated mesh, read here without a
+    depsgraph (so the panel can show the choice): an exact box or filled rectangle becomes that
+    analytic shape, anything else the Mesh."""
+    if ob.type == 'EMPTY':
+        return 'HALF_SPACE', np.eye(4)
+    if ob.type != 'MESH' or not len(ob.data.polygons):
+        return None, np.eye(4)
+    if any(not _made_by_bake(m) for m in ob.modifiers) or ob.data.shape_keys:
+        return 'MESH', np.eye(4)
+    me = ob.data
+    co = np.empty(len(me.vertices) * 3, np.float32)
+    me.vertices.foreach_get("co", co)
+    start = np.empty(len(me.polygons), np.int32)
+    total = np.empty(len(me.polygons), np.int32)
+    me.polygons.foreach_get("loop_start", start)
+    me.polygons.foreach_get("loop_total", total)
+    loops = np.empty(len(me.loops), np.int32)
+    me.loops.foreach_get("vertex_index", loops)
+    # fan triangles: exact for the convex faces of boxes and rectangles; a concave face only
+    # changes the area, and the fit then (conservatively) answers Mesh
+    fan = np.repeat(np.arange(len(start)), np.maximum(total - 2, 0))
+    k = np.arange(len(fan)) - np.repeat(np.cumsum(np.maximum(total - 2, 0)) - np.maximum(
+        total - 2, 0), np.maximum(total - 2, 0))
+    tris = np.stack([loops[start[fan]], loops[start[fan] + k + 1], loops[start[fan] + k + 2]], 1)
+    return fit_analytic_shape(co.reshape(-1, 3).astype(np.float64), tris)
+
+
 def _world_matrix(ob, frame: float, kind: str) -> np.ndarray:
     """``ob``'s world matrix as numpy; an error naming object, frame and value when it is not
     finite (a NaN key, a driver dividing by zero) or, for colliders, flattened by a zero scale —
@@ -159,21 +189,13 @@ class Extractor:
             return known
         shape, fit = ob.physanim.collider.shape, np.eye(4)
         if shape == 'AUTO':
-            if ob.type == 'EMPTY':
-                shape = 'HALF_SPACE'
-            elif ob.type != 'MESH':
-                raise PhysanimError(f"an Automatic collider must be a mesh or an empty (this is "
-                                    f"a {ob.type}) — convert it to a mesh or pick a shape",
-                                    obj=ob.name, frame=frame, kind="collider")
-            elif any(True for m in ob.modifiers if not _made_by_bake(m)) or ob.data.shape_keys:
-                shape = 'MESH'
-            else:
-                verts, tris = _mesh_arrays(ob, depsgraph, triangles=True)
-                if len(tris) == 0:
-                    raise PhysanimError("a collider needs faces (this mesh has none) — add "
-                                        "faces or pick the Ground shape", obj=ob.name,
-                                        frame=frame, kind="collider")
-                shape, fit = fit_analytic_shape(verts, tris)
+            shape, fit = automatic_collider(ob)
+            if shape is None:
+                raise PhysanimError(f"an Automatic collider must be a mesh with faces or an "
+                                    f"empty (this is a {ob.type}"
+                                    f"{' without faces' if ob.type == 'MESH' else ''}) — "
+                                    "pick a shape, or give it faces", obj=ob.name, frame=frame,
+                                    kind="collider")
         self._collider_shapes[ob.name] = (shape, fit)
         return shape, fit
 

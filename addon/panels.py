@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import bpy
 
-from . import extract
+from . import extract, props
+
+# larger meshes show their Automatic collider shape only when baking (the panel redraws often)
+AUTO_SHAPE_PREVIEW_LIMIT = 100_000
 
 
 def bake_status(scene) -> tuple[str, str]:
@@ -174,6 +177,16 @@ class PHYSANIM_PT_collider(_PhysicsPanel, bpy.types.Panel):
         layout = self.layout
         layout.use_property_split = True
         layout.prop(p, "shape")
+        if p.shape == 'AUTO':
+            ob = context.object
+            if ob.type == 'MESH' and len(ob.data.vertices) > AUTO_SHAPE_PREVIEW_LIMIT:
+                text, icon = "Collides as: decided when baking", 'INFO'
+            else:
+                shape = extract.automatic_collider(ob)[0]
+                names = {i[0]: i[1] for i in props.COLLIDER_SHAPE_ITEMS}
+                text, icon = ((f"Collides as: {names[shape]}", 'INFO') if shape else
+                              ("Needs a mesh with faces or an empty", 'ERROR'))
+            layout.label(text=text, icon=icon)
         layout.prop(p, "restitution")
         layout.prop(p, "friction")
         layout.prop(p, "thickness")

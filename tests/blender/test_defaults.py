@@ -259,3 +259,27 @@ def test_every_force_at_its_defaults_moves_particles_and_spring_meshes(physanim_
         cloth_turn = np.angle(np.exp(1j * (angle(c1) - angle(c0))))
         assert turn.mean() > 1e-3 and cloth_turn.mean() > 1e-5
         np.testing.assert_allclose(c1[:, 2], c0[:, 2], atol=1e-6)
+
+
+def test_automatic_collider_shape_is_what_the_mesh_is(physanim_ext):
+    extract = sys.modules[f"{physanim_ext.__name__}.addon.extract"]
+
+    def shape(ob):
+        return extract.automatic_collider(ob)[0]
+
+    assert shape(_primitive("plane", size=3.0, rotation=(0.4, 0.0, 0.0))) == 'PLANE'
+    assert shape(_primitive("grid", x_subdivisions=12, y_subdivisions=12)) == 'PLANE'
+    cube = _primitive("cube", scale=(1.0, 2.0, 0.5))
+    assert shape(cube) == 'BOX'
+    assert shape(_primitive("ico_sphere")) == 'MESH'
+    assert shape(_primitive("monkey")) == 'MESH'
+    assert shape(_primitive("circle", fill_type='NGON')) == 'MESH'  # flat, but no rectangle
+    cube.modifiers.new("Bend", 'SIMPLE_DEFORM')
+    assert shape(cube) == 'MESH'  # it may deform: it collides as its evaluated mesh
+    empty = bpy.data.objects.new("Empty", None)
+    assert shape(empty) == 'HALF_SPACE'
+    bpy.ops.curve.primitive_bezier_curve_add()
+    assert shape(bpy.context.object) is None
+    # the fitted box matches the cube's corners in its own space
+    fit = extract.automatic_collider(_primitive("cube", size=0.5, location=(1.0, 0.0, 0.0)))[1]
+    np.testing.assert_allclose(np.diag(fit)[:3], [0.25, 0.25, 0.25], atol=1e-6)
