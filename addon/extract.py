@@ -100,7 +100,19 @@ def automatic_collider(ob) -> tuple[str | None, np.ndarray]:
         return None, np.eye(4)
     if any(not _made_by_bake(m) for m in ob.modifiers) or ob.data.shape_keys:
         return 'MESH', np.eye(4)
-    me = ob.data
+    co, start, total, loops = mesh_polygons(ob.data)
+    # fan triangles: exact for the convex faces of boxes and rectangles; a concave face only
+    # changes the area, and the fit then (conservatively) answers Mesh
+    fan = np.repeat(np.arange(len(start)), np.maximum(total - 2, 0))
+    k = np.arange(len(fan)) - np.repeat(np.cumsum(np.maximum(total - 2, 0)) - np.maximum(
+        total - 2, 0), np.maximum(total - 2, 0))
+    tris = np.stack([loops[start[fan]], loops[start[fan] + k + 1], loops[start[fan] + k + 2]], 1)
+    return fit_analytic_shape(co, tris)
+
+
+def mesh_polygons(me) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A mesh's vertex positions (n, 3) float64 and its polygons as loop_start, loop_total and
+    loop_vertices int32 arrays (read in bulk)."""
     co = np.empty(len(me.vertices) * 3, np.float32)
     me.vertices.foreach_get("co", co)
     start = np.empty(len(me.polygons), np.int32)
@@ -109,13 +121,7 @@ def automatic_collider(ob) -> tuple[str | None, np.ndarray]:
     me.polygons.foreach_get("loop_total", total)
     loops = np.empty(len(me.loops), np.int32)
     me.loops.foreach_get("vertex_index", loops)
-    # fan triangles: exact for the convex faces of boxes and rectangles; a concave face only
-    # changes the area, and the fit then (conservatively) answers Mesh
-    fan = np.repeat(np.arange(len(start)), np.maximum(total - 2, 0))
-    k = np.arange(len(fan)) - np.repeat(np.cumsum(np.maximum(total - 2, 0)) - np.maximum(
-        total - 2, 0), np.maximum(total - 2, 0))
-    tris = np.stack([loops[start[fan]], loops[start[fan] + k + 1], loops[start[fan] + k + 2]], 1)
-    return fit_analytic_shape(co.reshape(-1, 3).astype(np.float64), tris)
+    return co.reshape(-1, 3).astype(np.float64), start, total, loops
 
 
 def _world_matrix(ob, frame: float, kind: str) -> np.ndarray:

@@ -21,7 +21,7 @@ from ..core.springs import (SpringFrameInputs, SpringMeshBuilder, SpringMeshSett
                             SpringMeshSolver, VirtualSprings)
 from ..core.transforms import inverse_affine, transform_points
 from . import convert, limits
-from .extract import _world_matrix
+from .extract import _world_matrix, mesh_polygons
 
 MODIFIER = "physanim"
 CACHE_FILE = "mesh.pc2"
@@ -40,18 +40,11 @@ def _mesh(ob, depsgraph, topology: bool):
     me = ob_eval.to_mesh()
     try:
         n = len(me.vertices)
-        co = np.empty(n * 3, np.float32)
-        me.vertices.foreach_get("co", co)
-        out = {"co": co.reshape(n, 3).astype(np.float64)}
+        co, start, total, loops = mesh_polygons(me)
+        out = {"co": co}
         if topology:
             edges = np.empty(len(me.edges) * 2, np.int32)
             me.edges.foreach_get("vertices", edges)
-            start = np.empty(len(me.polygons), np.int32)
-            total = np.empty(len(me.polygons), np.int32)
-            me.polygons.foreach_get("loop_start", start)
-            me.polygons.foreach_get("loop_total", total)
-            loops = np.empty(len(me.loops), np.int32)
-            me.loops.foreach_get("vertex_index", loops)
             me.calc_loop_triangles()
             tris = np.empty(len(me.loop_triangles) * 3, np.int32)
             me.loop_triangles.foreach_get("vertices", tris)
