@@ -223,6 +223,12 @@ class ExplicitRK(Integrator):
         return y_new, StepReport(steps=1, evaluations=self.tableau.stages, h_last=dt)
 
 
+# Internal steps (accepted + rejected) one adaptive call may take. A bake must never hang: a
+# discontinuous force (a contact switching on and off) can drive the step size down for ever,
+# so past this budget the step fails with advice instead of grinding on.
+MAX_ADAPTIVE_STEPS = 2_000
+
+
 class AdaptiveRK(Integrator):
     """Embedded Runge–Kutta pair with error control; reaches exactly ``t + dt`` per call.
 
@@ -245,7 +251,7 @@ class AdaptiveRK(Integrator):
 
     def __init__(
         self, tableau: Tableau = DOPRI5_TABLEAU, rtol: float = 1e-4, atol: float = 1e-7,
-        max_steps: int = 100_000,
+        max_steps: int = MAX_ADAPTIVE_STEPS,
     ):
         if tableau.E is None:
             raise ValueError(f"tableau {tableau.name!r} has no error estimate E (needs a pair)")
@@ -294,7 +300,8 @@ class AdaptiveRK(Integrator):
             if report.steps + report.rejected >= self.max_steps:
                 raise SimulationError(
                     f"adaptive integrator needed more than {self.max_steps} internal steps for a "
-                    f"{dt:g} s step — raise the tolerance (now rtol={self.rtol:g})"
+                    f"{dt:g} s step — raise the tolerance (now rtol={self.rtol:g}), use more "
+                    "substeps, or a fixed-step integrator (RK4, SYMPLECTIC_EULER, IMPLICIT)"
                 )
             if h < h_min:
                 raise SimulationError(
