@@ -103,7 +103,7 @@ class PHYSANIM_OT_bake(bpy.types.Operator):
             if not done:
                 return {'RUNNING_MODAL'}
             info = job.finish(context)
-        except Exception as exc:  # noqa: BLE001 — any failure must clean up and keep the old bake
+        except Exception as exc:  # any failure must clean up and keep the old bake
             self.cancel(context)
             self.report({'ERROR'}, str(exc))
             return {'CANCELLED'}

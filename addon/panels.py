@@ -29,7 +29,7 @@ def bake_status(scene) -> tuple[str, str]:
             elif ob.physanim.spring_mesh.bake_hash != extract.inputs_hash(
                     scene, ob, "spring_mesh", roles):
                 outdated.append(ob.name)
-    except Exception as exc:  # noqa: BLE001 — a panel must draw whatever the scene holds
+    except Exception as exc:  # a panel must draw whatever the scene holds
         return f"Cannot check bake: {exc}", 'ERROR'
     if outdated:
         return f"Bake is outdated (the scene changed): {', '.join(outdated)}", 'ERROR'

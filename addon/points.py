@@ -7,7 +7,7 @@ float3), never through ``MeshVertex.co`` (≈75 ms) or a Python loop.
 """
 from __future__ import annotations
 
-from typing import Mapping
+from collections.abc import Mapping
 
 import bpy
 import numpy as np

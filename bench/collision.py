@@ -104,13 +104,13 @@ def main(argv: list[str]) -> int:
             tree_a = BVHTree.FromPolygons(verts.tolist(), tris.tolist(), all_triangles=True)
             tree_b = BVHTree.FromPolygons(world_b.tolist(), tris.tolist(), all_triangles=True)
             blender_build = (time.perf_counter() - start) / 2
-            blender_time, theirs = _best(lambda: tree_a.overlap(tree_b), args.repeat)
+            blender_time, theirs = _best(lambda a=tree_a, b=tree_b: a.overlap(b), args.repeat)
             theirs = sorted(theirs)
             rows.append((label, "Blender BVHTree (C)", blender_build, blender_time, len(theirs),
                          "—", "—", "—"))
             for kind in KINDS:
                 build_time, tree = builds[kind]
-                took, ours = _best(lambda tree=tree: collision.collision_determination(
+                took, ours = _best(lambda tree=tree, mb=mb: collision.collision_determination(
                     tree, tree, None, mb, descend=DESCEND), args.repeat)
                 pairs = [tuple(p) for p in ours.pairs.tolist()]
                 if pairs != theirs:
@@ -132,7 +132,7 @@ def main(argv: list[str]) -> int:
         print(f"| {label} | {method} | {build:.3f} | {took:.4f} | {pairs:,} | {n_v} | {n_p} | "
               f"{n_u} | {ratio:.1f} |")
     took, rate, triangles = rain
-    print(f"\n### Particles vs a mesh collider (core, 1 sub-step per frame)\n")
+    print("\n### Particles vs a mesh collider (core, 1 sub-step per frame)\n")
     print("| particles | triangles | frames | time (s) | particle-steps / s |")
     print("|---:|---:|---:|---:|---:|")
     print(f"| {args.particles:,} | {triangles:,} | {args.particle_frames} | {took:.2f} | "

@@ -66,7 +66,7 @@ def _core():
         module = importlib.util.module_from_spec(spec)
         sys.modules["physanim"] = module
         spec.loader.exec_module(module)
-    import physanim.core.particles as particles  # noqa: PLC0415
+    import physanim.core.particles as particles
     return particles
 
 
@@ -124,7 +124,7 @@ def check_points(label: str, z: np.ndarray, expected: int) -> list[str]:
 # --- part 1: Blender built-in --------------------------------------------------------------------
 
 def _plane(bpy, scene, name: str, half_size: float, z: float):
-    import bmesh  # noqa: PLC0415
+    import bmesh
 
     me = bpy.data.meshes.new(name)
     bm = bmesh.new()
@@ -160,7 +160,7 @@ def _quiet_c_stdout():
 
 
 def run_blender(sc: Scene, method: str) -> Run:
-    import bpy  # noqa: PLC0415
+    import bpy
 
     scene = _empty_file(bpy)
     scene.frame_start, scene.frame_end = 1, sc.frames
@@ -249,7 +249,7 @@ def _bake(bpy):
 
 
 def run_physanim_bake(sc: Scene, folder: str) -> Run:
-    import bpy  # noqa: PLC0415
+    import bpy
 
     scene, emitter = build_physanim_scene(bpy, sc, folder)
     _, wall, cpu = _timed(lambda: _bake(bpy))
@@ -267,7 +267,7 @@ def run_physanim_bake(sc: Scene, folder: str) -> Run:
 
 
 def profile_physanim_bake(sc: Scene, folder: str, top: int) -> str:
-    import bpy  # noqa: PLC0415
+    import bpy
 
     build_physanim_scene(bpy, sc, folder)
     prof = cProfile.Profile()
@@ -489,7 +489,7 @@ def main(argv: list[str]) -> int:
     if args.profile:
         parts.add("profile")
 
-    import bpy  # noqa: PLC0415
+    import bpy
 
     print(f"# physanim particle benchmark — Blender {bpy.app.version_string}, numpy "
           f"{np.__version__}, Python {platform.python_version()}, {os.cpu_count()} CPUs, "

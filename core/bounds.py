@@ -54,3 +54,6 @@ class StateBounds:
         big = float(np.abs(v[i]).max())  # scaled: |v|^2 may overflow where |v| does not
         return i, (f"speed {big * float(np.linalg.norm(v[i] / big)):.4g} m/s is beyond the speed limit "
                    f"({self.speed:g} m/s)")
+
+
+DEFAULT_BOUNDS = StateBounds()

@@ -36,7 +36,7 @@ class LifeCurve:
             raise ValueError(f"life curve positions must not decrease (got {pos.tolist()})")
 
     @classmethod
-    def constant(cls, *value: float) -> "LifeCurve":
+    def constant(cls, *value: float) -> LifeCurve:
         return cls((0.0,), (tuple(float(v) for v in value),))
 
     @property

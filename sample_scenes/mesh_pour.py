@@ -6,7 +6,6 @@ from __future__ import annotations
 import math
 
 import bpy
-import numpy as np
 
 from sample_scenes import _common
 

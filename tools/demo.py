@@ -11,11 +11,11 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from tools import blender_env  # noqa: E402  (sets BLENDER_USER_RESOURCES before bpy)
+from tools import blender_env  # sets BLENDER_USER_RESOURCES before bpy is imported
 
-import bpy  # noqa: E402
+import bpy
 
-from sample_scenes import SCENES  # noqa: E402
+from sample_scenes import SCENES
 
 
 def render(scene, out: Path, name: str, frames: list[int]) -> list[Path]:

@@ -69,7 +69,7 @@ class BroadPhase(ABC):
         self.last_stats = stats
         return canonical_pairs(i, j, len(lo))
 
-    def reset(self) -> None:
+    def reset(self) -> None:  # noqa: B027 (a hook: stateless broad phases keep nothing)
         """Forget state kept between calls (nothing for stateless broad phases)."""
 
     @abstractmethod

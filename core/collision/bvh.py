@@ -114,7 +114,7 @@ class BVH:
         for d in range(len(self.level_start) - 1):
             yield np.arange(self.level_start[d], self.level_start[d + 1])
 
-    def refit(self, vertices) -> tuple["BVH", int]:
+    def refit(self, vertices) -> tuple[BVH, int]:
         """The same hierarchy over deformed vertices (n_v, 3) [m].
 
         Only volumes over triangles with a moved vertex are refitted (each kind's refit; OBBs

@@ -52,7 +52,7 @@ class Budget:
         if self.seconds is not None and not (math.isfinite(self.seconds) and self.seconds >= 0):
             raise ValueError(f"budget seconds must be finite and >= 0 (got {self.seconds})")
 
-    def meter(self) -> "Meter":
+    def meter(self) -> Meter:
         return Meter(self)
 
 

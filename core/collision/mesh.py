@@ -85,7 +85,7 @@ class TriangleMesh:
     def triangle_count(self) -> int:
         return len(self.triangles)
 
-    def with_vertices(self, vertices) -> "TriangleMesh":
+    def with_vertices(self, vertices) -> TriangleMesh:
         """The same triangles over new (deformed) vertex positions (n_v, 3) [m]."""
         v = check_points(self.name, "vertex", vertices)
         if v.shape != self.vertices.shape:

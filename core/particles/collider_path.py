@@ -46,7 +46,7 @@ class Hits:
     element: np.ndarray | None = None
 
     @classmethod
-    def none(cls) -> "Hits":
+    def none(cls) -> Hits:
         return cls(np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)))
 
 
@@ -70,7 +70,7 @@ class SurfacePoints:
     gap: np.ndarray
 
     @classmethod
-    def none(cls) -> "SurfacePoints":
+    def none(cls) -> SurfacePoints:
         return cls(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)),
                    np.zeros(0))
 
@@ -106,7 +106,7 @@ class ColliderPath:
         self.per_metre = np.linalg.norm(inverse_affine(self.path.m0)[:3, :3], axis=1)
 
     @classmethod
-    def of(cls, frame: ColliderFrame, frame_dt: float) -> "ColliderPath":
+    def of(cls, frame: ColliderFrame, frame_dt: float) -> ColliderPath:
         """The path object of the kind that handles ``frame.shape``."""
         try:
             kind = ColliderPath._kinds[frame.shape]

@@ -29,14 +29,14 @@ class Births:
     size: np.ndarray  # (n,) [m]
 
     @classmethod
-    def empty(cls) -> "Births":
+    def empty(cls) -> Births:
         z = np.zeros(0)
         return cls(z, np.zeros((0, 3)), np.zeros((0, 3)), z, z, z)
 
     def __len__(self) -> int:
         return len(self.u)
 
-    def take(self, mask: np.ndarray) -> "Births":
+    def take(self, mask: np.ndarray) -> Births:
         return Births(self.u[mask], self.x[mask], self.v[mask], self.life[mask],
                       self.mass[mask], self.size[mask])
 

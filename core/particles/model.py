@@ -22,7 +22,7 @@ class ParticleModel:
     def emitter_count(self) -> int:
         return len(self.emitters)
 
-    def state(self, t: float = 0.0) -> "ParticleState":
+    def state(self, t: float = 0.0) -> ParticleState:
         """A fresh State at time ``t`` [s]: no particles, one random generator per emitter.
 
         Each generator is seeded from (scene seed, emitter seed, CRC-32 of the emitter's UTF-8
@@ -130,7 +130,7 @@ class ParticleState:
     rngs: list[np.random.Generator] = field(repr=False)
 
     @classmethod
-    def empty(cls, t: float, rngs: list[np.random.Generator]) -> "ParticleState":
+    def empty(cls, t: float, rngs: list[np.random.Generator]) -> ParticleState:
         f = np.zeros(0)
         i = np.zeros(0, np.int64)
         return cls(t, np.zeros((0, 3)), np.zeros((0, 3)), f, f, f, f, i, np.zeros(0, np.int32),

@@ -159,7 +159,7 @@ class EmitterFrame:
     verts0: np.ndarray | None = None
     verts1: np.ndarray | None = None
 
-    def validated(self, name: str) -> "EmitterFrame":
+    def validated(self, name: str) -> EmitterFrame:
         owner = f'emitter "{name}"'
         _non_negative(owner, rate=self.rate, rate_random=self.rate_random, speed=self.speed,
                       speed_random=self.speed_random, lifetime=self.lifetime,

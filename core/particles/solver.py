@@ -14,11 +14,11 @@ Per sub-step, in order (each a named pass below):
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
-from ..bounds import StateBounds
+from ..bounds import DEFAULT_BOUNDS, StateBounds
 from ..errors import PhysanimError, SimulationError
 from ..integrators import Integrator, make_integrator
 from . import colliders as coll
@@ -115,7 +115,7 @@ class ParticleSolver:
     """
 
     def __init__(self, model: ParticleModel, integrator: str | Integrator = "SYMPLECTIC_EULER",
-                 substeps: int = 1, tolerance: float = 1e-4, bounds: StateBounds = StateBounds()):
+                 substeps: int = 1, tolerance: float = 1e-4, bounds: StateBounds = DEFAULT_BOUNDS):
         if int(substeps) != substeps or substeps < 1:
             raise ValueError(f"substeps must be an integer >= 1 (got {substeps})")
         self.model = model

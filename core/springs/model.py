@@ -132,7 +132,7 @@ class SpringMeshModel:
     def vertex_count(self) -> int:
         return len(self.rest_x)
 
-    def state(self) -> "SpringMeshState":
+    def state(self) -> SpringMeshState:
         return SpringMeshState(self.rest_x.copy(), np.zeros_like(self.rest_x))
 
 

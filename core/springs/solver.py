@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..bounds import StateBounds
+from ..bounds import DEFAULT_BOUNDS, StateBounds
 from ..errors import PhysanimError, SimulationError
 from ..integrators import make_integrator
 from ..particles import colliders as coll
@@ -77,7 +77,7 @@ class LandingContacts:
     h: float
 
     @classmethod
-    def resting(cls, contact) -> "LandingContacts":
+    def resting(cls, contact) -> LandingContacts:
         """A step's resting contacts (a ContactForce, or already these), none landing."""
         if isinstance(contact, cls):
             return contact
@@ -87,7 +87,7 @@ class LandingContacts:
                    restitution, np.zeros(c, bool),
                    np.einsum("ij,ij->i", contact.surface_velocity, contact.normal), contact.h)
 
-    def merged(self, other: "LandingContacts") -> "LandingContacts":
+    def merged(self, other: LandingContacts) -> LandingContacts:
         """These contacts with ``other``'s vertices replaced or added, index sorted."""
         stay = ~np.isin(self.index, other.index)
         names = ("index", "normal", "surface_velocity", "friction", "restitution", "landing",
@@ -237,7 +237,7 @@ class SpringMeshSolver:
 
     def __init__(self, model: SpringMeshModel, integrator: str = "IMPLICIT", substeps: int = 1,
                  tolerance: float = 1e-4, frame_dt: float = 1 / 24, frame: int | None = None,
-                 bounds: StateBounds = StateBounds()):
+                 bounds: StateBounds = DEFAULT_BOUNDS):
         if int(substeps) != substeps or substeps < 1:
             raise ValueError(f"substeps must be an integer >= 1 (got {substeps})")
         self.model = model

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
-from tools import blender_env  # noqa: E402  (sets BLENDER_USER_RESOURCES before bpy)
+from tools import blender_env  # sets BLENDER_USER_RESOURCES before bpy is imported
 
 bpy = pytest.importorskip("bpy")
 

@@ -140,7 +140,7 @@ def test_collider_at_its_defaults_stops_particles_at_its_visible_surface(physani
     inv = target.matrix_world.inverted()
     origin = inv @ gun.matrix_world.translation
     through = 0
-    for f, a in _frames(physanim_ext, gun).items():
+    for a in _frames(physanim_ext, gun).values():
         for q in a["position"]:
             local = inv @ Vector(q.tolist())
             ray = local - origin

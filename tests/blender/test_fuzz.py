@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
-from tools import fuzz  # noqa: E402  (the repository root on sys.path first)
+from tools import fuzz  # the repository root is on sys.path first
 
 
 @pytest.mark.parametrize("seed", range(8))

@@ -89,7 +89,10 @@ def test_failed_splits_fall_back_to_other_axes_then_halving():
 def test_bottomup_and_incremental_group_nearby_triangles():
     # on a grid, good trees keep leaves compact: compare total leaf volume to top-down's
     mesh = grid_mesh(17, amplitude=0.1)
-    measure = lambda b: b.kind.measure(b.node_bv[b.node_is_leaf], 1e-3).sum()
+
+    def measure(b):
+        return b.kind.measure(b.node_bv[b.node_is_leaf], 1e-3).sum()
+
     top = measure(build_topdown(mesh, "aabb"))
     assert measure(build_bottomup(mesh, "aabb")) < 2.0 * top
     assert measure(build_incremental(mesh, "aabb")) < 3.0 * top

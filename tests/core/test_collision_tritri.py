@@ -123,7 +123,10 @@ def _move(rng, t1, t2):
     n = len(t1)
     m = _unimodular(rng, n)
     shift = rng.integers(-50, 51, (n, 1, 3))
-    f = lambda t: np.einsum("nij,nkj->nki", m, t) + shift
+
+    def f(t):
+        return np.einsum("nij,nkj->nki", m, t) + shift
+
     return f(t1).astype(np.float64), f(t2).astype(np.float64)
 
 
