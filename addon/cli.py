@@ -1,7 +1,9 @@
 """Command line: ``blender -b [file.blend] -c physanim bake [file.blend] [--frames A-B]
-[--objects NAMES] [--save]``. Synchronous, one log line per frame, non-zero exit on failure.
+[--objects NAMES] [--save]``. Synchronous, one log line per frame, non-zero exit on failure;
+every error is one ``physanim: error: ...`` line.
 
-``main(argv)`` is a plain function (tests call it directly); ``register`` hooks it up as
+``main(argv)`` is a plain function (tests call it directly, and ``tools/physanim.sh`` runs it
+with the ``bpy`` module where there is no ``blender`` binary); ``register`` hooks it up as
 Blender's ``-c physanim`` command.
 """
 from __future__ import annotations
@@ -19,8 +21,10 @@ def _parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True)
     b = sub.add_parser("bake", help="bake every PhysAnim system of the scene")
     b.add_argument("blend", nargs="?", help=".blend file to open (default: the one loaded)")
-    b.add_argument("--frames", help="frame range A-B (default: the scene's PhysAnim range)")
-    b.add_argument("--objects", help="comma-separated emitter names to bake (default: all)")
+    b.add_argument("--frames", help="frame range A-B (default: the scene's PhysAnim range); it "
+                   "becomes the scene's PhysAnim range, which --save stores in the file")
+    b.add_argument("--objects", help="comma-separated names of the emitters and spring meshes "
+                   "to bake (default: all)")
     b.add_argument("--scene", help="scene name (default: the active scene)")
     b.add_argument("--save", action="store_true", help="save the .blend after baking")
     f = sub.add_parser("free", help="free every PhysAnim bake of the scene")
@@ -40,8 +44,8 @@ def main(argv: list[str]) -> int:
         args = _parser().parse_args(argv)
     except SystemExit as exc:  # argparse exits on --help and on bad arguments
         return int(exc.code or 0) if isinstance(exc.code, int) else 2
-    if args.blend:
-        bpy.ops.wm.open_mainfile(filepath=args.blend)
+    if args.blend and not _open(args.blend):
+        return 1
     if args.scene:
         scene = bpy.data.scenes.get(args.scene)
         if scene is None:
@@ -55,7 +59,11 @@ def main(argv: list[str]) -> int:
             if not m:
                 _log(f'error: --frames must look like 1-250 (got "{args.frames}")')
                 return 2
-            scene.physanim.frame_start, scene.physanim.frame_end = int(m[1]), int(m[2])
+            settings = scene.physanim
+            was = (settings.frame_start, settings.frame_end)
+            settings.frame_start, settings.frame_end = int(m[1]), int(m[2])
+            _log(f"frame range {m[1]}-{m[2]} (the scene's PhysAnim range was {was[0]}-{was[1]}"
+                 f"{'; --save stores the new one' if args.save else ''})")
         only = None
         if args.objects:
             only = {n.strip() for n in args.objects.split(",") if n.strip()}
@@ -75,6 +83,21 @@ def main(argv: list[str]) -> int:
         bpy.ops.wm.save_mainfile()
         _log(f"saved {bpy.data.filepath}")
     return 0
+
+
+def _open(path: str) -> bool:
+    """Open a .blend; an unreadable one is an error line, not a traceback."""
+    import os
+
+    if not os.path.isfile(path):
+        _log(f'error: no such .blend file: "{path}"')
+        return False
+    try:
+        bpy.ops.wm.open_mainfile(filepath=path)
+    except RuntimeError as exc:  # Blender's message names the file and the reason
+        _log(f"error: {str(exc).removeprefix('Error: ').strip()}")
+        return False
+    return True
 
 
 def _bake(scene, only) -> set:

@@ -55,6 +55,25 @@ def build_package(out_dir: str) -> str:
     return os.path.join(out_dir, zips[0])
 
 
+def build_repository(out_dir: str) -> str:
+    """Build the zip into ``out_dir`` and list it in an ``index.json`` there (Blender's
+    ``server-generate``): the folder is then a static extension repository, to be added in
+    Preferences > Get Extensions > Repositories as ``file:///<out_dir>/index.json`` or served over
+    HTTP. Returns the zip's path."""
+    import bpy  # noqa: F401  (Blender's bl_pkg comes with it)
+    import bl_pkg
+
+    zip_path = build_package(out_dir)
+    try:
+        bl_pkg.cli_extension(["server-generate", "--repo-dir", out_dir])
+    except SystemExit as exc:  # the command-line tool exits; 0 is success
+        if exc.code:
+            raise RuntimeError(f"server-generate failed in {out_dir} (exit {exc.code})") from exc
+    if not os.path.isfile(os.path.join(out_dir, "index.json")):
+        raise RuntimeError(f"server-generate wrote no index.json in {out_dir}")
+    return zip_path
+
+
 def install_package(repo_module: str = "physanim_test"):
     """Build the zip and install it into a fresh user repository with Blender's installer (as
     Extensions > Install from Disk does); returns the enabled module."""

@@ -164,3 +164,24 @@ def test_free_removes_the_bake(cli, tmp_path):
         assert not _emitter_folder(path, name).exists()
     assert "A_particles" not in bpy.data.objects and "B_particles" not in bpy.data.objects
     assert scene.physanim.bake_hash == ""
+
+
+def test_missing_or_unreadable_blend_is_an_error_line(cli, tmp_path, capsys):
+    assert cli.main(["bake", str(tmp_path / "nope.blend")]) == 1
+    out = capsys.readouterr().out
+    assert f'physanim: error: no such .blend file: "{tmp_path / "nope.blend"}"' in out
+    junk = tmp_path / "junk.blend"
+    junk.write_text("not a blend file")
+    assert cli.main(["bake", str(junk), "--save"]) == 1
+    out = capsys.readouterr().out
+    assert "physanim: error:" in out and str(junk) in out
+    assert junk.read_text() == "not a blend file"
+
+
+def test_frames_says_it_sets_the_scene_range(cli, tmp_path, capsys):
+    path = _shot(tmp_path, frame_end=20)
+    assert cli.main(["bake", str(path), "--frames", "3-8"]) == 0
+    out = capsys.readouterr().out
+    assert "physanim: frame range 3-8 (the scene's PhysAnim range was 1-20)" in out
+    assert cli.main(["bake", str(path), "--frames", "1-4", "--save"]) == 0
+    assert "--save stores the new one" in capsys.readouterr().out
