@@ -20,7 +20,7 @@ import numpy as np
 from ..core.cache import CacheWriter
 from ..core.errors import PhysanimError, SimulationError
 from ..core.particles import ParticleSolver, emitter_arrays
-from ..core.particles.mesh_collider import forget_hierarchies
+from ..core.contact import ColliderPaths
 from . import convert, extract, limits, springs
 
 STREAM = "points"
@@ -130,6 +130,7 @@ class BakeJob:
         self.stats = {"births": 0, "collisions": 0, "peak": 0}
         self.births = {ob.name: 0 for ob in self.roles.emitters}
         self.meshes: list[springs.SpringMeshBake] = []
+        self.colliders = ColliderPaths()  # every system's colliders, kept for the whole run
         self.mesh_writers: dict[str, CacheWriter] = {}
         # systems that failed: (what, message); the others still bake (see _system)
         self.failures: list[tuple[str, str]] = []
@@ -155,7 +156,7 @@ class BakeJob:
             for ob in self.roles.spring_meshes:
                 with self._system(ob.name):
                     bake = springs.SpringMeshBake(self.scene, ob, self.mesh_writers[ob.name],
-                                                  self.frame_start)
+                                                  self.frame_start, self.colliders)
                     self.meshes.append(bake)
                     bake.prepare(depsgraph, self.frame_start)
             self.objects_limit = {ob.name for ob in self.roles.emitters
@@ -164,8 +165,10 @@ class BakeJob:
                 self.model = self.extractor.build_model(depsgraph, self.frame_start)
                 self.solver = ParticleSolver(self.model, self.settings.integrator,
                                              self.settings.substeps, self.settings.tolerance,
-                                             limits.bounds(self.scene))
-            self.sample = self.extractor.sample(depsgraph, self.frame_start)
+                                             limits.bounds(self.scene), self.colliders)
+            self.sample = self.extractor.sample(depsgraph, self.frame_start, emitters=False)
+            self.sample.emitters = self._emitter_read(
+                lambda: self.extractor.sample_emitters(depsgraph, self.frame_start))
             if self.particles_live:
                 with self._system(None):
                     self._first_births()
@@ -280,12 +283,25 @@ class BakeJob:
         ``frame``; leaves the scene at ``frame + 1``. Returns (inputs, sample at frame + 1)."""
         between = []
         substeps = self.settings.substeps
+        depsgraph = self.view_layer.depsgraph
         for k in range(1, substeps):  # sub-frame motion keys: one per sub-step boundary
             self.scene.frame_set(frame, subframe=k / substeps)
-            between.append(self.extractor.sample_motion())
+            between.append(self.extractor.sample_motion(emitters=False))
+            between[-1][0].extend(self._emitter_read(self.extractor.emitter_motion))
         self.scene.frame_set(frame + 1)
-        end = self.extractor.sample(self.view_layer.depsgraph, frame + 1)
+        end = self.extractor.sample(depsgraph, frame + 1, emitters=False)
+        end.emitters = self._emitter_read(lambda: self.extractor.sample_emitters(depsgraph,
+                                                                                 frame + 1))
         return self.extractor.inputs(start, end, between), end
+
+    def _emitter_read(self, read) -> list:
+        """``read()`` of emitter values for the particle system: a failure there is that
+        system's (see :meth:`_system`) and leaves the spring meshes baking; [] once the
+        particle system has failed."""
+        if self.particles_live:
+            with self._system(None):
+                return read()
+        return []
 
     def _first_births(self) -> None:
         """Births of frame f happen during the interval f - 1 -> f, so they show at frame f
@@ -346,7 +362,7 @@ class BakeJob:
                 "fps": convert.fps(self.scene), "kind": "particles"}
         for mesh in self.meshes:
             mesh.close()
-        forget_hierarchies()
+        self.colliders.release()
         for writer in [*self.writers.values(), *self.mesh_writers.values()]:
             writer.flush()  # every frame on disk before any bake is swapped in
         emitters = [ob for ob in self.roles.emitters if ob.name in self.writers]
@@ -396,7 +412,7 @@ class BakeJob:
 
         for mesh in self.meshes:
             mesh.close()
-        forget_hierarchies()
+        self.colliders.release()
         for writer in [*self.writers.values(), *getattr(self, "mesh_writers", {}).values()]:
             writer.abort()
         self.writers.clear()

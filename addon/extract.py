@@ -12,10 +12,11 @@ import numpy as np
 
 from ..core.curves import LifeCurve
 from ..core.errors import PhysanimError
-from ..core.particles import (Attractor, ColliderFrame, Drag, EmitterFrame, EmitterSettings,
-                              FrameInputs, ParticleModel, ParticleModelBuilder, SpringLink,
-                              Vortex, Wind)
-from ..core.particles.collider_fit import fit_analytic_shape
+from ..core.contact import ColliderFrame
+from ..core.contact.fit import fit_analytic_shape
+from ..core.forces import Attractor, Drag, Vortex, Wind
+from ..core.particles import (EmitterFrame, EmitterSettings, FrameInputs, ParticleModel,
+                              ParticleModelBuilder, SpringLink)
 from . import convert, limits
 
 MESH_SOURCES = ("VERTS", "FACES", "VOLUME")
@@ -262,8 +263,15 @@ class Extractor:
                 size=_curve(p.size_stops, "size"), stretch=p.stretch, link=link))
         return builder.finalize(frame)
 
-    def sample(self, depsgraph, frame: int) -> FrameSample:
-        """Read every keyframable value at ``frame`` (the scene must already be at that frame)."""
+    def sample(self, depsgraph, frame: int, emitters: bool = True) -> FrameSample:
+        """Read every keyframable value at ``frame`` (the scene must already be at that frame);
+        ``emitters`` False leaves the emitters out (see :meth:`sample_emitters`)."""
+        return FrameSample(frame, self.sample_emitters(depsgraph, frame) if emitters else [],
+                           *self._sample_world(depsgraph, frame))
+
+    def sample_emitters(self, depsgraph, frame: int) -> list:
+        """The emitters' values at ``frame``: what only the particle system reads (a failure
+        here is that system's, not the spring meshes')."""
         emitters = []
         for ob in self.roles.emitters:
             p = ob.physanim.emitter
@@ -287,6 +295,10 @@ class Extractor:
                         f"{key}_random or raise {key}", obj=ob.name, frame=frame, kind="emitter")
             values["active"] = p.frame_start <= frame <= p.frame_end  # births of this frame
             emitters.append((_world_matrix(ob, frame, "emitter"), verts, values))
+        return emitters
+
+    def _sample_world(self, depsgraph, frame: int) -> tuple[list, list]:
+        """Colliders and force objects at ``frame``: what every system reads."""
         colliders = []
         for ob in self.roles.colliders:
             c = ob.physanim.collider
@@ -303,12 +315,18 @@ class Extractor:
                 "quadratic", "falloff", "min_distance", "max_distance", "seed")}
             _check_finite(ob, frame, "force", values)
             forces.append((_world_matrix(ob, frame, "force"), values))
-        return FrameSample(frame, emitters, colliders, forces)
+        return colliders, forces
 
-    def sample_motion(self) -> tuple[list, list]:
-        """World matrices of emitters and colliders at the current (sub-)frame."""
+    def emitter_motion(self) -> list:
+        """World matrices of the emitters at the current (sub-)frame."""
         frame = self.scene.frame_current_final
-        return ([_world_matrix(ob, frame, "emitter") for ob in self.roles.emitters],
+        return [_world_matrix(ob, frame, "emitter") for ob in self.roles.emitters]
+
+    def sample_motion(self, emitters: bool = True) -> tuple[list, list]:
+        """World matrices of emitters (none when ``emitters`` is False) and colliders at the
+        current (sub-)frame."""
+        frame = self.scene.frame_current_final
+        return (self.emitter_motion() if emitters else [],
                 [_world_matrix(ob, frame, "collider") @ self._collider_shapes[ob.name][1]
                  for ob in self.roles.colliders])
 

@@ -15,7 +15,8 @@ import numpy as np
 
 from ..core.cache import CacheWriter
 from ..core.errors import PhysanimError
-from ..core.particles.forces import Wind
+from ..core.contact import ColliderPaths
+from ..core.forces import Wind
 from ..core.pc2 import Pc2Writer
 from ..core.springs import (SpringFrameInputs, SpringMeshBuilder, SpringMeshSettings,
                             SpringMeshSolver, VirtualSprings)
@@ -83,11 +84,12 @@ class SpringMeshBake:
         frame: bake start frame. settings: scene.physanim.
     """
 
-    def __init__(self, scene, ob, writer: CacheWriter, frame: int):
+    def __init__(self, scene, ob, writer: CacheWriter, frame: int, colliders: ColliderPaths):
         if ob.type != 'MESH':
             raise PhysanimError(f"a spring mesh must be a mesh object (this is a {ob.type})",
                                 obj=ob.name, frame=frame, kind="spring mesh")
         self.scene, self.ob, self.writer = scene, ob, writer
+        self.colliders = colliders  # the bake's, shared with its other systems
         p = ob.physanim.spring_mesh
         self.props = p
         self.groups = [v for v in p.virtual_springs]
@@ -129,7 +131,7 @@ class SpringMeshBake:
         substeps = p.substeps or s.substeps
         self.solver = SpringMeshSolver(self.model, integrator, substeps, s.tolerance,
                                        1.0 / convert.fps(self.scene), frame,
-                                       limits.bounds(self.scene))
+                                       limits.bounds(self.scene), self.colliders)
         self.state = self.model.state()
         self.vertex_count = len(rest)
         self.pc2 = Pc2Writer(self.writer.file_path(CACHE_FILE), self.vertex_count, frame)

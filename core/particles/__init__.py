@@ -1,12 +1,13 @@
-"""Particle systems: emitters, forces, analytic and mesh colliders and the sub-stepping solver."""
-from .forces import Attractor, DampedSprings, Drag, Gravity, Vortex, Wind
+"""Particle systems: emitters, particle springs and the sub-stepping solver (colliders live in
+:mod:`physanim.core.contact`, field forces in :mod:`physanim.core.forces`)."""
+from .forces import DampedSprings
 from .model import ParticleModel, ParticleModelBuilder, ParticleState
 from .output import emitter_arrays
-from .settings import ColliderFrame, EmitterFrame, EmitterSettings, SpringLink
+from .settings import EmitterFrame, EmitterSettings, SpringLink
 from .solver import FrameInputs, FrameReport, ParticleSolver
 
 __all__ = [
-    "Attractor", "ColliderFrame", "DampedSprings", "Drag", "EmitterFrame", "EmitterSettings",
-    "FrameInputs", "FrameReport", "Gravity", "ParticleModel", "ParticleModelBuilder",
-    "ParticleSolver", "ParticleState", "SpringLink", "Vortex", "Wind", "emitter_arrays",
+    "DampedSprings", "EmitterFrame", "EmitterSettings", "FrameInputs", "FrameReport",
+    "ParticleModel", "ParticleModelBuilder", "ParticleSolver", "ParticleState", "SpringLink",
+    "emitter_arrays",
 ]

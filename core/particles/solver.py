@@ -19,13 +19,14 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..bounds import DEFAULT_BOUNDS, StateBounds
+from ..contact import ColliderFrame, ColliderPaths, ContactForce, respond, resting_contacts
 from ..errors import PhysanimError, SimulationError
+from ..forces import Force, Gravity, ParticleView
 from ..integrators import Integrator, make_integrator
-from . import colliders as coll
 from .emit import Births, sample_births, sample_bursts
-from .forces import DampedSprings, Force, Gravity, ParticleView
+from .forces import DampedSprings
 from .model import ParticleModel, ParticleState
-from .settings import ColliderFrame, EmitterFrame
+from .settings import EmitterFrame
 
 MAX_PARTICLES = 50_000_000  # hard limit that keeps a bake inside memory (~5 GB of state)
 
@@ -77,9 +78,10 @@ class FrameReport:
 class _ParticleOde:
     """Witkin & Baraff's particle system seen by an integrator: dim, get/set state, derivative."""
 
-    def __init__(self, state: ParticleState, forces: list):
+    def __init__(self, state: ParticleState, forces: list, contact: ContactForce):
         self.state = state
         self.forces = forces
+        self.contact = contact
         n = state.particle_count
         self.dim = 6 * n
         self._n = n
@@ -99,6 +101,7 @@ class _ParticleOde:
         f = np.zeros((n, 3))  # clear the accumulator, then every force adds in
         for force in self.forces:
             force.apply(view, f)
+        self.contact.constrain(view, f)  # last: it cancels what the forces push into surfaces
         return np.concatenate([y[3 * n:], (f / self.state.particle_mass[:, None]).ravel()])
 
 
@@ -112,10 +115,13 @@ class ParticleSolver:
         substeps: sub-steps per frame (>= 1).
         tolerance: error tolerance of the adaptive integrator.
         bounds: a particle beyond them (position or speed) stops the bake with an error.
+        colliders: makes each frame's collider paths and keeps what lasts between frames (a
+            caller baking several systems passes one to all of them; default: a new one).
     """
 
     def __init__(self, model: ParticleModel, integrator: str | Integrator = "SYMPLECTIC_EULER",
-                 substeps: int = 1, tolerance: float = 1e-4, bounds: StateBounds = DEFAULT_BOUNDS):
+                 substeps: int = 1, tolerance: float = 1e-4, bounds: StateBounds = DEFAULT_BOUNDS,
+                 colliders: ColliderPaths | None = None):
         if int(substeps) != substeps or substeps < 1:
             raise ValueError(f"substeps must be an integer >= 1 (got {substeps})")
         self.model = model
@@ -123,6 +129,7 @@ class ParticleSolver:
         self.integrator = (make_integrator(integrator, tolerance) if isinstance(integrator, str)
                            else integrator)
         self.substeps = int(substeps)
+        self.colliders = ColliderPaths() if colliders is None else colliders
 
     # -- the frame ------------------------------------------------------------------------------
     def advance(self, state: ParticleState, inputs: FrameInputs) -> FrameReport:
@@ -139,20 +146,22 @@ class ParticleSolver:
                 raise PhysanimError(detail, obj=e.name, frame=inputs.frame, kind="emitter") from exc
         report = FrameReport(per_emitter_births=[0] * model.emitter_count)
         births = [self._sample(state, inputs, i) for i in range(model.emitter_count)]
-        paths = [coll.ColliderPath.of(c, inputs.frame_dt) for c in inputs.colliders]
+        paths = self.colliders.of(inputs.colliders, inputs.frame_dt)
         h = inputs.frame_dt / self.substeps
         g = np.asarray(inputs.gravity, dtype=np.float64)
         rest_speed = 2.0 * float(np.linalg.norm(g)) * h + 1e-4
         for k in range(self.substeps):
             s0, s1 = k / self.substeps, (k + 1) / self.substeps
             t = inputs.t0 + k * h
-            contact = coll.contacts(paths, state.particle_x, state.particle_v, s0, rest_speed, h)
-            forces = self._forces(state, inputs, g, contact)
+            contact = ContactForce(resting_contacts(paths, state.particle_x, state.particle_v, s0,
+                                                    rest_speed), h)
             x0, v0 = state.particle_x, state.particle_v
-            report.integrator_steps += self._integrate(state, forces, t, h, inputs)
-            state.particle_x, state.particle_v, hits = coll.respond(
-                paths, x0, state.particle_x, v0, state.particle_v, s0, s1, h, rest_speed)
-            report.collisions += hits
+            report.integrator_steps += self._integrate(
+                state, self._forces(state, inputs, g), contact, t, h, inputs)
+            done = respond(paths, x0, state.particle_x, v0, state.particle_v, s0, s1, h,
+                           rest_speed)
+            state.particle_x, state.particle_v = done.x, done.v
+            report.collisions += done.count
             self._check(state, inputs, t + h)
             deaths = self._age_kill(state, h)
             report.deaths += sum(len(d[0]) for d in deaths)
@@ -175,7 +184,7 @@ class ParticleSolver:
         except ValueError as exc:  # e.g. a volume that encloses nothing: name emitter and frame
             raise PhysanimError(str(exc), obj=e.name, frame=inputs.frame, kind="emitter") from exc
 
-    def _forces(self, state, inputs, g, contact) -> list:
+    def _forces(self, state, inputs, g) -> list:
         forces: list = [Gravity(tuple(g))] if np.any(g) else []
         forces.extend(inputs.forces)
         if len(state.link_a):
@@ -187,13 +196,12 @@ class ParticleSolver:
                                             state.index_of(state.link_b[sel]),
                                             settings.link.stiffness, settings.link.damping,
                                             state.link_rest[sel]))
-        forces.append(contact)  # last: it cancels what the others push into the surface
         return forces
 
-    def _integrate(self, state, forces, t, h, inputs) -> int:
+    def _integrate(self, state, forces, contact, t, h, inputs) -> int:
         if state.particle_count == 0:
             return 0
-        ode = _ParticleOde(state, forces)
+        ode = _ParticleOde(state, forces, contact)
         try:
             return self.integrator.step(ode, t, h).steps
         except SimulationError as exc:

@@ -1,7 +1,7 @@
 """Spring-mesh forces with the Jacobians an implicit integrator needs.
 
 Each force object has ``apply(p, f_out)`` (the particle force interface of
-:mod:`physanim.core.particles.forces`) and ``linearize(p)``, which returns its Jacobian at that
+:mod:`physanim.core.forces`) and ``linearize(p)``, which returns its Jacobian at that
 state as 3 x 3 blocks: ``clique`` names the vertices it couples (None: per-vertex blocks only),
 ``add_to(builder, cx, cv)`` puts cx df/dx + cv df/dv into an assembled block-sparse matrix
 (:mod:`physanim.core.springs.sparse`) and ``product(cx, cv, u, out)`` applies it once
@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..particles.forces import ParticleView
+from ..forces import ParticleView
 from . import topology
 
 

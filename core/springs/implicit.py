@@ -35,8 +35,9 @@ class BaraffWitkin:
     ``clique`` (the fixed (m, k) index array of vertices they couple, or None for per-vertex
     blocks), ``add_to(builder, cx, cv)`` (puts cx df/dx + cv df/dv into a
     :class:`~.sparse.MatrixBuilder`) and ``product(cx, cv, u, out)`` (out += that matrix times
-    u, matrix-free), and ``x``/``v`` attributes it updates; optionally
-    ``energy(x, v)`` and ``contact``.
+    u, matrix-free), ``contact`` (:class:`~physanim.core.contact.Contacts`: the vertices
+    constrained to move with a surface along its normal) and ``x``/``v`` attributes it updates;
+    optionally ``energy(x, v)``.
 
     Args:
         tolerance: relative residual at which CG stops. max_iterations: CG cap.
@@ -79,19 +80,16 @@ class BaraffWitkin:
         # change; vertices pressed onto a collider have a prescribed normal velocity (the
         # surface's) and move freely along it.
         given = np.where(free, 0.0, system.pinned_velocity(t + h) - v0)
-        contact = getattr(system, "contact", None)
+        contact = system.contact
         pressed, normal = np.zeros(0, np.int64), np.zeros((0, 3))
-        if contact is not None and len(contact.index):
+        if len(contact):
             push = np.einsum("ij,ij->i", f0[contact.index], contact.normal)
-            # only where forces press inwards, or where the vertex is landing (the solver's
-            # re-solve of a step in which it hit the surface: see SpringMeshSolver.advance)
-            landing = getattr(contact, "landing", None)
-            inwards = push < 0.0 if landing is None else (push < 0.0) | landing
-            keep = inwards & system.free[contact.index]
+            # only where forces press inwards, or where the vertex is held (landing: the
+            # solver's re-solve of a step in which it hit the surface, SpringMeshSolver.advance)
+            keep = ((push < 0.0) | contact.held) & system.free[contact.index]
             pressed, normal = contact.index[keep], contact.normal[keep]
-            surface_vn = np.einsum("ij,ij->i", contact.surface_velocity[keep], normal)
             vn = np.einsum("ij,ij->i", v0[pressed], normal)
-            given[pressed] = (surface_vn - vn)[:, None] * normal
+            given[pressed] = (contact.normal_speed[keep] - vn)[:, None] * normal
 
         free_scale = free.astype(np.float64)
 

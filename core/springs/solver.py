@@ -10,16 +10,15 @@ not torn apart).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from ..bounds import DEFAULT_BOUNDS, StateBounds
 from ..errors import PhysanimError, SimulationError
+from ..contact import ColliderFrame, ColliderPaths, ContactForce, Contacts, respond, resting_contacts
+from ..forces import Gravity, ParticleView, Wind
 from ..integrators import make_integrator
-from ..particles import colliders as coll
-from ..particles.forces import Gravity, ParticleView, Wind
-from ..particles.settings import ColliderFrame
 from ..transforms import TransformPath, inverse_affine, transform_points
 from .forces import (AnchorSprings, AngularSprings, LinearDrag, MassShared, SpringSet,
                      scatter_add)
@@ -59,56 +58,19 @@ class SpringFrameInputs:
     fields: Sequence = ()
 
 
-@dataclass(frozen=True)
-class LandingContacts:
-    """The contacts of a re-solved step: resting ones and landing ones (``landing`` True: a
-    vertex that hit the surface during the step, constrained whatever the forces; its
-    ``surface_velocity`` carries, along the normal, the velocity that lands it, and
-    ``surface_vn`` the surface's own normal speed). Fields as
-    :class:`~..particles.forces.ContactForce`, index sorted."""
-
-    index: np.ndarray
-    normal: np.ndarray
-    surface_velocity: np.ndarray
-    friction: np.ndarray
-    restitution: np.ndarray
-    landing: np.ndarray
-    surface_vn: np.ndarray
-    h: float
-
-    @classmethod
-    def resting(cls, contact) -> LandingContacts:
-        """A step's resting contacts (a ContactForce, or already these), none landing."""
-        if isinstance(contact, cls):
-            return contact
-        c = len(contact.index)
-        restitution = np.zeros(c) if contact.restitution is None else contact.restitution
-        return cls(contact.index, contact.normal, contact.surface_velocity, contact.friction,
-                   restitution, np.zeros(c, bool),
-                   np.einsum("ij,ij->i", contact.surface_velocity, contact.normal), contact.h)
-
-    def merged(self, other: LandingContacts) -> LandingContacts:
-        """These contacts with ``other``'s vertices replaced or added, index sorted."""
-        stay = ~np.isin(self.index, other.index)
-        names = ("index", "normal", "surface_velocity", "friction", "restitution", "landing",
-                 "surface_vn")
-        fields = [np.concatenate([getattr(self, k)[stay], getattr(other, k)]) for k in names]
-        order = np.argsort(fields[0], kind="stable")
-        return LandingContacts(*(f[order] for f in fields), self.h)
-
-
-def _bounce(v: np.ndarray, landing: LandingContacts, rest_speed: float) -> None:
+def _bounce(v: np.ndarray, landing: Contacts, rest_speed: float) -> None:
     """After a re-solved step the landing vertices are on the surface, still approaching it at
     their landing speed: they leave it at restitution times that speed (relative to the
     surface; a bounce slower than ``rest_speed`` ends in contact), as the collision pass would
     have made them."""
-    sel = landing.landing
+    sel = landing.held
     idx, n = landing.index[sel], landing.normal[sel]
-    approach = np.einsum("ij,ij->i", landing.surface_velocity[sel], n) - landing.surface_vn[sel]
+    surface_vn = np.einsum("ij,ij->i", landing.surface_velocity[sel], n)
+    approach = landing.normal_speed[sel] - surface_vn
     out = -landing.restitution[sel] * np.minimum(approach, 0.0)
     out = np.where(out < rest_speed, 0.0, out)
     vn = np.einsum("ij,ij->i", v[idx], n)
-    v[idx] += (landing.surface_vn[sel] + out - vn)[:, None] * n
+    v[idx] += (surface_vn + out - vn)[:, None] * n
 
 
 @dataclass(frozen=True)
@@ -142,14 +104,21 @@ class FaceWind:
 
 class _MeshSystem:
     """The spring mesh as integrators see it: flat y = [x, v] with derivative [v, f/m], plus
-    the richer interface of the Baraff-Witkin stepper. Pinned vertices move with their targets."""
+    the richer interface of the Baraff-Witkin stepper. Pinned vertices move with their targets.
+
+    ``contact``: the vertices touching colliders. Explicit integrators see them as a constraint
+    on the accumulated forces (``constraint``, a :class:`ContactForce`); the implicit stepper
+    enforces ``contact`` as velocity constraints instead (``constraint`` None)."""
 
     def __init__(self, state: SpringMeshState, mass: np.ndarray, free: np.ndarray, forces: list,
-                 pin_x0: np.ndarray, pin_v: np.ndarray, t0: float):
+                 pin_x0: np.ndarray, pin_v: np.ndarray, t0: float, contact: Contacts,
+                 constraint: ContactForce | None):
         self.state = state
         self.mass = mass
         self.free = free
         self.forces = forces
+        self.contact = contact
+        self.constraint = constraint
         self._pin_x0, self._pin_v, self._t0 = pin_x0, pin_v, t0
         self.n = len(mass)
         self.dim = 6 * self.n
@@ -168,6 +137,8 @@ class _MeshSystem:
         view = ParticleView(x, v, self.mass, t)
         for force in self.forces:
             force.apply(view, f)
+        if self.constraint is not None:
+            self.constraint.constrain(view, f)  # last: it cancels what presses into surfaces
         return f
 
     def derivative(self, t: float, y: np.ndarray) -> np.ndarray:
@@ -233,15 +204,18 @@ class SpringMeshSolver:
         tolerance: RK45 tolerance (the implicit solve has its own, BaraffWitkin.TOLERANCE).
         frame_dt: frame length [s] (used to check explicit stability up front). frame: start
         frame (messages). bounds: a vertex beyond them (position or speed) is an error.
+        colliders: makes each frame's collider paths and keeps what lasts between frames
+            (shared with the other systems of a bake; default: a new one).
     """
 
     def __init__(self, model: SpringMeshModel, integrator: str = "IMPLICIT", substeps: int = 1,
                  tolerance: float = 1e-4, frame_dt: float = 1 / 24, frame: int | None = None,
-                 bounds: StateBounds = DEFAULT_BOUNDS):
+                 bounds: StateBounds = DEFAULT_BOUNDS, colliders: ColliderPaths | None = None):
         if int(substeps) != substeps or substeps < 1:
             raise ValueError(f"substeps must be an integer >= 1 (got {substeps})")
         self.model = model
         self.bounds = bounds
+        self.colliders = ColliderPaths() if colliders is None else colliders
         self.substeps = int(substeps)
         self.integrator_name = integrator
         self.integrator = (BaraffWitkin() if integrator == "IMPLICIT"
@@ -314,7 +288,7 @@ class SpringMeshSolver:
         g = np.asarray(inputs.gravity, dtype=np.float64)
         rest0 = inputs.rest0 if inputs.rest0 is not None else model.rest_x
         rest1 = inputs.rest1 if inputs.rest1 is not None else rest0
-        paths = [coll.ColliderPath.of(c, inputs.frame_dt) for c in inputs.colliders]
+        paths = self.colliders.of(inputs.colliders, inputs.frame_dt)
         rest_speed = 2.0 * float(np.linalg.norm(g)) * h + 1e-4
         hits = 0
         for k in range(self.substeps):
@@ -322,18 +296,21 @@ class SpringMeshSolver:
             t = inputs.t0 + k * h
             pin_x1 = rest0 + s1 * (rest1 - rest0)
             pin_v = (rest1 - rest0) / inputs.frame_dt
-            contact = coll.contacts(paths, state.x, state.v, s0, rest_speed, h)
+            contact = resting_contacts(paths, state.x, state.v, s0, rest_speed)
             forces = [Gravity(tuple(g)), self.springs, self.bending,
                       LinearDrag(model.settings.drag)]
             forces += self._virtual(inputs, t, h, s0, s1)
             forces += [FaceWind(model.triangles, w) for w in inputs.winds if len(model.triangles)]
             forces += [MassShared(f, self._mass_share) for f in inputs.fields]
             implicit = isinstance(self.integrator, BaraffWitkin)
-            if not implicit:  # the implicit step enforces contacts as constraints instead
-                forces.append(contact)
-            system = _MeshSystem(state, model.vertex_mass, self.free, forces,
-                                 rest0 + s0 * (rest1 - rest0), pin_v, t)
-            system.contact = contact if implicit else None
+
+            def system_with(constraints: Contacts, forces=forces, t=t, s0=s0, pin_v=pin_v,
+                            implicit=implicit):
+                return _MeshSystem(state, model.vertex_mass, self.free, forces,
+                                   rest0 + s0 * (rest1 - rest0), pin_v, t, constraints,
+                                   None if implicit else ContactForce(constraints, h))
+
+            system = system_with(contact)
             x0, v0 = state.x.copy(), state.v.copy()
             landing, collided, first = None, 0, None
             for round_ in range(LANDING_ROUNDS + 1):
@@ -343,19 +320,18 @@ class SpringMeshSolver:
                     # the springs instead of a projection after the fact (which stretches stiff
                     # springs: energy from nowhere)
                     state.x, state.v = x0.copy(), v0.copy()
-                    system.contact = landing
+                    system = system_with(landing)
                 self._step(system, t, h, pin_x1, pin_v, inputs.frame)
                 if landing is not None:
                     _bounce(state.v, landing, rest_speed)
                 if not paths:
                     break
-                record = {} if implicit and round_ < LANDING_ROUNDS else None
-                x, v, count = coll.respond(paths, x0, state.x, v0, state.v, s0, s1, h,
-                                           rest_speed, record)
+                x, v, count, hit = respond(paths, x0, state.x, v0, state.v, s0, s1, h,
+                                           rest_speed)
                 collided = max(collided, count)  # the first round finds the step's collisions
                 first = (x, v) if first is None else first
-                more = None if record is None else \
-                    self._landing(landing if landing is not None else contact, record, x0, h)
+                more = None if not (implicit and round_ < LANDING_ROUNDS) else \
+                    self._landing(landing if landing is not None else contact, hit, x0, h)
                 if more is None:
                     break
                 landing = more
@@ -386,26 +362,19 @@ class SpringMeshSolver:
             limit_strain(state.x, state.v, model.spring_i[limited], model.spring_j[limited],
                          model.spring_rest[limited], self._inv_mass, model.settings.max_stretch, h)
 
-    def _landing(self, base, record: dict, x0, h: float):
-        """Contacts for re-solving a step in which free vertices hit a collider (``record``
-        from :func:`~..particles.colliders.respond`): each becomes a landing constraint — its
-        normal velocity is the one that takes it from its start to where the collision put it
-        — merged with ``base`` (the step's resting contacts, or the last round's set). None
-        when no vertex that is not landing already was hit."""
-        base = LandingContacts.resting(base)
-        idx = record["index"]
-        keep = self.free[idx] & ~np.isin(idx, base.index[base.landing])
+    def _landing(self, base: Contacts, hit: Contacts, x0, h: float) -> Contacts | None:
+        """Contacts for re-solving a step in which free vertices hit a collider (``hit``: their
+        first collisions, from :func:`~..contact.respond`): each becomes a held constraint
+        whose normal velocity is the one that takes it from its start to where the collision
+        put it — merged with ``base`` (the step's resting contacts, or the last round's set;
+        a resting vertex that was hit lands instead). None when no vertex that is not held
+        already was hit."""
+        keep = self.free[hit.index] & ~np.isin(hit.index, base.index[base.held])
         if not keep.any():
             return None
-        idx, n = idx[keep], record["normal"][keep]
-        sv = record["surface_velocity"][keep]
-        own_vn = np.einsum("ij,ij->i", sv, n)
-        land_vn = np.einsum("ij,ij->i", record["landing"][keep] - x0[idx], n) / h
-        sv = sv + (land_vn - own_vn)[:, None] * n
-        # a resting vertex that was hit lands instead
-        return base.merged(LandingContacts(idx, n, sv, record["friction"][keep],
-                                           record["restitution"][keep],
-                                           np.ones(len(idx), bool), own_vn, h))
+        hit = hit.take(keep)
+        land_vn = np.einsum("ij,ij->i", hit.point - x0[hit.index], hit.normal) / h
+        return base.merged(replace(hit, normal_speed=land_vn, held=np.ones(len(hit), bool)))
 
     def _check(self, state: SpringMeshState, frame) -> None:
         if not (np.all(np.isfinite(state.x)) and np.all(np.isfinite(state.v))):

@@ -465,3 +465,34 @@ def test_a_failing_emitter_does_not_stop_a_spring_mesh(physanim_ext, tmp_path):
     assert orphan.physanim.emitter.result is None
     assert message.count("Orphan") == 2
     assert not _leftovers(_cache_root(scene))
+
+
+@pytest.mark.parametrize("when", ["first frame", "mid-bake"])
+def test_an_emitter_that_cannot_be_read_does_not_stop_a_spring_mesh(physanim_ext, tmp_path, when):
+    """Reading an emitter's values is the particle system's business: an emitter that cannot be
+    read — an empty with a mesh source from the first frame, or a mesh whose vertex count a
+    Build modifier changes during the bake — fails the particles and the cloth still bakes
+    (the fuzzer found the first one ending in a Python traceback)."""
+    scene = _scene()
+    if when == "first frame":
+        bad = _emitter("Bad")
+        bad.physanim.emitter.source = 'VERTS'
+        parts = ('emitter "Bad"', "needs a mesh object")
+    else:
+        bad = bpy.data.objects.new("Bad", _mesh("Bad", _grid))
+        scene.collection.objects.link(bad)
+        bad.physanim.emitter.enabled = True
+        bad.physanim.emitter.source = 'VERTS'
+        build = bad.modifiers.new("Build", 'BUILD')
+        build.frame_start, build.frame_duration = FRAME_START - 3, 2 * (FRAME_END - FRAME_START)
+        parts = ('emitter "Bad"', "vertex count")
+    cloth = bpy.data.objects.new("Cloth", _mesh("Cloth", _grid))
+    scene.collection.objects.link(cloth)
+    cloth.physanim.spring_mesh.enabled = True
+    _save(tmp_path)
+    message = _bake_fails(*parts, 'not baked (previous bake kept): particles (emitter "Bad")',
+                          "the rest baked (0 emitter(s), 1 spring")
+    assert "Traceback" not in message
+    assert cloth.modifiers["physanim"].type == 'MESH_CACHE'  # the cloth baked all the same
+    assert bad.physanim.emitter.result is None
+    assert not _leftovers(_cache_root(scene))

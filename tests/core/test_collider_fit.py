@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from physanim.core.collision.shapes import box_mesh, grid_mesh, sphere_mesh
-from physanim.core.particles import (ColliderFrame, EmitterFrame, EmitterSettings, FrameInputs,
-                                     ParticleSolver)
-from physanim.core.particles.collider_fit import fit_analytic_shape
+from physanim.core.contact import ColliderFrame
+from physanim.core.particles import EmitterFrame, EmitterSettings, FrameInputs, ParticleSolver
+from physanim.core.contact.fit import fit_analytic_shape
 from physanim.tests.core.helpers import particle_model, place, rotation, translation
 
 DT = 1.0 / 24.0

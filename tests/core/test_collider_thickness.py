@@ -4,9 +4,11 @@ import math
 import numpy as np
 import pytest
 
-from physanim.core.particles import (ColliderFrame, EmitterFrame, EmitterSettings, FrameInputs,
-                                     ParticleModelBuilder, ParticleSolver)
-from physanim.core.particles.colliders import SKIN
+from physanim.core.contact import ColliderFrame
+from physanim.core.particles import (
+    EmitterFrame, EmitterSettings, FrameInputs, ParticleModelBuilder, ParticleSolver,
+)
+from physanim.core.contact import SKIN
 
 DT = 1 / 24
 

@@ -10,9 +10,11 @@ import numpy as np
 import pytest
 
 from physanim.core.collision.shapes import grid_mesh
-from physanim.core.particles import (ColliderFrame, EmitterFrame, EmitterSettings, FrameInputs,
-                                     ParticleModelBuilder, ParticleSolver)
-from physanim.core.particles.colliders import SKIN
+from physanim.core.contact import ColliderFrame
+from physanim.core.particles import (
+    EmitterFrame, EmitterSettings, FrameInputs, ParticleModelBuilder, ParticleSolver,
+)
+from physanim.core.contact import SKIN
 from physanim.tests.core.helpers import (
     place as _place, rotation as _rotation,
     translation as _translate,
@@ -399,17 +401,18 @@ def test_hierarchy_is_reused_for_the_same_mesh_and_refitted_for_a_deformed_one()
     or a same-named other mesh rebuild it."""
     from physanim.core.collision import TriangleMesh, build_bvh
     from physanim.core.collision.raycast import segment_hits
-    from physanim.core.particles import mesh_collider
+    from physanim.core.contact import mesh as mesh_collider
 
     verts, tris = _sheet(12, 4.0)
     first = _mesh_collider("Reuse", verts, tris)
-    bvh, boundary = mesh_collider._hierarchy(first)
-    again, boundary_again = mesh_collider._hierarchy(_mesh_collider("Reuse", verts.copy(), tris))
+    cache = mesh_collider.MeshHierarchies()
+    bvh, boundary = cache.of(first)
+    again, boundary_again = cache.of(_mesh_collider("Reuse", verts.copy(), tris))
     assert again is bvh and boundary_again is boundary
 
     moved = verts.copy()
     moved[:, 2] = 0.3 * np.sin(2.0 * moved[:, 0]) + 0.1 * moved[:, 1]
-    refit, _ = mesh_collider._hierarchy(_mesh_collider("Reuse", moved, tris))
+    refit, _ = cache.of(_mesh_collider("Reuse", moved, tris))
     fresh = build_bvh(TriangleMesh(moved, tris), mesh_collider.BVH_KIND, "topdown")
     rng = np.random.default_rng(7)
     a = np.column_stack([rng.uniform(-2, 2, (500, 2)), np.full(500, 2.0)])
@@ -419,15 +422,15 @@ def test_hierarchy_is_reused_for_the_same_mesh_and_refitted_for_a_deformed_one()
     np.testing.assert_allclose(ours.point, theirs.point, atol=1e-12)
 
     other_tris = tris[::-1, ::-1].copy()
-    rebuilt, _ = mesh_collider._hierarchy(_mesh_collider("Reuse", moved, other_tris))
+    rebuilt, _ = cache.of(_mesh_collider("Reuse", moved, other_tris))
     assert rebuilt is not refit and np.array_equal(rebuilt.mesh.triangles, other_tris)
 
     # a mesh that keeps deforming is refitted REBUILD_AFTER times, then built afresh
     refits = []
     for k in range(mesh_collider.REBUILD_AFTER + 1):
         shape = moved + [0.0, 0.0, 0.01 * (k + 1)]
-        mesh_collider._hierarchy(_mesh_collider("Reuse", shape, other_tris))
-        refits.append(mesh_collider._HIERARCHIES["Reuse"][4])
+        cache.of(_mesh_collider("Reuse", shape, other_tris))
+        refits.append(cache._known["Reuse"][4])
     assert refits == list(range(1, mesh_collider.REBUILD_AFTER + 1)) + [0]
 
 
@@ -436,7 +439,7 @@ def test_deforming_mesh_with_two_sheets_stops_a_particle_at_the_far_one():
     moves): a particle just above the lower plate, rising fast, hits the upper plate from
     behind. Its side must be judged on the plate it hits, not on the nearest sheet (the lower
     plate, which it is in front of), or the hit is discarded and it passes through."""
-    from physanim.core.particles import colliders as coll
+    from physanim.core import contact as coll
 
     quad = np.array([[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]])
     v0 = np.concatenate([quad, quad + [0.0, 0.0, 0.1]])
@@ -444,8 +447,8 @@ def test_deforming_mesh_with_two_sheets_stops_a_particle_at_the_far_one():
     v1[0, 2] -= 1e-3  # deforming, far from the particle
     tris = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
     shelves = _mesh_collider("Shelves", v0, tris, verts1=v1, restitution=0.0, friction=0.0)
-    path = coll.ColliderPath.of(shelves, DT)
+    path = coll.ColliderPaths().path(shelves, DT)
     x0, v = np.array([[0.3, 0.2, 0.03]]), np.array([[0.0, 0.0, 6.0]])
-    x, v_after, count = coll.respond([path], x0, x0 + DT * v, v, v.copy(), 0.0, 1.0, DT, 0.1)
+    x, v_after, count, _ = coll.respond([path], x0, x0 + DT * v, v, v.copy(), 0.0, 1.0, DT, 0.1)
     assert count == 1
     assert 0.09 < x[0, 2] < 0.1 and v_after[0, 2] <= 0.0

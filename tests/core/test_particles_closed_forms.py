@@ -8,12 +8,13 @@ import math
 import numpy as np
 import pytest
 
+from physanim.core.contact import ColliderFrame
+from physanim.core.forces import Drag
 from physanim.core.particles import (
-    ColliderFrame, DampedSprings, Drag, EmitterFrame, EmitterSettings, FrameInputs,
-    ParticleSolver, SpringLink,
+    DampedSprings, EmitterFrame, EmitterSettings, FrameInputs, ParticleSolver, SpringLink,
 )
-from physanim.core.particles.colliders import SKIN
-from physanim.core.particles.forces import ParticleView
+from physanim.core.contact import SKIN
+from physanim.core.forces import ParticleView
 from physanim.tests.core.helpers import particle_model as _model, translation as _translate
 
 G = 9.81

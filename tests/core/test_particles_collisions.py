@@ -8,10 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from physanim.core.particles import (
-    ColliderFrame, EmitterFrame, EmitterSettings, FrameInputs, ParticleSolver,
-)
-from physanim.core.particles.colliders import SKIN
+from physanim.core.contact import ColliderFrame
+from physanim.core.particles import EmitterFrame, EmitterSettings, FrameInputs, ParticleSolver
+from physanim.core.contact import SKIN
 from physanim.tests.core.helpers import (
     particle_model as _model, place as _place,
     rotation as _rotation, translation as _translate,
@@ -249,24 +248,26 @@ def test_fast_spinning_collider_never_swallows_particles(shape):
 
 
 def test_respond_records_each_hit_for_the_spring_solver():
-    """``respond(record=...)`` notes every hit particle's first collision: a particle falling
+    """``respond`` returns every hit particle's first collision as Contacts: a particle falling
     through a ground rising at 1 m/s is recorded with the ground's normal and velocity, its
-    collider's restitution and friction, and a landing point SKIN above the surface where the
-    ground has carried it at the sub-step's end; a particle that misses is not recorded."""
-    from physanim.core.particles import colliders as coll
+    collider's restitution and friction, the normal velocity change of its bounce, and a landing
+    point SKIN above the surface where the ground has carried it at the sub-step's end; a
+    particle that misses is not recorded."""
+    from physanim.core import contact as coll
 
     m0, m1 = np.eye(4), np.eye(4)
     m1[2, 3] = DT  # the ground rises 1 m/s
     ground = ColliderFrame("Ground", "HALF_SPACE", m0, m1, restitution=0.25, friction=0.6)
-    paths = [coll.ColliderPath.of(ground, DT)]
+    paths = coll.ColliderPaths().of([ground], DT)
     x0 = np.array([[0.0, 0.0, 0.05], [2.0, 0.0, 3.0]])
     v0 = np.array([[0.0, 0.0, -4.0], [0.0, 0.0, -1.0]])
     x1 = x0 + DT * v0
-    record = {}
-    coll.respond(paths, x0, x1, v0, v0.copy(), 0.0, 1.0, DT, 0.01, record)
-    np.testing.assert_array_equal(record["index"], [0])
-    np.testing.assert_allclose(record["normal"], [[0.0, 0.0, 1.0]], atol=1e-12)
-    np.testing.assert_allclose(record["surface_velocity"], [[0.0, 0.0, 1.0]], atol=1e-9)
-    np.testing.assert_allclose(record["restitution"], [0.25])
-    np.testing.assert_allclose(record["friction"], [0.6])
-    np.testing.assert_allclose(record["landing"][0, 2], DT + SKIN, atol=1e-9)
+    first = coll.respond(paths, x0, x1, v0, v0.copy(), 0.0, 1.0, DT, 0.01).first
+    np.testing.assert_array_equal(first.index, [0])
+    np.testing.assert_allclose(first.normal, [[0.0, 0.0, 1.0]], atol=1e-12)
+    np.testing.assert_allclose(first.surface_velocity, [[0.0, 0.0, 1.0]], atol=1e-9)
+    np.testing.assert_allclose(first.restitution, [0.25])
+    np.testing.assert_allclose(first.friction, [0.6])
+    np.testing.assert_allclose(first.point[0, 2], DT + SKIN, atol=1e-9)
+    # it met the ground at 5 m/s relative to it and left at 0.25 of that: a 6.25 m/s change
+    np.testing.assert_allclose(first.impulse, [5.0 * 1.25], rtol=1e-9)

@@ -11,10 +11,9 @@ import pytest
 
 from physanim.core.bounds import StateBounds
 from physanim.core.errors import SimulationError
-from physanim.core.particles import (
-    Attractor, Drag, EmitterFrame, EmitterSettings, FrameInputs, ParticleSolver, Vortex, Wind,
-)
-from physanim.core.particles.forces import ParticleView
+from physanim.core.forces import Attractor, Drag, Vortex, Wind
+from physanim.core.particles import EmitterFrame, EmitterSettings, FrameInputs, ParticleSolver
+from physanim.core.forces import ParticleView
 from physanim.tests.core.helpers import particle_model as _model, place as _place
 
 FPS = 24

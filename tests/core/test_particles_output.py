@@ -9,8 +9,7 @@ import pytest
 from physanim.core.curves import LifeCurve
 from physanim.core.errors import PhysanimError
 from physanim.core.particles import (
-    EmitterFrame, EmitterSettings, FrameInputs, ParticleSolver,
-    emitter_arrays,
+    EmitterFrame, EmitterSettings, FrameInputs, ParticleSolver, emitter_arrays,
 )
 from physanim.tests.core.helpers import particle_model as _model
 

@@ -10,9 +10,7 @@ import numpy as np
 import pytest
 
 from physanim.core.errors import PhysanimError
-from physanim.core.particles import (
-    EmitterFrame, EmitterSettings, FrameInputs, ParticleSolver,
-)
+from physanim.core.particles import EmitterFrame, EmitterSettings, FrameInputs, ParticleSolver
 from physanim.tests.core.helpers import particle_model as _model
 
 DT = 1.0 / 24

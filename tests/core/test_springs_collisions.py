@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from physanim.core.particles import ColliderFrame
+from physanim.core.contact import ColliderFrame
 from physanim.core.springs import (SpringFrameInputs, SpringMeshBuilder, SpringMeshSettings,
                                    SpringMeshSolver)
 from physanim.tests.core.helpers import grid as _grid

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from physanim.core.particles import Attractor, Drag, Vortex
+from physanim.core.forces import Attractor, Drag, Vortex
 from physanim.core.springs import (SpringFrameInputs, SpringMeshBuilder, SpringMeshSettings,
                                    SpringMeshSolver)
 from physanim.tests.core.helpers import grid as _grid

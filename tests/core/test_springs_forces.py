@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from physanim.core.particles.forces import ParticleView
+from physanim.core.forces import ParticleView
 from physanim.core.springs import SpringMeshBuilder, SpringMeshSettings, topology
 from physanim.core.springs.forces import AngularSprings, SpringSet, dihedral_gradients
 from physanim.tests.core.helpers import grid as _grid

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from physanim.core.errors import PhysanimError
-from physanim.core.particles.forces import ParticleView
+from physanim.core.forces import ParticleView
 from physanim.core.springs import (SpringFrameInputs, SpringMeshBuilder, SpringMeshSettings,
                                    SpringMeshSolver, topology)
 from physanim.tests.core.helpers import grid as _grid

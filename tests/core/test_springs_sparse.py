@@ -106,7 +106,7 @@ def _stiff_grid(count: int, stiffness: float):
 def _system_matrix(model, h: float = 1 / 24):
     """A = M - h df/dv - h^2 df/dx of the model at rest, through the solver's own pieces."""
     solver = SpringMeshSolver(model, "IMPLICIT", 1, frame_dt=h)
-    from physanim.core.particles.forces import ParticleView
+    from physanim.core.forces import ParticleView
     view = ParticleView(model.rest_x, np.zeros_like(model.rest_x), model.vertex_mass, 0.0)
     blocks = [solver.springs.linearize(view), solver.bending.linearize(view)]
     return solver.integrator._assemble(blocks, model.vertex_mass, h), solver.integrator

@@ -1,6 +1,6 @@
-"""Any triangle mesh as a particle collider: moving, rotating and deforming, open or closed.
+"""Any triangle mesh as a collider: moving, rotating and deforming, open or closed.
 
-The mesh lives in its object's local frame like the analytic shapes (see :mod:`.collider_path`):
+The mesh lives in its object's local frame like the analytic shapes (see :mod:`.path`):
 a particle's path is tested as the local segment l0 = M(s0)^-1 x0 -> l1 = M(s1)^-1 x1. Its local
 vertices move linearly over the frame interval, vertices(s) = lerp(vertices0, vertices1, s); one
 bounding-volume hierarchy is built per interval and refitted for the sub-step times.
@@ -35,15 +35,16 @@ from ..collision.distance import CORNER, EDGE, closest_on_triangles, closest_poi
 from ..collision.mesh import TriangleMesh
 from ..collision.raycast import segment_hits
 from ..transforms import inverse_affine, norm_rows, transform_vectors
-from .collider_path import CONTACT_DISTANCE, ColliderPath, Hits, SurfacePoints
-from .settings import ColliderFrame
+from .frame import ColliderFrame
+from .path import CONTACT_DISTANCE, ColliderPath, Hits, SurfacePoints
 
 BVH_KIND = "aabb"  # refits cheaply and exactly for deforming meshes
 BVH_CACHE = 8  # hierarchies kept per interval (refits for the sub-step times in use)
 
 
-class MeshPath(ColliderPath, shapes=("MESH",)):
-    """A triangle mesh collider during one frame interval.
+class MeshPath(ColliderPath):
+    """A triangle mesh collider during one frame interval; its hierarchy comes from (and is kept
+    for the next interval by) ``hierarchies``, which the caller owns.
 
     Attributes:
         vertex_step: (n, 3) local vertex displacement over the interval [local units].
@@ -51,17 +52,17 @@ class MeshPath(ColliderPath, shapes=("MESH",)):
         max_step: largest vertex displacement over the interval [local units].
     """
 
-    def __init__(self, frame: ColliderFrame, frame_dt: float):
+    def __init__(self, frame: ColliderFrame, frame_dt: float, hierarchies: MeshHierarchies):
         super().__init__(frame, frame_dt)
         self.offset = frame.thickness
         self.triangles = frame.triangles
         self.vertices0 = frame.vertices0
         self.vertex_step = frame.vertices1 - frame.vertices0
         self.deforming = bool(np.any(self.vertex_step))
-        # hits are found on the mesh as it is at the sub-step's end (see colliders.respond)
+        # hits are found on the mesh as it is at the sub-step's end (see response.respond)
         self.hits_end_surface = self.deforming
         self.max_step = float(norm_rows(self.vertex_step).max())
-        self._bvh0, self._boundary = _hierarchy(frame)
+        self._bvh0, self._boundary = hierarchies.of(frame)
         self._welded = self._bvh0.mesh.welded[frame.triangles]  # corners, duplicates merged
         self._bvhs: dict[float, BVH] = {}
         both = np.concatenate([frame.vertices0, frame.vertices1])
@@ -238,6 +239,10 @@ class MeshPath(ColliderPath, shapes=("MESH",)):
         velocity = self.surface_velocity(q[sel], s[cand][sel], tri[sel])
         return SurfacePoints(cand[sel], p_w[sel], n_w[sel], velocity, gap[sel])
 
+    @classmethod
+    def build(cls, frame: ColliderFrame, frame_dt: float, owner) -> MeshPath:
+        return cls(frame, frame_dt, owner.hierarchies)
+
     def surface_velocity(self, l, s, element=None) -> np.ndarray:
         s = np.broadcast_to(np.asarray(s, float), len(l))
         local_v = None
@@ -251,42 +256,50 @@ class MeshPath(ColliderPath, shapes=("MESH",)):
         return self.path.point_velocities(l, s, self.frame_dt, local_velocity=local_v)
 
 
-_HIERARCHIES: dict = {}  # collider name -> (triangles, vertices, BVH, boundary features, refits)
 HIERARCHY_CACHE = 8  # colliders remembered between frame intervals
 REBUILD_AFTER = 24  # refits before a deforming mesh's hierarchy is built afresh (its splits
 #                     were chosen for the shape it had then)
 
 
-def forget_hierarchies() -> None:
-    """Drop the hierarchies kept between frame intervals (a bake calls this when it ends, so
-    large meshes do not stay in memory)."""
-    _HIERARCHIES.clear()
-
-
-def _hierarchy(frame: ColliderFrame) -> tuple[BVH, np.ndarray]:
-    """The hierarchy and open-boundary features of a collider mesh at the interval's start.
+class MeshHierarchies:
+    """Mesh-collider hierarchies kept between frame intervals, owned by the caller (a bake keeps
+    one for its run and drops it with the run, so large meshes do not stay in memory).
 
     Consecutive frame intervals of one collider usually share its mesh: the same vertices (a
     rigid collider: only the object matrix moves) reuse the hierarchy, moved vertices over the
     same triangles (a deforming mesh) refit it — building one costs ~100x a refit — and every
     REBUILD_AFTER refits it is built afresh for the current shape. Reuse is decided by
-    comparing the arrays, never by name alone."""
-    tris, verts = frame.triangles, frame.vertices0
-    known = _HIERARCHIES.get(frame.name)
-    if known is not None and known[0].shape == tris.shape and np.array_equal(known[0], tris):
-        if known[1].shape == verts.shape and np.array_equal(known[1], verts):
-            return known[2], known[3]
-        if known[1].shape == verts.shape and known[4] < REBUILD_AFTER:
-            bvh, _ = known[2].refit(verts)
-            boundary = _boundary_features(bvh.mesh)  # welding may change as vertices move
-            _HIERARCHIES[frame.name] = (known[0], verts.copy(), bvh, boundary, known[4] + 1)
-            return bvh, boundary
-    bvh = build_bvh(TriangleMesh(verts, tris, frame.name), BVH_KIND, "topdown")
-    boundary = _boundary_features(bvh.mesh)
-    if len(_HIERARCHIES) >= HIERARCHY_CACHE:
-        _HIERARCHIES.clear()
-    _HIERARCHIES[frame.name] = (tris.copy(), verts.copy(), bvh, boundary, 0)
-    return bvh, boundary
+    comparing the arrays, never by name alone.
+    """
+
+    def __init__(self, capacity: int = HIERARCHY_CACHE):
+        self.capacity = capacity
+        self._known: dict = {}  # collider name -> (triangles, vertices, BVH, boundary, refits)
+
+    def __len__(self) -> int:
+        return len(self._known)
+
+    def clear(self) -> None:
+        self._known.clear()
+
+    def of(self, frame: ColliderFrame) -> tuple[BVH, np.ndarray]:
+        """The hierarchy and open-boundary features of a collider mesh at the interval's start."""
+        tris, verts = frame.triangles, frame.vertices0
+        known = self._known.get(frame.name)
+        if known is not None and known[0].shape == tris.shape and np.array_equal(known[0], tris):
+            if known[1].shape == verts.shape and np.array_equal(known[1], verts):
+                return known[2], known[3]
+            if known[1].shape == verts.shape and known[4] < REBUILD_AFTER:
+                bvh, _ = known[2].refit(verts)
+                boundary = _boundary_features(bvh.mesh)  # welding may change as vertices move
+                self._known[frame.name] = (known[0], verts.copy(), bvh, boundary, known[4] + 1)
+                return bvh, boundary
+        bvh = build_bvh(TriangleMesh(verts, tris, frame.name), BVH_KIND, "topdown")
+        boundary = _boundary_features(bvh.mesh)
+        if len(self._known) >= self.capacity:
+            self._known.clear()
+        self._known[frame.name] = (tris.copy(), verts.copy(), bvh, boundary, 0)
+        return bvh, boundary
 
 
 def _boundary_features(mesh: TriangleMesh) -> np.ndarray:

@@ -5,8 +5,9 @@ A collider is a shape in its object's local space moved by an interpolated world
 x1 (at s1), is mapped into the collider's frame at its own times, l0 = M(s0)^-1 x0 and
 l1 = M(s1)^-1 x1, which makes a moving collider a static one with the relative motion.
 
-Each kind (analytic shapes in :mod:`.colliders`, triangle meshes in :mod:`.mesh_collider`)
-subclasses :class:`ColliderPath` and answers the three questions of the collision passes:
+Each kind (analytic shapes in :mod:`.analytic`, triangle meshes in :mod:`.mesh`, listed in
+:data:`physanim.core.contact.kinds.KINDS`) subclasses :class:`ColliderPath` and answers the three
+questions of the collision passes (:mod:`.response`):
 
 * :meth:`ColliderPath.first_hits`: where segments start -> end first enter the collider;
 * :meth:`ColliderPath.push_out`: which points ended inside it, and the surface to put them on;
@@ -20,7 +21,7 @@ import numpy as np
 
 from ..transforms import (TransformPath, inverse3, inverse_affine, norm_rows, transform_points,
                           transform_vectors)
-from .settings import ColliderFrame
+from .frame import ColliderFrame
 
 SKIN = 1e-4  # [m] particles are placed this far outside a surface after a hit
 CONTACT_DISTANCE = 1e-3  # [m] closer than this (and not separating) counts as resting contact
@@ -78,9 +79,7 @@ class SurfacePoints:
 class ColliderPath:
     """One collider during one frame interval, with its motion path.
 
-    Subclasses register the shapes they handle (``class MeshPath(ColliderPath,
-    shapes=("MESH",))``) and implement :meth:`first_hits`, :meth:`push_out` and
-    :meth:`near_surface`.
+    Subclasses implement :meth:`first_hits`, :meth:`push_out` and :meth:`near_surface`.
 
     Attributes:
         frame: the collider's settings for this interval.
@@ -92,12 +91,7 @@ class ColliderPath:
     """
 
     offset: float = 0.0
-    _kinds: dict[str, type] = {}
-
-    def __init_subclass__(cls, shapes: tuple[str, ...] = (), **kwargs):
-        super().__init_subclass__(**kwargs)
-        for shape in shapes:
-            ColliderPath._kinds[shape] = cls
+    hits_end_surface: bool = False  # hit points lie on the surface at the sub-step's END
 
     def __init__(self, frame: ColliderFrame, frame_dt: float):
         self.frame = frame
@@ -106,14 +100,10 @@ class ColliderPath:
         self.per_metre = np.linalg.norm(inverse_affine(self.path.m0)[:3, :3], axis=1)
 
     @classmethod
-    def of(cls, frame: ColliderFrame, frame_dt: float) -> ColliderPath:
-        """The path object of the kind that handles ``frame.shape``."""
-        try:
-            kind = ColliderPath._kinds[frame.shape]
-        except KeyError:
-            raise ValueError(f'collider "{frame.name}": no collider kind handles shape '
-                             f"{frame.shape!r}") from None
-        return kind(frame, frame_dt)
+    def build(cls, frame: ColliderFrame, frame_dt: float, owner) -> ColliderPath:
+        """The path of ``frame``; ``owner`` (a :class:`~.kinds.ColliderPaths`) keeps what lasts
+        between frame intervals, for the kinds that keep anything."""
+        return cls(frame, frame_dt)
 
     # -- motion ---------------------------------------------------------------------------------
     def _at(self, s) -> np.ndarray:

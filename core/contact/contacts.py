@@ -1,0 +1,115 @@
+"""The typed result of every contact query and response: :class:`Contacts`, and the resting
+contact constraint a system applies to its accumulated forces (:class:`ContactForce`)."""
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Contacts:
+    """Points of one system touching colliders (k of them), one row each, sorted by index.
+
+    Attributes:
+        index: (k,) int64 indices of the points in their system's arrays.
+        point: (k, 3) world point of each contact [m]: the surface point of a resting contact;
+            after a hit, where the response placed the point, carried with the surface to the
+            sub-step's end.
+        normal: (k, 3) unit surface normals, facing the point.
+        depth: (k,) how far each point is inside the surface [m] (negative: a gap).
+        surface_velocity: (k, 3) the surface's velocity there [m/s].
+        friction: (k,) Coulomb mu of the surface. restitution: (k,) k_r of the surface.
+        impulse: (k,) normal velocity change the response gave the point [m/s] (momentum per
+            unit mass; 0 for a resting contact).
+        normal_speed: (k,) the normal velocity a constraint on the point prescribes [m/s]: the
+            surface's own for a resting contact, the one that lands it for a landing one.
+        held: (k,) bool: a constraint whatever the forces (a point landing during the step),
+            not only while forces press the point into the surface.
+    """
+
+    index: np.ndarray
+    point: np.ndarray
+    normal: np.ndarray
+    depth: np.ndarray
+    surface_velocity: np.ndarray
+    friction: np.ndarray
+    restitution: np.ndarray
+    impulse: np.ndarray
+    normal_speed: np.ndarray
+    held: np.ndarray
+
+    @classmethod
+    def none(cls) -> Contacts:
+        return cls.of(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)),
+                      np.zeros((0, 3)), np.zeros(0), np.zeros(0))
+
+    @classmethod
+    def of(cls, index, point, normal, surface_velocity, friction, restitution, depth=None,
+           impulse=None, normal_speed=None, held=None) -> Contacts:
+        """Contacts from the arrays that always differ; the rest default to a resting contact
+        (depth 0, no impulse, the surface's own normal speed, not held). Sorts by index."""
+        k = len(index)
+        if normal_speed is None:
+            normal_speed = np.einsum("ij,ij->i", surface_velocity, normal)
+        made = cls(np.asarray(index, np.int64), point, normal,
+                   np.zeros(k) if depth is None else depth, surface_velocity,
+                   np.asarray(friction, np.float64), np.asarray(restitution, np.float64),
+                   np.zeros(k) if impulse is None else impulse, normal_speed,
+                   np.zeros(k, bool) if held is None else held)
+        if k > 1 and np.any(made.index[1:] < made.index[:-1]):
+            return made.take(np.argsort(made.index, kind="stable"))
+        return made
+
+    def __len__(self) -> int:
+        return len(self.index)
+
+    def take(self, rows) -> Contacts:
+        """These contacts' rows ``rows`` (a mask or indices; kept in the given order)."""
+        return Contacts(*(getattr(self, f.name)[rows] for f in fields(self)))
+
+    def merged(self, other: Contacts) -> Contacts:
+        """These contacts with ``other``'s points replaced or added, sorted by index."""
+        stay = ~np.isin(self.index, other.index)
+        both = [np.concatenate([getattr(self, f.name)[stay], getattr(other, f.name)])
+                for f in fields(self)]
+        order = np.argsort(both[0], kind="stable")
+        return Contacts(*(a[order] for a in both))
+
+
+@dataclass(frozen=True)
+class ContactForce:
+    """Keeps resting points on a surface: cancels the accumulated force pushing into it and adds
+    Coulomb friction: static (holds the point while the needed force is within mu |f_n|), else
+    kinetic (mu |f_n| against the motion, capped so it stops, never reverses, it).
+
+    A constraint on the total force, not a force among the others: a system calls
+    :meth:`constrain` after every force has added into the accumulator.
+
+    Args: contacts: the resting contacts at the sub-step's start. h: sub-step [s] (for the
+    stopping cap).
+    """
+
+    contacts: Contacts
+    h: float
+
+    def constrain(self, p, f_out: np.ndarray) -> None:
+        """Correct the accumulated forces ``f_out`` (n, 3) of the points ``p`` (a
+        :class:`~physanim.core.forces.ParticleView`) in place."""
+        c = self.contacts
+        if len(c) == 0:
+            return
+        idx, normal = c.index, c.normal
+        f = f_out[idx]
+        fn = np.einsum("ij,ij->i", f, normal)
+        push = np.minimum(fn, 0.0)  # only the component into the surface is cancelled
+        f = f - push[:, None] * normal
+        rel = p.v[idx] - c.surface_velocity
+        vt = rel - np.einsum("ij,ij->i", rel, normal)[:, None] * normal
+        ft = f - np.einsum("ij,ij->i", f, normal)[:, None] * normal
+        # friction that would stop the sliding within this step (static friction) ...
+        need = -(p.mass[idx, None] * vt / self.h + ft)
+        need_mag = np.linalg.norm(need, axis=1)
+        cap = c.friction * -push  # ... limited by Coulomb's mu |f_n| (kinetic friction)
+        scale = np.minimum(1.0, cap / np.where(need_mag > 0.0, need_mag, np.inf))
+        f_out[idx] = f + scale[:, None] * need

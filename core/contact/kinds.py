@@ -1,0 +1,39 @@
+"""Which path class handles each collider shape, and the object that turns a frame interval's
+colliders into paths for every system of a run."""
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from .analytic import SHAPES as ANALYTIC_SHAPES
+from .analytic import AnalyticPath
+from .frame import ColliderFrame
+from .mesh import MeshHierarchies, MeshPath
+from .path import ColliderPath
+
+KINDS: dict[str, type[ColliderPath]] = {
+    **{shape: AnalyticPath for shape in ANALYTIC_SHAPES},
+    "MESH": MeshPath,
+}
+
+
+class ColliderPaths:
+    """Makes the collider paths of each frame interval and keeps what lasts between intervals
+    (mesh hierarchies). One per run — a bake, a test — owned by the caller and dropped with it.
+    """
+
+    def __init__(self):
+        self.hierarchies = MeshHierarchies()
+
+    def release(self) -> None:
+        """Drop what is kept between frame intervals (a run calls this when it ends)."""
+        self.hierarchies.clear()
+
+    def of(self, frames: Sequence[ColliderFrame], frame_dt: float) -> list[ColliderPath]:
+        return [self.path(frame, frame_dt) for frame in frames]
+
+    def path(self, frame: ColliderFrame, frame_dt: float) -> ColliderPath:
+        kind = KINDS.get(frame.shape)
+        if kind is None:
+            raise ValueError(f'collider "{frame.name}": no collider kind handles shape '
+                             f"{frame.shape!r}")
+        return kind.build(frame, frame_dt, self)

@@ -1,0 +1,29 @@
+"""Argument checks shared by the frozen settings of every system: each error names its owner
+(an object), the value's name and the value."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def finite(owner: str, **values: float) -> None:
+    for key, value in values.items():
+        if not math.isfinite(value):
+            raise ValueError(f'{owner}: {key} must be finite (got {value})')
+
+
+def non_negative(owner: str, **values: float) -> None:
+    finite(owner, **values)
+    for key, value in values.items():
+        if value < 0.0:
+            raise ValueError(f'{owner}: {key} must be >= 0 (got {value})')
+
+
+def matrix(owner: str, key: str, m) -> np.ndarray:
+    m = np.asarray(m, dtype=np.float64)
+    if m.shape != (4, 4):
+        raise ValueError(f"{owner}: {key} must be a 4x4 matrix (got shape {m.shape})")
+    if not np.all(np.isfinite(m)):
+        raise ValueError(f"{owner}: {key} has non-finite entries")
+    return m
