@@ -3,11 +3,6 @@ miss. Degenerate and zero-area triangles, non-manifold and open meshes, duplicat
 positions, singular transforms and empty queries."""
 from __future__ import annotations
 
-import json
-import subprocess
-import sys
-import textwrap
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -155,22 +150,3 @@ def test_convex_hull_degenerate_inputs():
         convex_hull(np.zeros((0, 3)))
     with pytest.raises(PhysanimError, match="point 1 is not finite"):
         convex_hull([[0, 0, 0], [np.nan, 0, 0]])
-
-
-def test_collision_package_imports_without_blender():
-    root = Path(__file__).resolve().parents[2]
-    script = textwrap.dedent(f"""
-        import importlib, importlib.util, json, sys
-        spec = importlib.util.spec_from_file_location(
-            "physanim", {str(root)!r} + "/__init__.py", submodule_search_locations=[{str(root)!r}])
-        module = importlib.util.module_from_spec(spec)
-        sys.modules["physanim"] = module
-        spec.loader.exec_module(module)
-        importlib.import_module("physanim.core.collision")
-        print(json.dumps(sorted(sys.modules)))
-    """)
-    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                            timeout=120)
-    assert result.returncode == 0, result.stderr
-    loaded = json.loads(result.stdout.strip().splitlines()[-1])
-    assert not [m for m in loaded if m.split(".")[0] in ("bpy", "mathutils", "bmesh", "gpu")]

@@ -4,10 +4,6 @@ sweep and prune — from one frame to the next with temporal coherence.
 """
 from __future__ import annotations
 
-import json
-import subprocess
-import sys
-import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -478,22 +474,3 @@ def test_box_policy_helpers_refuse_bad_input():
         bp.aabb_of_oriented_boxes(np.zeros((2, 3)), np.zeros((3, 3, 3)), np.ones((2, 3)))
     lo, hi = bp.aabb_of_points(np.zeros((0, 3)), np.zeros(0, dtype=int), 0)
     assert lo.shape == hi.shape == (0, 3)
-
-
-def test_broadphase_imports_without_blender():
-    script = textwrap.dedent(f"""
-        import importlib.util, json, sys
-        root = {str(ROOT)!r}
-        spec = importlib.util.spec_from_file_location(
-            "physanim", root + "/__init__.py", submodule_search_locations=[root])
-        module = importlib.util.module_from_spec(spec)
-        sys.modules["physanim"] = module
-        spec.loader.exec_module(module)
-        import physanim.core.collision.broadphase
-        print(json.dumps(sorted(sys.modules)))
-    """)
-    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                            timeout=120, check=False)
-    assert result.returncode == 0, result.stderr
-    loaded = json.loads(result.stdout.strip().splitlines()[-1])
-    assert not [m for m in loaded if m.split(".")[0] in ("bpy", "mathutils", "bmesh", "gpu")]

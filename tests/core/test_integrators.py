@@ -5,10 +5,6 @@ Tolerances come from the method's order and step size, never from timing.
 from __future__ import annotations
 
 import math
-import subprocess
-import sys
-import textwrap
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -87,24 +83,6 @@ class Pulse:
 def run(integrator: integrators.Integrator, system, t_end: float, n_steps: int) -> list:
     h = t_end / n_steps
     return [integrator.step(system, i * h, h) for i in range(n_steps)]
-
-
-def test_core_integrators_never_import_blender():
-    root = Path(__file__).resolve().parents[2]
-    code = textwrap.dedent(f"""
-        import importlib.util, sys
-        spec = importlib.util.spec_from_file_location(
-            "physanim", {str(root / "__init__.py")!r}, submodule_search_locations=[{str(root)!r}])
-        module = importlib.util.module_from_spec(spec)
-        sys.modules["physanim"] = module
-        spec.loader.exec_module(module)
-        import physanim.core.integrators
-        assert "bpy" not in sys.modules and "mathutils" not in sys.modules
-    """)
-    subprocess.run([sys.executable, "-c", code], check=True, timeout=60)
-
-
-# --- Tableaux --------------------------------------------------------------------------------
 
 
 def order_conditions(A: np.ndarray, b: np.ndarray, c: np.ndarray, order: int) -> list:
