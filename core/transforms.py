@@ -176,6 +176,11 @@ class TransformPath:
 # numpy sends (n, 3) @ (3, 3) and 3x3/4x4 inverses to (multi-threaded) BLAS/LAPACK, whose call
 # overhead dwarfs the arithmetic here; these closed forms are plain vectorised element-wise math.
 
+def dot_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise dot products of two (n, 3) arrays: (n,)."""
+    return np.einsum("ij,ij->i", a, b)
+
+
 def norm_rows(a: np.ndarray) -> np.ndarray:
     """Euclidean norm of each row of (n, k) ``a``."""
     return np.sqrt(np.einsum("ij,ij->i", a, a))

@@ -21,10 +21,9 @@ import numpy as np
 from ..bounds import DEFAULT_BOUNDS, StateBounds
 from ..contact import ColliderFrame, ColliderPaths, ContactForce, respond, resting_contacts
 from ..errors import PhysanimError, SimulationError
-from ..forces import Force, Gravity, ParticleView
+from ..forces import DampedSprings, Force, Gravity, ParticleView
 from ..integrators import Integrator, make_integrator
 from .emit import Births, sample_births, sample_bursts
-from .forces import DampedSprings
 from .model import ParticleModel, ParticleState
 from .settings import EmitterFrame
 
@@ -194,8 +193,8 @@ class ParticleSolver:
                     continue
                 forces.append(DampedSprings(state.index_of(state.link_a[sel]),
                                             state.index_of(state.link_b[sel]),
-                                            settings.link.stiffness, settings.link.damping,
-                                            state.link_rest[sel]))
+                                            state.link_rest[sel], settings.link.stiffness,
+                                            settings.link.damping))
         return forces
 
     def _integrate(self, state, forces, contact, t, h, inputs) -> int:

@@ -17,11 +17,11 @@ import numpy as np
 from ..bounds import DEFAULT_BOUNDS, StateBounds
 from ..errors import PhysanimError, SimulationError
 from ..contact import ColliderFrame, ColliderPaths, ContactForce, Contacts, respond, resting_contacts
-from ..forces import Gravity, ParticleView, Wind
+from ..forces import AnchorSprings, DampedSprings, Gravity, ParticleView, Wind
+from ..forces.springs import scatter_add
 from ..integrators import make_integrator
 from ..transforms import TransformPath, inverse_affine, transform_points
-from .forces import (AnchorSprings, AngularSprings, LinearDrag, MassShared, SpringSet,
-                     scatter_add)
+from .forces import AngularSprings, LinearDrag, MassShared
 from .implicit import BaraffWitkin
 from .model import SpringMeshModel, SpringMeshState
 from .strain import limit_strain
@@ -174,10 +174,8 @@ class _MeshSystem:
         for force in self.forces:
             if isinstance(force, Gravity):
                 e -= float(np.sum(m * (x @ np.asarray(force.g))))
-            elif isinstance(force, SpringSet) and len(force.i):
-                d = x[force.i] - x[force.j]
-                stretch = np.sqrt(np.einsum("ij,ij->i", d, d)) - force.rest
-                e += 0.5 * float(np.dot(force.stiffness, stretch * stretch))
+            elif isinstance(force, DampedSprings):
+                e += force.energy(x)
             elif isinstance(force, AngularSprings) and len(force.hinge):
                 e += force.energy(x)
         return e
@@ -221,7 +219,7 @@ class SpringMeshSolver:
         self.integrator = (BaraffWitkin() if integrator == "IMPLICIT"
                            else make_integrator(integrator, tolerance))
         s = model.settings
-        self.springs = SpringSet(model.spring_i, model.spring_j, model.spring_rest,
+        self.springs = DampedSprings(model.spring_i, model.spring_j, model.spring_rest,
                                  model.spring_stiffness, model.spring_damping)
         self.bending = AngularSprings(model.hinge, model.hinge_rest, s.bend_stiffness,
                                       s.bend_damping)

@@ -8,13 +8,11 @@ import math
 import numpy as np
 import pytest
 
-from physanim.core.contact import ColliderFrame
-from physanim.core.forces import Drag
+from physanim.core.contact import SKIN, ColliderFrame
+from physanim.core.forces import DampedSprings, Drag, ParticleView
 from physanim.core.particles import (
-    DampedSprings, EmitterFrame, EmitterSettings, FrameInputs, ParticleSolver, SpringLink,
+    EmitterFrame, EmitterSettings, FrameInputs, ParticleSolver, SpringLink,
 )
-from physanim.core.contact import SKIN
-from physanim.core.forces import ParticleView
 from physanim.tests.core.helpers import particle_model as _model, translation as _translate
 
 G = 9.81
@@ -328,7 +326,8 @@ def test_damped_spring_matches_underdamped_closed_form():
     model = _model(EmitterSettings("Pair"))
     state = model.state()
     _place(state, [[0.0, 0.0, 0.0], [r0, 0.0, 0.0]], np.zeros((2, 3)), mass=[m1, m2])
-    spring = DampedSprings(np.array([1]), np.array([0]), k, c, np.array([rest]))
+    spring = DampedSprings(np.array([1]), np.array([0]), stiffness=k, damping=c,
+                           rest=np.array([rest]))
     fps = 240
     dt = 1.0 / fps
     solver = ParticleSolver(model, "RK4")

@@ -12,7 +12,8 @@ import pytest
 
 from physanim.core.forces import ParticleView
 from physanim.core.springs import SpringMeshBuilder, SpringMeshSettings, topology
-from physanim.core.springs.forces import AngularSprings, SpringSet, dihedral_gradients
+from physanim.core.forces import DampedSprings
+from physanim.core.springs.forces import AngularSprings, dihedral_gradients
 from physanim.tests.core.helpers import grid as _grid
 
 
@@ -35,7 +36,7 @@ def _deformed(model, seed: int):
 
 
 def _forces(model):
-    return [SpringSet(model.spring_i, model.spring_j, model.spring_rest, model.spring_stiffness,
+    return [DampedSprings(model.spring_i, model.spring_j, model.spring_rest, model.spring_stiffness,
                       model.spring_damping),
             AngularSprings(model.hinge, model.hinge_rest, model.settings.bend_stiffness,
                            model.settings.bend_damping)]
