@@ -11,6 +11,11 @@ RADIUS = 0.7
 THICKNESS = 0.02  # keeps the cloth's flat faces from cutting into the curved ball
 
 
+# Frames that show the point (falling over the ball with its corners flying; draping; settled
+# in folds); README_FRAME is the README's picture.
+SHOWCASE = (14, 22, 60)
+README_FRAME = 14
+
 def build(scene) -> None:
     import bmesh
 

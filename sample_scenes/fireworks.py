@@ -12,6 +12,11 @@ from sample_scenes import _common
 NAME = "fireworks"
 
 
+# Frames that show the point (rockets bursting into sparks at different ages); README_FRAME is the
+# README's picture.
+SHOWCASE = (60, 100, 140)
+README_FRAME = 100
+
 def build(scene) -> None:
     _common.stage(scene, (0.0, -75.0, 14.0), (0.0, 0.0, 20.0), frame_end=150)
     scene.world.color = (0.005, 0.005, 0.015)

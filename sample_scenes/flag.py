@@ -13,6 +13,11 @@ WIDTH, HEIGHT = 3.0, 2.0
 POLE_X = -WIDTH / 2
 
 
+# Frames that show the point (the flag streaming and flapping in the gusts); README_FRAME is the
+# README's picture.
+SHOWCASE = (40, 80, 120)
+README_FRAME = 80
+
 def build(scene) -> None:
     import bmesh
 

@@ -13,6 +13,11 @@ NAME = "fountain"
 SPEED = 7.0
 
 
+# Frames that show the point (the spray in full flow, bouncing and fading); README_FRAME is the
+# README's picture.
+SHOWCASE = (40, 80, 120)
+README_FRAME = 80
+
 def build(scene) -> None:
     _common.stage(scene, (9.0, -11.0, 5.0), (0.0, 0.0, 2.0), frame_end=120)
     _common.ground(scene)

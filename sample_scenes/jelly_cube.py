@@ -12,6 +12,11 @@ NAME = "jelly_cube"
 SIZE = 1.0
 
 
+# Frames that show the point (the hammer squashing it, frames 46-52; its bulge as the hammer
+# lifts; springing back); README_FRAME is the README's picture.
+SHOWCASE = (47, 55, 70)
+README_FRAME = 55
+
 def build(scene, shear: bool = True, angular: bool = True) -> None:
     import bmesh
 

@@ -12,6 +12,11 @@ from sample_scenes import _common
 NAME = "mesh_pour"
 
 
+# Frames that show the point (particles landing on the spinning Suzanne and the travelling waves);
+# README_FRAME is the README's picture.
+SHOWCASE = (25, 50, 75)
+README_FRAME = 50
+
 def build(scene) -> None:
     import bmesh
 

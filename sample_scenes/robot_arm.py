@@ -13,6 +13,11 @@ NAME = "robot_arm"
 SEGMENTS = (("Base", 0.6), ("UpperArm", 2.0), ("Forearm", 1.6))
 
 
+# Frames that show the point (mid-whip, the ball just thrown, the next wind-up (its motion repeats
+# every 40 frames)); README_FRAME is the README's picture.
+SHOWCASE = (64, 70, 100)
+README_FRAME = 70
+
 def _segment(scene, name, length, parent, color):
     import bmesh
 

@@ -51,3 +51,35 @@ def test_jelly_cube_needs_shear_and_angular_springs(physanim_ext, tmp_path):
     volume = jelly_cube.volumes(scene, [1, scene.physanim.frame_end])
     assert volume[-1] < 0.2 * volume[0]
     assert any("did not recover" in p for p in jelly_cube.check(scene))
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_showcase_frames_lie_in_the_bake_and_include_the_readme_frame(name):
+    module = importlib.import_module(f"sample_scenes.{name}")
+    scene = bpy.context.scene
+    module.build(scene)
+    first, last = scene.physanim.frame_start, scene.physanim.frame_end
+    assert module.SHOWCASE and all(first <= f <= last for f in module.SHOWCASE)
+    assert module.README_FRAME in module.SHOWCASE
+    assert (ROOT / "docs" / "images" / f"{name}.png").is_file()
+
+
+def test_the_demo_saves_without_blend1_backups(tmp_path):
+    sys.modules.setdefault("bpy", bpy)
+    from tools import demo
+
+    plain = tmp_path / "plain"
+    plain.mkdir()
+    bpy.ops.wm.save_as_mainfile(filepath=str(plain / "scene.blend"))
+    bpy.ops.wm.save_mainfile()
+    assert (plain / "scene.blend1").is_file()  # what Blender does by default
+    folder = tmp_path / "demo"
+    folder.mkdir()
+    path = folder / "scene.blend"
+    before = bpy.context.preferences.filepaths.save_version
+    with demo.no_backups():
+        bpy.ops.wm.save_as_mainfile(filepath=str(path))
+        bpy.ops.wm.save_mainfile()
+        bpy.ops.wm.save_mainfile()
+    assert bpy.context.preferences.filepaths.save_version == before
+    assert sorted(p.name for p in folder.iterdir()) == ["scene.blend"]
