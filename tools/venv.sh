@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Create (when missing) and print the path of a venv holding the pinned `bpy` wheel.
-# Usage: tools/venv.sh [4.5|4.2|5.0]   (default 4.5, the primary LTS)
+# Create (when missing) and print the path of a venv holding the pinned `bpy` wheel (or, for
+# "lint", the pinned ruff).
+# Usage: tools/venv.sh [4.5|4.2|5.0|lint]   (default 4.5, the primary LTS)
 # Venvs live under $PHYSANIM_VENVS (default ~/.cache/physanim/venvs) so CI and repeated runs reuse them.
 set -euo pipefail
 ver="${1:-4.5}"
@@ -8,12 +9,12 @@ case "$ver" in
   4.2) pins="bpy==4.2.23 numpy==1.26.4" ;;
   4.5) pins="bpy==4.5.4" ;;
   5.0) pins="bpy==5.0.1" ;;
-  *) echo "tools/venv.sh: unknown Blender version '$ver' (use 4.2, 4.5 or 5.0)" >&2; exit 2 ;;
+  lint) pins="ruff==0.17.6" ;;
+  *) echo "tools/venv.sh: unknown Blender version '$ver' (use 4.2, 4.5, 5.0 or lint)" >&2; exit 2 ;;
 esac
 root="${PHYSANIM_VENVS:-$HOME/.cache/physanim/venvs}"
-venv="$root/bpy-$ver"
+if [ "$ver" = lint ]; then venv="$root/lint"; want="$pins"; else venv="$root/bpy-$ver"; want="$pins pytest==8.3.3"; fi
 stamp="$venv/.physanim-ready"
-want="$pins pytest==8.3.3"
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   py="${PYTHON:-python3.11}"
   command -v "$py" >/dev/null 2>&1 || py=python3
@@ -23,6 +24,7 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   "$venv/bin/python" -m pip install --quiet $want >&2
   echo "$want" > "$stamp"
 fi
+if [ "$ver" = lint ]; then echo "$venv"; exit 0; fi
 # The bpy wheel links against X11/GL/EGL system libraries; a bare machine may lack them.
 if ! "$venv/bin/python" -c "import bpy" >/dev/null 2>&1; then
   libs="libx11-6 libxrender1 libxi6 libxxf86vm1 libxfixes3 libxkbcommon0 libsm6 libice6 libgl1
