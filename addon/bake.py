@@ -19,6 +19,7 @@ import numpy as np
 
 from ..core.cache import CacheWriter
 from ..core.errors import PhysanimError, SimulationError
+from ..core.integrators import make_integrator
 from ..core.particles import ParticleSolver, emitter_arrays
 from ..core.contact import ColliderPaths
 from . import convert, extract, limits, springs
@@ -28,7 +29,6 @@ BYTES_PER_PARTICLE_FRAME = 4 * (1 + 3 + 3 + 1 + 1 + 1 + 4 + 3 + 3)  # cache arra
 BYTES_PER_PARTICLE_STATE = 8 * 16  # float64 state + integrator stages, per particle
 MEMORY_BUDGET = 16 * 2**30  # the bake refuses to start when its estimate exceeds this
 FLOAT32_MAX = float(np.finfo(np.float32).max)  # the cache stores float32
-RK_STAGES = {"EULER": 1, "SYMPLECTIC_EULER": 1, "MIDPOINT": 2, "RK4": 4, "RK45": 7, "IMPLICIT": 4}
 
 
 def safe_name(name: str) -> str:
@@ -223,7 +223,7 @@ class BakeJob:
 
     def _check_budget(self) -> None:
         peak, cache_bytes = estimate(self.scene, self.roles)
-        stages = RK_STAGES[self.settings.integrator]
+        stages = make_integrator(self.settings.integrator, self.settings.tolerance).stages
         memory = peak * BYTES_PER_PARTICLE_STATE * (1 + stages)
         if memory > MEMORY_BUDGET:
             raise PhysanimError(

@@ -44,6 +44,7 @@ class BaraffWitkin:
     """
 
     name = "IMPLICIT"
+    stable_h_omega = None  # unconditionally stable
 
     TOLERANCE = 1e-3  # relative residual: Baraff & Witkin's inexact solve, visually converged
 

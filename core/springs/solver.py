@@ -26,9 +26,6 @@ from .implicit import BaraffWitkin
 from .model import SpringMeshModel, SpringMeshState
 from .strain import limit_strain
 
-# explicit methods: largest stable h * omega on an undamped spring (Euler and midpoint grow at
-# any step; these keep the growth per frame small enough for damping to win)
-STABLE_H_OMEGA = {"EULER": 0.1, "MIDPOINT": 0.5, "SYMPLECTIC_EULER": 1.9, "RK4": 2.5}
 TEAR_FACTOR = 50.0  # a spring stretched past this many rest lengths means the solve blew up
 LANDING_ROUNDS = 3  # re-solves of a sub-step whose vertices hit colliders (implicit only)
 
@@ -233,7 +230,7 @@ class SpringMeshSolver:
         return cls(message, obj=self.model.settings.name, frame=frame, kind="spring mesh")
 
     def _check_stability(self, h: float, frame) -> None:
-        limit = STABLE_H_OMEGA.get(self.integrator_name)
+        limit = self.integrator.stable_h_omega
         omega = self.springs.max_rate(self.model.vertex_mass)
         if limit is None or omega * h <= limit:
             return

@@ -1,0 +1,94 @@
+"""What every integrator shares: the system interface it sees (Witkin & Baraff's), the report of
+a step, and the base class that reads, checks and writes the state around each step."""
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from ..errors import SimulationError
+
+Derivative = Callable[[float, np.ndarray], np.ndarray]
+
+
+class System(Protocol):
+    """What an integrator needs (Witkin & Baraff): ``dim``; ``get_state() -> (dim,)`` float64;
+    ``set_state(y)``; ``derivative(t, y) -> (dim,)``, a pure function of ``t`` [s] and ``y``."""
+
+    dim: int
+
+    def get_state(self) -> np.ndarray: ...
+
+    def set_state(self, y: np.ndarray) -> None: ...
+
+    def derivative(self, t: float, y: np.ndarray) -> np.ndarray: ...
+
+
+@dataclass
+class StepReport:
+    """What one :meth:`Integrator.step` call did.
+
+    Attributes:
+        steps: accepted internal steps.
+        rejected: internal steps rejected by the error control (adaptive methods only).
+        evaluations: calls of ``system.derivative``.
+        h_last: size of the last accepted internal step [s].
+    """
+
+    steps: int = 0
+    rejected: int = 0
+    evaluations: int = 0
+    h_last: float = 0.0
+
+
+def non_finite(y: np.ndarray, what: str) -> SimulationError:
+    bad = int(np.count_nonzero(~np.isfinite(y)))
+    return SimulationError(
+        f"state became non-finite: {what} has {bad} NaN/inf of {y.shape[0]} values — "
+        "reduce the time step (more substeps) or use a more stable integrator"
+    )
+
+
+class Integrator:
+    """Base class: advances a :class:`System` from ``t`` to ``t + dt``.
+
+    Subclasses implement ``_step_impl(system, t, y, dt) -> (y_new, StepReport)``; :meth:`step`
+    reads the state, checks the result and writes it back.
+    """
+
+    name = "INTEGRATOR"
+    #: state-sized arrays one step holds besides the state (stages, residuals): what a bake's
+    #: memory estimate multiplies the state by
+    stages = 1
+    #: largest ``h * omega`` on an undamped spring of angular frequency ``omega`` for which a
+    #: step stays bounded over a frame (methods that grow at any step get the bound that keeps
+    #: the growth small enough for damping to win); None: no bound (implicit or adaptive)
+    stable_h_omega: float | None = None
+
+    def step(self, system: System, t: float, dt: float) -> StepReport:
+        """Advance ``system`` from time ``t`` [s] by ``dt`` [s] and store the new state.
+
+        Raises:
+            ValueError: ``dt`` is not positive and finite, or the state has the wrong shape.
+            SimulationError: the state became non-finite (the caller adds object and frame).
+        """
+        if not (math.isfinite(dt) and dt > 0.0) or not math.isfinite(t):
+            raise ValueError(f"time step must be finite and > 0 (got dt={dt!r} at t={t!r})")
+        y = np.array(system.get_state(), dtype=np.float64)
+        if y.shape != (system.dim,):
+            raise ValueError(f"state must have shape ({system.dim},) (got {y.shape})")
+        if not np.all(np.isfinite(y)):
+            raise non_finite(y, "the state before the step")
+        # Overflow is detected below and reported as SimulationError, not as a numpy warning.
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            y_new, report = self._step_impl(system, float(t), y, float(dt))
+        if not np.all(np.isfinite(y_new)):
+            raise non_finite(y_new, "the new state")
+        system.set_state(y_new)
+        return report
+
+    def _step_impl(self, system: System, t: float, y: np.ndarray, dt: float):
+        raise NotImplementedError  # -> (y_new (dim,), StepReport)
