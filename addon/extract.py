@@ -2,12 +2,9 @@
 of every keyframable property sampled per frame (after ``scene.frame_set``)."""
 from __future__ import annotations
 
-import hashlib
-import json
 import math
 from dataclasses import dataclass, field
 
-import bpy
 import numpy as np
 
 from ..core.curves import LifeCurve
@@ -18,6 +15,7 @@ from ..core.forces import Attractor, Drag, Vortex, Wind
 from ..core.particles import (EmitterFrame, EmitterSettings, FrameInputs, ParticleModel,
                               ParticleModelBuilder, SpringLink)
 from . import convert, limits
+from .mesh_read import evaluated_mesh, mesh_polygons
 
 MESH_SOURCES = ("VERTS", "FACES", "VOLUME")
 
@@ -48,19 +46,30 @@ def gather(scene, only: set[str] | None = None) -> Roles:
             raise PhysanimError(f"not an emitter or spring mesh in scene \"{scene.name}\": "
                                 f"{', '.join(sorted(unknown))}")
         meshes = [o for o in meshes if o.name in only]
-        chosen = {o.name for o in emitters if o.name in only}
-        changed = True
-        while changed:
-            changed = False
-            for o in emitters:
-                p = o.physanim.emitter
-                if o.name in chosen and p.source == 'DEATHS' and p.parent and p.parent.name not in chosen:
-                    chosen.add(p.parent.name)
-                    changed = True
+        chosen = {a.name for o in emitters if o.name in only for a in emitter_chain(o)}
         emitters = [o for o in emitters if o.name in chosen]
     return Roles(emitters,
                  [o for o in objects if o.physanim.collider.enabled],
                  [o for o in objects if o.physanim.force.enabled], meshes)
+
+
+def emitter_chain(ob) -> list:
+    """``ob`` and the emitters above it: a sub-emitter (source Particle Deaths) bursts where its
+    parent's particles die, so it depends on its parent, and on its parent's parent... The one
+    walk up the chain (stops at the top or where the chain would loop)."""
+    chain, names, current = [], set(), ob
+    while current is not None and current.name not in names:
+        chain.append(current)
+        names.add(current.name)
+        p = current.physanim.emitter
+        current = p.parent if p.source == 'DEATHS' else None
+    return chain
+
+
+def made_by_bake(modifier) -> bool:
+    """The bake's own output modifiers are not inputs of the bake."""
+    return ((modifier.type == 'NODES' and modifier.name == "physanim_instances")
+            or (modifier.type == 'MESH_CACHE' and modifier.name == "physanim"))
 
 
 def _curve(stops, kind: str) -> LifeCurve:
@@ -69,24 +78,6 @@ def _curve(stops, kind: str) -> LifeCurve:
         return LifeCurve.constant(1.0, 1.0, 1.0, 1.0) if kind == "color" else LifeCurve.constant(1.0)
     values = [tuple(s.color) if kind == "color" else (s.value,) for s in ordered]
     return LifeCurve(tuple(s.position for s in ordered), tuple(values))
-
-
-def _mesh_arrays(ob, depsgraph, triangles: bool):
-    """Local vertex positions (n, 3) and, optionally, triangles (m, 3) of the evaluated mesh."""
-    ob_eval = ob.evaluated_get(depsgraph)
-    me = ob_eval.to_mesh()
-    try:
-        co = np.empty(len(me.vertices) * 3, np.float32)
-        me.vertices.foreach_get("co", co)
-        tris = None
-        if triangles:
-            me.calc_loop_triangles()
-            tris = np.empty(len(me.loop_triangles) * 3, np.int32)
-            me.loop_triangles.foreach_get("vertices", tris)
-            tris = tris.reshape(-1, 3).astype(np.int64)
-        return co.reshape(-1, 3).astype(np.float64), tris
-    finally:
-        ob_eval.to_mesh_clear()
 
 
 def automatic_collider(ob) -> tuple[str | None, np.ndarray]:
@@ -99,7 +90,7 @@ def automatic_collider(ob) -> tuple[str | None, np.ndarray]:
         return 'HALF_SPACE', np.eye(4)
     if ob.type != 'MESH' or not len(ob.data.polygons):
         return None, np.eye(4)
-    if any(not _made_by_bake(m) for m in ob.modifiers) or ob.data.shape_keys:
+    if any(not made_by_bake(m) for m in ob.modifiers) or ob.data.shape_keys:
         return 'MESH', np.eye(4)
     co, start, total, loops = mesh_polygons(ob.data)
     # fan triangles: exact for the convex faces of boxes and rectangles; a concave face only
@@ -111,21 +102,7 @@ def automatic_collider(ob) -> tuple[str | None, np.ndarray]:
     return fit_analytic_shape(co, tris)
 
 
-def mesh_polygons(me) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """A mesh's vertex positions (n, 3) float64 and its polygons as loop_start, loop_total and
-    loop_vertices int32 arrays (read in bulk)."""
-    co = np.empty(len(me.vertices) * 3, np.float32)
-    me.vertices.foreach_get("co", co)
-    start = np.empty(len(me.polygons), np.int32)
-    total = np.empty(len(me.polygons), np.int32)
-    me.polygons.foreach_get("loop_start", start)
-    me.polygons.foreach_get("loop_total", total)
-    loops = np.empty(len(me.loops), np.int32)
-    me.loops.foreach_get("vertex_index", loops)
-    return co.reshape(-1, 3).astype(np.float64), start, total, loops
-
-
-def _world_matrix(ob, frame: float, kind: str) -> np.ndarray:
+def world_matrix(ob, frame: float, kind: str) -> np.ndarray:
     """``ob``'s world matrix as numpy; an error naming object, frame and value when it is not
     finite (a NaN key, a driver dividing by zero) or, for colliders, flattened by a zero scale —
     before the core sees it."""
@@ -213,7 +190,8 @@ class Extractor:
             raise PhysanimError(f"a Mesh collider must be a mesh object (this is a {ob.type})",
                                 obj=ob.name, frame=frame, kind="collider")
         first = ob.name not in self._collider_tris
-        verts, tris = _mesh_arrays(ob, depsgraph, triangles=first)
+        mesh = evaluated_mesh(ob, depsgraph, triangles=first)
+        verts, tris = mesh.co, mesh.triangles
         if first:
             if len(tris) == 0:
                 raise PhysanimError("a Mesh collider needs faces (this mesh has none)",
@@ -243,7 +221,8 @@ class Extractor:
                 if ob.type != 'MESH':
                     raise PhysanimError(f"source {p.source} needs a mesh object (this is a {ob.type})",
                                         obj=ob.name, frame=frame, kind="emitter")
-                verts, tris = _mesh_arrays(ob, depsgraph, triangles=True)
+                mesh = evaluated_mesh(ob, depsgraph, triangles=True)
+                verts, tris = mesh.co, mesh.triangles
                 nverts = len(verts)
                 self._vertex_counts[ob.name] = nverts
             parent = None
@@ -277,7 +256,7 @@ class Extractor:
             p = ob.physanim.emitter
             verts = None
             if self._uses_mesh(ob):
-                verts, _ = _mesh_arrays(ob, depsgraph, triangles=False)
+                verts = evaluated_mesh(ob, depsgraph).co
                 expected = self._vertex_counts.get(ob.name)
                 if expected is not None and len(verts) != expected:
                     raise PhysanimError(f"the mesh changed its vertex count to {len(verts)} "
@@ -294,7 +273,7 @@ class Extractor:
                         f"{values[key]:g} {unit}: values would become negative — lower "
                         f"{key}_random or raise {key}", obj=ob.name, frame=frame, kind="emitter")
             values["active"] = p.frame_start <= frame <= p.frame_end  # births of this frame
-            emitters.append((_world_matrix(ob, frame, "emitter"), verts, values))
+            emitters.append((world_matrix(ob, frame, "emitter"), verts, values))
         return emitters
 
     def _sample_world(self, depsgraph, frame: int) -> tuple[list, list]:
@@ -306,7 +285,7 @@ class Extractor:
                                                    "friction": c.friction, "thickness": c.thickness})
             shape, fit = self._collider_shape(ob, depsgraph, frame)
             verts = self._collider_mesh(ob, depsgraph, frame) if shape == 'MESH' else None
-            colliders.append((_world_matrix(ob, frame, "collider") @ fit, shape, c.restitution,
+            colliders.append((world_matrix(ob, frame, "collider") @ fit, shape, c.restitution,
                               c.friction, c.thickness, verts))
         forces = []
         for ob in self.roles.forces:
@@ -314,20 +293,20 @@ class Extractor:
                 "type", "strength", "noise", "noise_scale", "noise_speed", "linear",
                 "quadratic", "falloff", "min_distance", "max_distance", "seed")}
             _check_finite(ob, frame, "force", values)
-            forces.append((_world_matrix(ob, frame, "force"), values))
+            forces.append((world_matrix(ob, frame, "force"), values))
         return colliders, forces
 
     def emitter_motion(self) -> list:
         """World matrices of the emitters at the current (sub-)frame."""
         frame = self.scene.frame_current_final
-        return [_world_matrix(ob, frame, "emitter") for ob in self.roles.emitters]
+        return [world_matrix(ob, frame, "emitter") for ob in self.roles.emitters]
 
     def sample_motion(self, emitters: bool = True) -> tuple[list, list]:
         """World matrices of emitters (none when ``emitters`` is False) and colliders at the
         current (sub-)frame."""
         frame = self.scene.frame_current_final
         return (self.emitter_motion() if emitters else [],
-                [_world_matrix(ob, frame, "collider") @ self._collider_shapes[ob.name][1]
+                [world_matrix(ob, frame, "collider") @ self._collider_shapes[ob.name][1]
                  for ob in self.roles.colliders])
 
     def inputs(self, a: FrameSample, b: FrameSample, between: list | None = None) -> FrameInputs:
@@ -380,138 +359,3 @@ class Extractor:
             return Attractor(ob.name, origin, f["strength"], f["falloff"], f["min_distance"],
                              f["max_distance"])
         return Vortex(ob.name, origin, z_axis, f["strength"])
-
-
-# --- inputs hash (is the bake outdated?) ------------------------------------------------------
-# A digest of what a bake depends on that does not change with the current frame: property
-# values that are not animated, and the keyframes/drivers of those that are.
-
-def _animated_paths(id_data) -> set[str]:
-    ad = getattr(id_data, "animation_data", None)
-    if ad is None:
-        return set()
-    paths = {fc.data_path for fc in ad.drivers}
-    if ad.action is not None:
-        paths |= {fc.data_path for fc in _fcurves(ad)}
-    return paths
-
-
-def _rna_dump(pg, prefix: str = "", animated: frozenset = frozenset()) -> dict:
-    out = {}
-    for prop in pg.bl_rna.properties:
-        key = prop.identifier
-        if key in ("rna_type", "result", "bake_hash", "bake_info", "enabled"):
-            continue
-        path = f"{prefix}{key}"
-        if path in animated:
-            continue  # its keys are hashed instead: the current value depends on the frame
-        value = getattr(pg, key)
-        if prop.type == 'POINTER':
-            out[key] = value.name if isinstance(value, bpy.types.ID) else (
-                _rna_dump(value, path + ".", animated) if value is not None else None)
-        elif prop.type == 'COLLECTION':
-            out[key] = [_rna_dump(item, f"{path}[{i}].", animated) for i, item in enumerate(value)]
-        elif getattr(prop, "is_array", False):
-            out[key] = [round(float(v), 9) for v in value]
-        else:
-            out[key] = value if not isinstance(value, float) else round(value, 9)
-    return out
-
-
-def _animation_dump(id_data) -> list:
-    ad = getattr(id_data, "animation_data", None)
-    if ad is None:
-        return []
-    keys = []
-    curves = list(_fcurves(ad)) if ad.action is not None else []
-    for fc in curves:
-        co = np.empty(len(fc.keyframe_points) * 2, np.float32)
-        fc.keyframe_points.foreach_get("co", co)
-        keys.append((fc.data_path, fc.array_index, hashlib.sha1(co.tobytes()).hexdigest()))
-    for fc in ad.drivers:
-        keys.append((fc.data_path, fc.array_index, fc.driver.expression))
-    return sorted(keys)
-
-
-def _fcurves(ad):
-    from . import compat
-    return compat.action_fcurves(ad)
-
-
-def _made_by_bake(modifier) -> bool:
-    """The bake's own output modifiers are not inputs of the bake."""
-    return ((modifier.type == 'NODES' and modifier.name == "physanim_instances")
-            or (modifier.type == 'MESH_CACHE' and modifier.name == "physanim"))
-
-
-def _input_modifiers(ob) -> list:
-    """Modifiers that feed a bake: not the bake's own, and not those after the spring-mesh cache
-    (they deform the played-back result)."""
-    out = []
-    for m in ob.modifiers:
-        if m.type == 'MESH_CACHE' and m.name == "physanim":
-            break
-        if not _made_by_bake(m):
-            out.append((m.type, m.name, m.show_render, m.show_viewport))
-    return out
-
-
-def _object_record(ob, role: str | None) -> dict:
-    """Everything about one object a bake reads, independent of the current frame."""
-    animated = frozenset(_animated_paths(ob))
-    record = {"name": ob.name, "type": ob.type, "anim": _animation_dump(ob),
-              "parent": _object_record(ob.parent, None) if ob.parent else None,
-              "parent_type": ob.parent_type, "parent_bone": ob.parent_bone,
-              "constraints": [(c.type, c.name, round(c.influence, 7), c.mute)
-                              for c in ob.constraints],
-              "modifiers": _input_modifiers(ob)}
-    for channel in ("location", "rotation_euler", "rotation_quaternion", "rotation_axis_angle",
-                    "scale", "delta_location", "delta_rotation_euler", "delta_scale"):
-        if channel not in animated:
-            record[channel] = [round(float(v), 7) for v in getattr(ob, channel)]
-    record["rotation_mode"] = ob.rotation_mode
-    if role is not None:
-        record["props"] = _rna_dump(getattr(ob.physanim, role), f"physanim.{role}.", animated)
-    if ob.type == 'MESH' and role is not None:
-        co = np.empty(len(ob.data.vertices) * 3, np.float32)
-        ob.data.vertices.foreach_get("co", co)
-        record["mesh"] = (hashlib.sha1(co.tobytes()).hexdigest(), len(ob.data.polygons),
-                          _animation_dump(ob.data.shape_keys) if ob.data.shape_keys else [])
-    return record
-
-
-def inputs_hash(scene, ob, role: str, roles: Roles | None = None) -> str:
-    """Digest of everything the bake of ``ob`` in ``role`` ("emitter" or "spring_mesh") depends
-    on: scene settings, every collider and force, the object (with its parent chain), for
-    sub-emitters their parent emitter, for spring meshes their virtual-spring targets."""
-    roles = roles if roles is not None else gather(scene)
-    h = hashlib.sha256()
-    settings = _rna_dump(scene.physanim)
-    settings.update(fps=convert.fps(scene), gravity=convert.gravity(scene),
-                    anim=_animation_dump(scene), role=role)
-    h.update(json.dumps(settings, sort_keys=True).encode())
-    records = []
-    if role == "emitter":
-        chain, current = [], ob
-        while current is not None and current.name not in {o.name for o in chain}:
-            chain.append(current)
-            p = current.physanim.emitter
-            current = p.parent if p.source == 'DEATHS' else None
-        records += [_object_record(o, "emitter") for o in chain]
-    else:
-        records.append(_object_record(ob, role))
-        targets = {v.target.name: v.target for v in ob.physanim.spring_mesh.virtual_springs
-                   if v.target is not None}
-        records += [_object_record(targets[name], None) for name in sorted(targets)]
-    records += [_object_record(o, "collider") for o in roles.colliders]
-    records += [_object_record(o, "force") for o in roles.forces]
-    h.update(json.dumps(records, sort_keys=True).encode())
-    return h.hexdigest()
-
-
-def emitter_hash(scene, emitter, roles: Roles | None = None) -> str:
-    return inputs_hash(scene, emitter, "emitter", roles)
-
-
-def scene_hash(hashes: list[str]) -> str:
-    return hashlib.sha256("".join(sorted(hashes)).encode()).hexdigest()

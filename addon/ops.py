@@ -12,7 +12,7 @@ import bpy
 from bpy.props import BoolProperty, EnumProperty, IntProperty
 
 from ..core.errors import PhysanimError
-from . import bake, results, springs
+from . import bake, cache_paths, results, springs
 
 FRAME_BUDGET_S = 0.05  # modal: simulate for at most this long per timer tick, then redraw
 
@@ -167,9 +167,9 @@ class PHYSANIM_OT_free_bake(bpy.types.Operator):
                     results.remove_collection(keyed)
                     freed += 1
                 if ob.physanim.emitter.enabled and bpy.data.filepath:
-                    freed += remove_cache(bake.emitter_cache_dir(scene, ob))
+                    freed += remove_cache(cache_paths.emitter_cache_dir(scene, ob))
                 if ob.physanim.spring_mesh.enabled and bpy.data.filepath:
-                    freed += remove_cache(bake.spring_cache_dir(scene, ob))
+                    freed += remove_cache(cache_paths.spring_cache_dir(scene, ob))
         except (PhysanimError, OSError) as exc:
             self.report({'ERROR'}, str(exc))
             return {'CANCELLED'}

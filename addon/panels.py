@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import extract, props
+from . import extract, inputs_hash, props
 
 # larger meshes show their Automatic collider shape only when baking (the panel redraws often)
 AUTO_SHAPE_PREVIEW_LIMIT = 100_000
@@ -21,12 +21,12 @@ def bake_status(scene) -> tuple[str, str]:
             res = ob.physanim.emitter.result
             if res is None or not res.physanim.result.cache:
                 missing.append(ob.name)
-            elif res.physanim.result.hash != extract.emitter_hash(scene, ob, roles):
+            elif res.physanim.result.hash != inputs_hash.emitter_hash(scene, ob, roles):
                 outdated.append(ob.name)
         for ob in roles.spring_meshes:
             if springs.cache_modifier(ob) is None:
                 missing.append(ob.name)
-            elif ob.physanim.spring_mesh.bake_hash != extract.inputs_hash(
+            elif ob.physanim.spring_mesh.bake_hash != inputs_hash.inputs_hash(
                     scene, ob, "spring_mesh", roles):
                 outdated.append(ob.name)
     except Exception as exc:  # a panel must draw whatever the scene holds

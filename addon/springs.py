@@ -16,13 +16,14 @@ import numpy as np
 from ..core.cache import CacheWriter
 from ..core.errors import PhysanimError
 from ..core.contact import ColliderPaths
-from ..core.forces import Wind
 from ..core.pc2 import Pc2Writer
-from ..core.springs import (SpringFrameInputs, SpringMeshBuilder, SpringMeshSettings,
-                            SpringMeshSolver, VirtualSprings)
+from ..core.springs import (SpringDrive, SpringMeshBuilder, SpringMeshSettings,
+                            SpringMeshSolver, SpringMeshSystem, VirtualSprings)
 from ..core.transforms import inverse_affine, transform_points
 from . import convert, limits
-from .extract import _world_matrix, mesh_polygons
+from .cache_paths import spring_cache_dir
+from .extract import world_matrix
+from .mesh_read import evaluated_mesh
 
 MODIFIER = "physanim"
 CACHE_FILE = "mesh.pc2"
@@ -34,39 +35,10 @@ def cache_modifier(ob):
     return mod if mod is not None and mod.type == 'MESH_CACHE' else None
 
 
-def _mesh(ob, depsgraph, topology: bool):
-    """Evaluated mesh (without our cache modifier, which the bake disabled): local vertex
-    positions and, optionally, edges, polygons, triangles and vertex-group weights."""
-    ob_eval = ob.evaluated_get(depsgraph)
-    me = ob_eval.to_mesh()
-    try:
-        n = len(me.vertices)
-        co, start, total, loops = mesh_polygons(me)
-        out = {"co": co}
-        if topology:
-            edges = np.empty(len(me.edges) * 2, np.int32)
-            me.edges.foreach_get("vertices", edges)
-            me.calc_loop_triangles()
-            tris = np.empty(len(me.loop_triangles) * 3, np.int32)
-            me.loop_triangles.foreach_get("vertices", tris)
-            out.update(edges=edges.reshape(-1, 2), loop_start=start, loop_total=total,
-                       loop_vertices=loops, triangles=tris.reshape(-1, 3))
-            names = {g.index: g.name for g in ob.vertex_groups}
-            weights = {name: np.zeros(n) for name in names.values()}
-            for v in me.vertices:  # setup only (once per bake): no vectorised access exists
-                for g in v.groups:
-                    if g.group in names:
-                        weights[names[g.group]][v.index] = g.weight
-            out["weights"] = weights
-        return out
-    finally:
-        ob_eval.to_mesh_clear()
-
-
 def _object_matrix(ob, frame: int) -> np.ndarray:
     """World matrix of a spring mesh; an error naming object, frame and value when it is not
     finite or has a zero scale (the cache holds object-space positions: it needs the inverse)."""
-    m = _world_matrix(ob, frame, "spring mesh")
+    m = world_matrix(ob, frame, "spring mesh")
     if abs(np.linalg.det(m[:3, :3])) < 1e-12:
         scale = tuple(round(v, 4) for v in ob.matrix_world.to_scale())
         raise PhysanimError(f"its world matrix has a zero scale {scale}: the cache holds "
@@ -80,15 +52,16 @@ class SpringMeshBake:
     """Bake of one spring-mesh object.
 
     Args:
-        scene, ob: the scene and the mesh object. writer: its cache folder writer.
+        scene, ob: the scene and the mesh object (its cache folder is opened here).
         frame: bake start frame. settings: scene.physanim.
     """
 
-    def __init__(self, scene, ob, writer: CacheWriter, frame: int, colliders: ColliderPaths):
+    def __init__(self, scene, ob, frame: int, colliders: ColliderPaths):
         if ob.type != 'MESH':
             raise PhysanimError(f"a spring mesh must be a mesh object (this is a {ob.type})",
                                 obj=ob.name, frame=frame, kind="spring mesh")
-        self.scene, self.ob, self.writer = scene, ob, writer
+        self.scene, self.ob = scene, ob
+        self.writer = CacheWriter(spring_cache_dir(scene, ob))
         self.colliders = colliders  # the bake's, shared with its other systems
         p = ob.physanim.spring_mesh
         self.props = p
@@ -98,13 +71,18 @@ class SpringMeshBake:
                                if v.mode != 'PIN' and v.target is not None})
         self.pc2: Pc2Writer | None = None
 
+    @property
+    def label(self) -> str:
+        """What a failure report calls this system."""
+        return f'spring mesh "{self.ob.name}"'
+
     # --- set-up --------------------------------------------------------------------------------
     def prepare(self, depsgraph, frame: int) -> None:
         ob, p, s = self.ob, self.props, self.scene.physanim
-        mesh = _mesh(ob, depsgraph, topology=True)
+        mesh = evaluated_mesh(ob, depsgraph, topology=True)
         m = _object_matrix(ob, frame)
-        rest = transform_points(m, mesh["co"])
-        weights = mesh["weights"]
+        rest = transform_points(m, mesh.co)
+        weights = mesh.weights
         pin = None
         if p.pin_group:
             if p.pin_group not in weights:
@@ -116,9 +94,8 @@ class SpringMeshBake:
             shear_stiffness=p.shear_stiffness, shear_damping=p.shear_damping,
             bend_mode=p.bend_mode, bend_stiffness=p.bend_stiffness, bend_damping=p.bend_damping,
             drag=p.drag, pin_stiffness=p.pin_stiffness, max_stretch=p.max_stretch)
-        builder = SpringMeshBuilder(settings, rest, mesh["edges"], mesh["triangles"],
-                                    mesh["loop_start"], mesh["loop_total"], mesh["loop_vertices"],
-                                    pin)
+        builder = SpringMeshBuilder(settings, rest, mesh.edges, mesh.triangles, mesh.loop_start,
+                                    mesh.loop_total, mesh.loop_vertices, pin)
         if pin is not None:
             soft = (pin > 0.0) & (pin < 0.999)
             if soft.any():
@@ -133,6 +110,7 @@ class SpringMeshBake:
                                        1.0 / convert.fps(self.scene), frame,
                                        limits.bounds(self.scene), self.colliders)
         self.state = self.model.state()
+        self.system = SpringMeshSystem(self.solver, self.state)
         self.vertex_count = len(rest)
         self.pc2 = Pc2Writer(self.writer.file_path(CACHE_FILE), self.vertex_count, frame)
         self.sample = self.read(depsgraph, frame)
@@ -162,11 +140,11 @@ class SpringMeshBake:
         # solver would report a blow-up a frame early, and an unpinned mesh would write NaN
         m = _object_matrix(ob, frame)
         out = {"frame": frame, "matrix": m, "rest": None,
-               "targets": {name: _world_matrix(bpy.data.objects[name], frame,
+               "targets": {name: world_matrix(bpy.data.objects[name], frame,
                                                "virtual spring target")
                            for name in self.targets}}
         if self.needs_rest:
-            co = _mesh(ob, depsgraph, topology=False)["co"]
+            co = evaluated_mesh(ob, depsgraph).co
             if len(co) != self.vertex_count:
                 raise PhysanimError(f"the mesh changed its vertex count to {len(co)} (was "
                                     f"{self.vertex_count}) — spring meshes must keep their topology",
@@ -174,14 +152,14 @@ class SpringMeshBake:
             out["rest"] = transform_points(m, co)
         return out
 
-    def advance(self, nxt: dict, colliders, forces, t0: float, frame_dt: float, gravity) -> None:
+    def drive(self, nxt: dict) -> SpringDrive:
+        """This mesh's own input for the interval from its last sample to ``nxt``."""
         a = self.sample
-        inputs = SpringFrameInputs(
-            frame=a["frame"], t0=t0, frame_dt=frame_dt, gravity=gravity, rest0=a["rest"],
-            rest1=nxt["rest"], targets={n: (a["targets"][n], nxt["targets"][n]) for n in self.targets},
-            colliders=colliders, winds=[f for f in forces if isinstance(f, Wind)],
-            fields=[f for f in forces if not isinstance(f, Wind)])
-        self.solver.advance(self.state, inputs)
+        return SpringDrive(a["rest"], nxt["rest"],
+                           {n: (a["targets"][n], nxt["targets"][n]) for n in self.targets})
+
+    def end_frame(self, nxt: dict) -> None:
+        """The interval to ``nxt`` was simulated: write its frame."""
         self.sample = nxt
         self.write()
 
@@ -198,6 +176,16 @@ class SpringMeshBake:
     def close(self) -> None:
         if self.pc2 is not None:
             self.pc2.close()
+
+    def commit(self, meta: dict) -> str:
+        """Swap the new cache in; returns its folder."""
+        self.close()
+        return self.writer.commit(meta)
+
+    def abort(self) -> None:
+        """Delete the partial cache; the previous bake stays as it was."""
+        self.close()
+        self.writer.abort()
 
 
 # --- result: the Mesh Cache modifier ------------------------------------------------------------

@@ -24,30 +24,17 @@ from __future__ import annotations
 
 import argparse
 import hashlib
-import importlib.util
-import os
-import platform
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from bench import common
+
 NEIGHBOURS = 4.0  # expected overlapping neighbours per box
 HALF_MIN, HALF_MAX = 0.25, 0.75  # [m] box half sizes
-
-
-def _broadphase():
-    """``physanim.core.collision.broadphase`` of this checkout, registered by path."""
-    if "physanim" not in sys.modules:
-        spec = importlib.util.spec_from_file_location(
-            "physanim", ROOT / "__init__.py", submodule_search_locations=[str(ROOT)])
-        module = importlib.util.module_from_spec(spec)
-        sys.modules["physanim"] = module
-        spec.loader.exec_module(module)
-    import physanim.core.collision.broadphase as bp
-    return bp
 
 
 def walk(n: int, frames: int, step: float, seed: int) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -108,14 +95,13 @@ def run_methods(bp, n: int, frames: list, all_pairs_max: int, problems: list[str
 
 
 def methods_table(rows: list[dict], timed: int) -> str:
-    lines = [(f"Broad phases on moving boxes ({timed} timed frames, about {NEIGHBOURS:g} "
-              "neighbours per box):"), "",
-             "| boxes | method | ms/frame | pairs/s | pairs/frame | candidates/frame |",
-             "|---:|---|---:|---:|---:|---:|"]
-    for r in rows:
-        lines.append(f"| {r['n']:,} | {r['name']} | {r['ms']:.1f} | {r['rate']:,.0f} | "
-                     f"{r['pairs']:,.0f} | {r['candidates']:,.0f} |")
-    return "\n".join(lines)
+    cells = [(f"{r['n']:,}", r["name"], f"{r['ms']:.1f}", f"{r['rate']:,.0f}",
+              f"{r['pairs']:,.0f}", f"{r['candidates']:,.0f}") for r in rows]
+    return "\n".join([
+        (f"Broad phases on moving boxes ({timed} timed frames, about {NEIGHBOURS:g} "
+         "neighbours per box):"), "",
+        *common.markdown_table(("boxes", "method", "ms/frame", "pairs/s", "pairs/frame",
+                                "candidates/frame"), "rlrrrr", cells)])
 
 
 def sort_row(bp, n: int, frames: list) -> dict:
@@ -145,16 +131,15 @@ def sort_row(bp, n: int, frames: list) -> dict:
 
 
 def sort_table(rows: list[dict], step: float) -> str:
-    lines = [(f"Sweep and prune, sorting the 2n x endpoints alone (random walk, step {step:g} m "
-              "per axis per frame):"), "",
-             ("| boxes | fresh sort ms | coherent re-sort ms | speed-up | swaps/frame coherent "
-              "| swaps of a fresh insertion sort | endpoint displacement/frame |"),
-             "|---:|---:|---:|---:|---:|---:|---:|"]
-    for r in rows:
-        lines.append(f"| {r['n']:,} | {r['fresh_ms']:.2f} | {r['coherent_ms']:.2f} | "
-                     f"{r['fresh_ms'] / r['coherent_ms']:.1f}x | {r['swaps']:,.0f} | "
-                     f"{r['fresh_swaps']:,.0f} | {r['moved']:,.0f} |")
-    return "\n".join(lines)
+    cells = [(f"{r['n']:,}", f"{r['fresh_ms']:.2f}", f"{r['coherent_ms']:.2f}",
+              f"{r['fresh_ms'] / r['coherent_ms']:.1f}x", f"{r['swaps']:,.0f}",
+              f"{r['fresh_swaps']:,.0f}", f"{r['moved']:,.0f}") for r in rows]
+    return "\n".join([
+        (f"Sweep and prune, sorting the 2n x endpoints alone (random walk, step {step:g} m "
+         "per axis per frame):"), "",
+        *common.markdown_table(("boxes", "fresh sort ms", "coherent re-sort ms", "speed-up",
+                                "swaps/frame coherent", "swaps of a fresh insertion sort",
+                                "endpoint displacement/frame"), "rrrrrrr", cells)])
 
 
 def _rotations(rng: np.random.Generator, n: int, angle: float | None = None) -> np.ndarray:
@@ -217,21 +202,14 @@ def policy_rows(bp, n: int, frames: int, step: float, seed: int, problems) -> li
 
 def policy_table(rows: list[dict]) -> str:
     n = rows[0]["n"] if rows else 0
-    lines = [(f"Box policies: {n:,} spinning rods (0.8 x 0.15 x 0.15 m half sizes, 0.1 rad per "
-              "frame); the cube of a rod is its bounding sphere's:"), "",
-             ("| method | policy | box update ms/frame | broad phase ms/frame | pairs/frame "
-              "| candidates/frame |"), "|---|---|---:|---:|---:|---:|"]
-    for r in rows:
-        lines.append(f"| {r['method']} | {r['policy']} | {r['box_ms']:.2f} | {r['ms']:.1f} | "
-                     f"{r['pairs']:,.0f} | {r['candidates']:,.0f} |")
-    return "\n".join(lines)
-
-
-def _load() -> str:
-    try:
-        return " ".join(f"{v:.2f}" for v in os.getloadavg())
-    except OSError:
-        return "n/a"
+    cells = [(r["method"], r["policy"], f"{r['box_ms']:.2f}", f"{r['ms']:.1f}",
+              f"{r['pairs']:,.0f}", f"{r['candidates']:,.0f}") for r in rows]
+    return "\n".join([
+        (f"Box policies: {n:,} spinning rods (0.8 x 0.15 x 0.15 m half sizes, 0.1 rad per "
+         "frame); the cube of a rod is its bounding sphere's:"), "",
+        *common.markdown_table(("method", "policy", "box update ms/frame",
+                                "broad phase ms/frame", "pairs/frame", "candidates/frame"),
+                               "llrrrr", cells)])
 
 
 def main(argv: list[str]) -> int:
@@ -246,17 +224,14 @@ def main(argv: list[str]) -> int:
                     help="largest box count AllPairs runs on (default 10000)")
     ap.add_argument("--policy-boxes", type=int, help="rods in the policy table (default 10000)")
     args = ap.parse_args(argv)
-    sizes = [int(s) for s in (args.sizes or ("1000,10000" if args.quick else
-                                             "1000,10000,100000")).split(",") if s]
+    sizes = common.int_list(args.sizes or ("1000,10000" if args.quick else "1000,10000,100000"))
     frames = args.frames or (5 if args.quick else 20)
     policy_boxes = args.policy_boxes or (1000 if args.quick else 10_000)
     if frames < 1 or min(sizes) < 2:
         ap.error("need --frames >= 1 and box counts >= 2")
-    bp = _broadphase()
+    bp = common.core_module("collision.broadphase")
 
-    print(f"# physanim broad-phase benchmark — numpy {np.__version__}, Python "
-          f"{platform.python_version()}, {os.cpu_count()} CPUs, load average {_load()}\n",
-          flush=True)
+    print(f"# physanim broad-phase benchmark — {common.machine()}\n", flush=True)
     problems: list[str] = []
     rows, sorts = [], []
     for n in sizes:
@@ -268,10 +243,8 @@ def main(argv: list[str]) -> int:
     print(methods_table(rows, frames) + "\n")
     print(sort_table(sorts, args.step) + "\n")
     print(policy_table(policies) + "\n")
-    print(f"load average at the end: {_load()} (other work on the machine skews timings)")
-    for p in problems:
-        print("SANITY CHECK FAILED:", p)
-    return 1 if problems else 0
+    common.print_final_load()
+    return common.report(problems)
 
 
 if __name__ == "__main__":

@@ -28,12 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-from tools import blender_env  # noqa: E402  (sets BLENDER_USER_RESOURCES before bpy)
-
-import bpy  # noqa: E402
-import bmesh  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from bench import blender_side, common  # blender_side first: it sets up Blender before bpy
+import bpy
 
 FPS = 24
 STIFFNESS = 6000.0  # N/m: the cloth then hangs as low as Blender's default cloth
@@ -41,19 +38,9 @@ SAME_HANG = 0.1  # m: largest allowed difference of the two cloths' lowest point
 
 
 def build(grid: int, frames: int):
-    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
-    scene = bpy.context.scene
-    scene.render.fps, scene.render.fps_base = FPS, 1.0
-    scene.frame_start, scene.frame_end = 1, frames
-    me = bpy.data.meshes.new("Cloth")
-    bm = bmesh.new()
-    bmesh.ops.create_grid(bm, x_segments=grid - 1, y_segments=grid - 1, size=1.0)
-    bm.to_mesh(me)
-    bm.free()
-    ob = bpy.data.objects.new("Cloth", me)
-    scene.collection.objects.link(ob)
-    ob.location.z = 2.0
-    co = np.array([v.co[:] for v in me.vertices])
+    scene = blender_side.empty_scene(FPS, frames)
+    ob = blender_side.grid_object(scene, "Cloth", grid - 1, 1.0, 2.0)
+    co = np.array([v.co[:] for v in ob.data.vertices])
     corners = [int(np.argmin(co[:, 0] - co[:, 1])), int(np.argmin(-co[:, 0] - co[:, 1]))]
     ob.vertex_groups.new(name="Pin").add(corners, 1.0, 'REPLACE')
     return scene, ob, corners
@@ -115,38 +102,40 @@ def run_physanim(grid: int, frames: int, folder: str):
     return took, x, problems + check("physanim", x, rest, corners)
 
 
+def cloth_table(grid: int, frames: int, quality: int, blender: tuple[float, np.ndarray],
+                physanim: tuple[float, np.ndarray]) -> str:
+    """The heading, the table and the target line; ``quality`` is Blender's cloth quality, each
+    run is ``(seconds, final world vertices (n, 3) [m])``."""
+    (b_time, b_x), (p_time, p_x) = blender, physanim
+    rows = [(f"Blender cloth (default, quality {quality})", f"{b_time:.2f}",
+             f"{1000 * b_time / frames:.1f}", f"{b_x[:, 2].min():.2f}", "1.00"),
+            ("physanim spring mesh (IMPLICIT, 1 step/frame, incl. PC2)", f"{p_time:.2f}",
+             f"{1000 * p_time / frames:.1f}", f"{p_x[:, 2].min():.2f}", f"{p_time / b_time:.2f}")]
+    return "\n".join([
+        "", f"### {grid} x {grid} grid ({grid * grid:,} vertices) pinned at two corners, "
+        f"{frames} frames at {FPS} fps, Blender {bpy.app.version_string}", "",
+        *common.markdown_table(("simulator", "time (s)", "ms / frame", "lowest point (m)",
+                                "ratio vs Blender"), "lrrrr", rows), "",
+        "- target: physanim no slower than Blender's cloth (ratio <= 1.0): "
+        f"{'met' if p_time <= b_time else 'NOT met'} ({p_time / b_time:.2f} x)"])
+
+
 def main(argv: list[str]) -> int:
+    """Both runs with the extension enabled -> the same-hang check -> the table -> report."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=250)
     ap.add_argument("--grid", type=int, default=64)
     args = ap.parse_args(argv)
-    blender_env.enable_extension()
-    problems = []
-    try:
-        with tempfile.TemporaryDirectory(prefix="physanim_bench_") as folder:
-            b_time, b_x, b_problems, quality = run_blender(args.grid, args.frames)
-            p_time, p_x, p_problems = run_physanim(args.grid, args.frames, folder)
-            problems = b_problems + p_problems
-            gap = abs(b_x[:, 2].min() - p_x[:, 2].min())
-            if gap > SAME_HANG:
-                problems.append(f"the cloths hang differently: lowest points {gap:.2f} m apart")
-            bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
-    finally:
-        blender_env.disable_extension()
-    n = args.grid * args.grid
-    print(f"\n### {args.grid} x {args.grid} grid ({n:,} vertices) pinned at two corners, "
-          f"{args.frames} frames at {FPS} fps, Blender {bpy.app.version_string}\n")
-    print("| simulator | time (s) | ms / frame | lowest point (m) | ratio vs Blender |")
-    print("|---|---:|---:|---:|---:|")
-    print(f"| Blender cloth (default, quality {quality}) | {b_time:.2f} | "
-          f"{1000 * b_time / args.frames:.1f} | {b_x[:, 2].min():.2f} | 1.00 |")
-    print(f"| physanim spring mesh (IMPLICIT, 1 step/frame, incl. PC2) | {p_time:.2f} | "
-          f"{1000 * p_time / args.frames:.1f} | {p_x[:, 2].min():.2f} | {p_time / b_time:.2f} |")
-    print("\n- target: physanim no slower than Blender's cloth (ratio <= 1.0): "
-          f"{'met' if p_time <= b_time else 'NOT met'} ({p_time / b_time:.2f} x)")
-    for p in problems:
-        print("SANITY CHECK FAILED:", p)
-    return 1 if problems else 0
+    with (tempfile.TemporaryDirectory(prefix="physanim_bench_") as folder,
+          blender_side.extension_enabled()):
+        b_time, b_x, b_problems, quality = run_blender(args.grid, args.frames)
+        p_time, p_x, p_problems = run_physanim(args.grid, args.frames, folder)
+    problems = b_problems + p_problems
+    gap = abs(b_x[:, 2].min() - p_x[:, 2].min())
+    if gap > SAME_HANG:
+        problems.append(f"the cloths hang differently: lowest points {gap:.2f} m apart")
+    print(cloth_table(args.grid, args.frames, quality, (b_time, b_x), (p_time, p_x)))
+    return common.report(problems)
 
 
 if __name__ == "__main__":

@@ -16,28 +16,18 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from importlib import import_module
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-from tools import blender_env  # noqa: E402  (sets BLENDER_USER_RESOURCES before bpy)
-
-import bpy  # noqa: E402,F401  (mathutils comes with it)
-from mathutils.bvhtree import BVHTree  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from bench import blender_side, common  # blender_side first: it sets up Blender before bpy
+import bpy  # noqa: F401  (mathutils comes with it)
+from mathutils.bvhtree import BVHTree
 
 KINDS = ("obb", "obb6", "aabb", "sphere", "kdop18")
 DESCEND = "both"  # two trees of the same size: split both nodes of a pair at once
-
-
-def _best(fn, repeat: int):
-    best, out = np.inf, None
-    for _ in range(repeat):
-        start = time.perf_counter()
-        out = fn()
-        best = min(best, time.perf_counter() - start)
-    return best, out
 
 
 def _rotation_z(angle: float, offset) -> np.ndarray:
@@ -51,10 +41,9 @@ def _rotation_z(angle: float, offset) -> np.ndarray:
 def particles_vs_mesh(module_name: str, particles: int, grid: int, frames: int) -> tuple:
     """Core solver only: ``particles`` falling onto a wavy ``grid`` x ``grid`` mesh collider
     (one sub-step per frame); returns (seconds, particle-steps per second, triangles)."""
-    from importlib import import_module
-
     shapes = import_module(module_name + ".core.collision.shapes")
     P = import_module(module_name + ".core.particles")
+    contact = import_module(module_name + ".core.contact")
     mesh = shapes.grid_mesh(grid, size=20.0, amplitude=0.3, name="ground")
     verts = np.asarray(mesh.vertices) - [10.0, 10.0, 0.0]
     tris = np.asarray(mesh.triangles)
@@ -66,80 +55,98 @@ def particles_vs_mesh(module_name: str, particles: int, grid: int, frames: int) 
     x = np.column_stack([rng.uniform(-9.5, 9.5, (particles, 2)), rng.uniform(0.5, 3.0, particles)])
     state.append(0, x, np.zeros_like(x), np.ones(particles), np.zeros(particles),
                  np.full(particles, 1e9), np.full(particles, 0.02))
-    ground = P.ColliderFrame("Ground", "MESH", np.eye(4), np.eye(4), restitution=0.3,
-                             friction=0.4, vertices0=verts, vertices1=verts, triangles=tris)
+    ground = contact.ColliderFrame("Ground", "MESH", np.eye(4), np.eye(4), restitution=0.3,
+                                   friction=0.4, vertices0=verts, vertices1=verts,
+                                   triangles=tris)
     solver = P.ParticleSolver(model, "SYMPLECTIC_EULER", 1)
     start = time.perf_counter()
     for f in range(frames):
-        solver.advance(state, P.FrameInputs(f, f / 24, 1 / 24, emitters=[P.EmitterFrame(active=False)],
+        solver.advance(state, P.FrameInputs(f, f / 24, 1 / 24,
+                                            emitters=[P.EmitterFrame(active=False)],
                                             colliders=[ground]))
     took = time.perf_counter() - start
     return took, particles * frames / took, len(tris)
 
 
-def main(argv: list[str]) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--grid", type=int, default=159)
-    ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--particles", type=int, default=100_000)
-    ap.add_argument("--particle-grid", type=int, default=225, help="225 x 225 vertices: 100k triangles")
-    ap.add_argument("--particle-frames", type=int, default=24)
-    args = ap.parse_args(argv)
-    module = blender_env.enable_extension()
-    try:
-        from importlib import import_module
-        collision = import_module(module.__name__ + ".core.collision")
-        shapes = import_module(module.__name__ + ".core.collision.shapes")
-        mesh = shapes.grid_mesh(args.grid, size=2.0, amplitude=0.05, name="wavy")
-        scenes = {"close parallel (1 mm)": _rotation_z(0.01, (0.003, 0.002, 0.001)),
-                  "far apart (1 m)": _rotation_z(0.01, (0.0, 0.0, 1.0))}
-        rows, problems = [], []
-        builds = {}
+def overlap_rows(module_name: str, grid: int, repeat: int) -> tuple[list[tuple], list[str], int]:
+    """Every scene through Blender's BVHTree and each physanim tree kind (the pairs compared with
+    Blender's); returns (table rows, mismatches, triangles per mesh)."""
+    collision = import_module(module_name + ".core.collision")
+    shapes = import_module(module_name + ".core.collision.shapes")
+    mesh = shapes.grid_mesh(grid, size=2.0, amplitude=0.05, name="wavy")
+    scenes = {"close parallel (1 mm)": _rotation_z(0.01, (0.003, 0.002, 0.001)),
+              "far apart (1 m)": _rotation_z(0.01, (0.0, 0.0, 1.0))}
+    rows, problems = [], []
+    builds = {}
+    for kind in KINDS:
+        builds[kind] = common.best_of(
+            lambda kind=kind: collision.build_bvh(mesh, kind, "topdown"), 1)
+    verts, tris = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
+    for label, mb in scenes.items():
+        world_b = verts @ mb[:3, :3].T + mb[:3, 3]
+        start = time.perf_counter()
+        tree_a = BVHTree.FromPolygons(verts.tolist(), tris.tolist(), all_triangles=True)
+        tree_b = BVHTree.FromPolygons(world_b.tolist(), tris.tolist(), all_triangles=True)
+        blender_build = (time.perf_counter() - start) / 2
+        blender_time, theirs = common.best_of(lambda a=tree_a, b=tree_b: a.overlap(b), repeat)
+        theirs = sorted(theirs)
+        rows.append((label, "Blender BVHTree (C)", blender_build, blender_time, len(theirs),
+                     "—", "—", "—"))
         for kind in KINDS:
-            builds[kind] = _best(lambda kind=kind: collision.build_bvh(mesh, kind, "topdown"), 1)
-        verts, tris = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
-        for label, mb in scenes.items():
-            world_b = verts @ mb[:3, :3].T + mb[:3, 3]
-            start = time.perf_counter()
-            tree_a = BVHTree.FromPolygons(verts.tolist(), tris.tolist(), all_triangles=True)
-            tree_b = BVHTree.FromPolygons(world_b.tolist(), tris.tolist(), all_triangles=True)
-            blender_build = (time.perf_counter() - start) / 2
-            blender_time, theirs = _best(lambda a=tree_a, b=tree_b: a.overlap(b), args.repeat)
-            theirs = sorted(theirs)
-            rows.append((label, "Blender BVHTree (C)", blender_build, blender_time, len(theirs),
-                         "—", "—", "—"))
-            for kind in KINDS:
-                build_time, tree = builds[kind]
-                took, ours = _best(lambda tree=tree, mb=mb: collision.collision_determination(
-                    tree, tree, None, mb, descend=DESCEND), args.repeat)
-                pairs = [tuple(p) for p in ours.pairs.tolist()]
-                if pairs != theirs:
-                    problems.append(f"{label}, {kind}: {len(pairs)} pairs, Blender {len(theirs)}")
-                rows.append((label, f"physanim {kind} tree", build_time, took, len(pairs),
-                             ours.n_v, ours.n_p, ours.n_u))
-        rain = particles_vs_mesh(module.__name__, args.particles, args.particle_grid,
-                                 args.particle_frames)
-    finally:
-        blender_env.disable_extension()
-    print(f"\n### Mesh-mesh overlap: two wavy grids of {len(tris):,} triangles each\n")
-    print("| scene | method | build (s) | overlap (s) | pairs | n_v | n_p | n_u | x Blender |")
-    print("|---|---|---:|---:|---:|---:|---:|---:|---:|")
-    blender = {}
+            build_time, tree = builds[kind]
+            took, ours = common.best_of(lambda tree=tree, mb=mb: collision.collision_determination(
+                tree, tree, None, mb, descend=DESCEND), repeat)
+            pairs = [tuple(p) for p in ours.pairs.tolist()]
+            if pairs != theirs:
+                problems.append(f"{label}, {kind}: {len(pairs)} pairs, Blender {len(theirs)}")
+            rows.append((label, f"physanim {kind} tree", build_time, took, len(pairs),
+                         ours.n_v, ours.n_p, ours.n_u))
+    return rows, problems, len(tris)
+
+
+def overlap_table(rows: list[tuple], triangles: int) -> str:
+    """Each row with its time as a multiple of Blender's in the same scene."""
+    cells, blender = [], {}
     for label, method, build, took, pairs, n_v, n_p, n_u in rows:
         if method.startswith("Blender"):
             blender[label] = took
         ratio = took / blender[label] if blender[label] > 0 else float("inf")
-        print(f"| {label} | {method} | {build:.3f} | {took:.4f} | {pairs:,} | {n_v} | {n_p} | "
-              f"{n_u} | {ratio:.1f} |")
+        cells.append((label, method, f"{build:.3f}", f"{took:.4f}", f"{pairs:,}", n_v, n_p, n_u,
+                      f"{ratio:.1f}"))
+    return "\n".join([
+        f"\n### Mesh-mesh overlap: two wavy grids of {triangles:,} triangles each\n",
+        *common.markdown_table(("scene", "method", "build (s)", "overlap (s)", "pairs", "n_v",
+                                "n_p", "n_u", "x Blender"), "llrrrrrrr", cells)])
+
+
+def rain_table(particles: int, frames: int, rain: tuple) -> str:
+    """The particles-vs-mesh run: ``rain`` is :func:`particles_vs_mesh`'s result."""
     took, rate, triangles = rain
-    print("\n### Particles vs a mesh collider (core, 1 sub-step per frame)\n")
-    print("| particles | triangles | frames | time (s) | particle-steps / s |")
-    print("|---:|---:|---:|---:|---:|")
-    print(f"| {args.particles:,} | {triangles:,} | {args.particle_frames} | {took:.2f} | "
-          f"{rate:,.0f} |")
-    for p in problems:
-        print("MISMATCH:", p)
-    return 1 if problems else 0
+    return "\n".join([
+        "\n### Particles vs a mesh collider (core, 1 sub-step per frame)\n",
+        *common.markdown_table(("particles", "triangles", "frames", "time (s)",
+                                "particle-steps / s"), "rrrrr",
+                               [(f"{particles:,}", f"{triangles:,}", frames, f"{took:.2f}",
+                                 f"{rate:,.0f}")])])
+
+
+def main(argv: list[str]) -> int:
+    """Overlaps, then particles on a mesh, with the extension enabled -> tables -> mismatches."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--grid", type=int, default=159)
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--particles", type=int, default=100_000)
+    ap.add_argument("--particle-grid", type=int, default=225,
+                    help="225 x 225 vertices: 100k triangles")
+    ap.add_argument("--particle-frames", type=int, default=24)
+    args = ap.parse_args(argv)
+    with blender_side.extension_enabled() as module:
+        rows, problems, triangles = overlap_rows(module.__name__, args.grid, args.repeat)
+        rain = particles_vs_mesh(module.__name__, args.particles, args.particle_grid,
+                                 args.particle_frames)
+    print(overlap_table(rows, triangles))
+    print(rain_table(args.particles, args.particle_frames, rain))
+    return common.report(problems, "MISMATCH:")
 
 
 if __name__ == "__main__":

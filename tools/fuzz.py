@@ -181,13 +181,13 @@ def _bake_once(ext, scene, names: set[str]) -> str:
                 raise AssertionError(f"a failed bake changed the previous one: {message}") from exc
             _check_results(ext, scene)
             return "failed"
-        bake = sys.modules[f"{ext.__name__}.addon.bake"]
+        paths = sys.modules[f"{ext.__name__}.addon.cache_paths"]
         kept = re.search(r"not baked \(previous bake kept\): (.*); the rest baked", message)[1]
         failed = [(name, True) for name in re.findall(r'spring mesh "([^"]+)"', kept)]
         for group in re.findall(r"particles \(emitters? (.*?)\)(?:,|$)", kept):
             failed += [(name, False) for name in re.findall(r'"([^"]+)"', group)]
         for name, mesh in failed:
-            folder = bake.safe_name(name)
+            folder = paths.safe_name(name)
             for key in before:
                 parts = key.split("/")
                 if (folder in parts and ("spring_meshes" in parts) == mesh

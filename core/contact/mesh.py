@@ -27,6 +27,8 @@ moderate non-uniform ones).
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from ..collision.build import build_bvh
@@ -145,6 +147,8 @@ class MeshPath(ColliderPath):
 
     # -- the three questions --------------------------------------------------------------------
     def first_hits(self, start, end, s_start, s_end) -> Hits:
+        """Segment hits on the mesh at the end times, kept where the segment came from the side
+        it hits; then the hits at t = 1 that the segment test cannot see (see the module)."""
         if len(end) == 0:
             return Hits.none()
         l0 = self.to_local(start, s_start)
@@ -155,57 +159,73 @@ class MeshPath(ColliderPath):
         cand = self._near_box(np.minimum(l0, l1), np.maximum(l0, l1), reach)
         if len(cand) == 0:
             return Hits.none()
-        l0, l1, sa, sb, reach = l0[cand], l1[cand], s_start[cand], s_end[cand], reach[cand]
-        k = len(cand)
-        hit, t = np.zeros(k, bool), np.ones(k)
-        normal, point, tri = np.zeros((k, 3)), np.zeros((k, 3)), np.full(k, -1, np.int64)
-        front = np.zeros(k, bool)
-        # fast particles: exact segment-triangle tests on the mesh at the end time
+        l0, l1, sa, sb, r = l0[cand], l1[cand], s_start[cand], s_end[cand], float(reach[cand].max())
+        entries = self._segment_entries(l0, l1, sb)
+        side0 = tri0 = None
+        if not self._still:
+            _, _, _, _, _, tri0, side0 = self._closest(l0, sa, r)
+        if self.deforming and entries.hit.any():
+            self._drop_entries_from_behind(entries, l0, sa, tri0, side0)
+        if not (self._still and self.frame.thickness == 0.0):
+            self._late_entries(entries, l1, sb, r, side0)
+        return entries.hits(cand)
+
+    def _segment_entries(self, l0: np.ndarray, l1: np.ndarray, sb: np.ndarray) -> _Entries:
+        """Fast particles: exact segment-triangle tests of local segments l0 -> l1 (k, 3) on the
+        mesh at their end times sb (k,)."""
+        k = len(l0)
+        found = _Entries(np.zeros(k, bool), np.ones(k), np.zeros((k, 3)), np.zeros((k, 3)),
+                         np.full(k, -1, np.int64), np.zeros(k, bool))
         for s in np.unique(sb):
             g = np.nonzero(sb == s)[0]
             sh = segment_hits(self.bvh_at(s), l0[g], l1[g])
             # a segment starting on the surface has no side to come from: it counts as coming
             # from the front (as contacts do), so only moving into the back is a hit
-            hit[g] = sh.hit & ~((sh.t == 0.0) & ~sh.front)
-            normal[g], point[g], tri[g], front[g] = sh.normal, sh.point, sh.triangle, sh.front
-            t[g] = np.where(sh.hit, sh.t, 1.0)
-        r = float(reach.max())
-        side0 = tri0 = None
-        if not self._still:
-            _, _, _, _, _, tri0, side0 = self._closest(l0, sa, r)
-        if self.deforming and hit.any():
-            # the segment is tested against the mesh at the end time: a particle riding a
-            # deforming surface crosses where that surface will be from behind. Such a hit is
-            # real only if the particle started on the side it hits from; otherwise the
-            # surface moved past it and side tracking decides. The side is judged on the mesh
-            # at the start time nearest the particle when that is the triangle hit or one
-            # touching it (across a ridge the hit triangle's plane may pass on the wrong side
-            # of a particle sitting on its neighbour); otherwise — another sheet of the mesh,
-            # or no side (an open boundary) — on the hit triangle's own plane.
-            g = np.nonzero(hit)[0]
-            c = self._corners(tri[g], sa[g])
-            face = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
-            plane = np.sign(np.einsum("ij,ij->i", l0[g] - c[:, 0], face))
-            near = (side0[g] != 0.0) & self._touching(tri0[g], tri[g])
-            side = np.where(near, side0[g], plane)
-            hit[g[side * np.where(front[g], 1.0, -1.0) < 0.0]] = False
-        if self._still and self.frame.thickness == 0.0:
-            return Hits(cand[hit], t[hit], normal[hit], point[hit], tri[hit])
+            found.hit[g] = sh.hit & ~((sh.t == 0.0) & ~sh.front)
+            found.normal[g], found.point[g] = sh.normal, sh.point
+            found.triangle[g], found.front[g] = sh.triangle, sh.front
+            found.t[g] = np.where(sh.hit, sh.t, 1.0)
+        return found
+
+    def _drop_entries_from_behind(self, found: _Entries, l0: np.ndarray, sa: np.ndarray,
+                                  tri0: np.ndarray, side0: np.ndarray) -> None:
+        """The segment is tested against the mesh at the end time: a particle riding a deforming
+        surface crosses where that surface will be from behind. Such a hit is real only if the
+        particle started (at sa, nearest triangles tri0 on sides side0) on the side it hits
+        from; otherwise the surface moved past it and side tracking decides. The side is judged
+        on the mesh at the start time nearest the particle when that is the triangle hit or one
+        touching it (across a ridge the hit triangle's plane may pass on the wrong side of a
+        particle sitting on its neighbour); otherwise — another sheet of the mesh, or no side
+        (an open boundary) — on the hit triangle's own plane. Modifies ``found`` in place."""
+        g = np.nonzero(found.hit)[0]
+        c = self._corners(found.triangle[g], sa[g])
+        face = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
+        plane = np.sign(np.einsum("ij,ij->i", l0[g] - c[:, 0], face))
+        near = (side0[g] != 0.0) & self._touching(tri0[g], found.triangle[g])
+        side = np.where(near, side0[g], plane)
+        found.hit[g[side * np.where(found.front[g], 1.0, -1.0) < 0.0]] = False
+
+    def _late_entries(self, found: _Entries, l1: np.ndarray, sb: np.ndarray, r: float,
+                      side0: np.ndarray | None) -> None:
+        """Hits at t = 1 on the end-time surface, for segments ``found`` did not hit: the mesh
+        moved over the particle (its side changed from side0), or the particle ended within
+        the thickness (out to the grown surface). Modifies ``found`` in place."""
+        k = len(l1)
         f1, q1, diff1, d1, face1, tri1, side1 = self._closest(l1, sb, r)
-        late = np.zeros(k, bool)  # hits at t = 1 on the end-time surface
+        late = np.zeros(k, bool)
         late_n = np.zeros((k, 3))
         if not self._still:  # the mesh moving over a particle: a side change without a hit
-            crossed = ~hit & (side0 * side1 < 0.0)
+            crossed = ~found.hit & (side0 * side1 < 0.0)
             late |= crossed
             late_n[crossed] = face1[crossed] * side0[crossed, None]
         if self.frame.thickness > 0.0:  # ends within the thickness: out to the grown surface
-            near = ~hit & ~late & f1
+            near = ~found.hit & ~late & f1
             near[near] = self._world_length(diff1[near], sb[near]) < self.frame.thickness
             late |= near
             late_n[near] = self._facing(diff1[near], d1[near], face1[near], side1[near], 1.0)
-        normal[late], point[late], tri[late], t[late] = late_n[late], q1[late], tri1[late], 1.0
-        hit |= late
-        return Hits(cand[hit], t[hit], normal[hit], point[hit], tri[hit])
+        found.normal[late], found.point[late] = late_n[late], q1[late]
+        found.triangle[late], found.t[late] = tri1[late], 1.0
+        found.hit[late] = True
 
     def push_out(self, x, s, start, s_start) -> SurfacePoints:
         """A thin mesh has no inside: points whose last path start -> x still hits the mesh
@@ -254,6 +274,23 @@ class MeshPath(ColliderPath):
         if local_v is None and self.path.static:
             return np.zeros_like(l)
         return self.path.point_velocities(l, s, self.frame_dt, local_velocity=local_v)
+
+
+class _Entries(NamedTuple):
+    """Where k candidate segments enter the mesh, in its local frame; the passes of
+    :meth:`MeshPath.first_hits` fill the arrays in place."""
+
+    hit: np.ndarray  # (k,) bool
+    t: np.ndarray  # (k,) fraction of the segment before the hit
+    normal: np.ndarray  # (k, 3) unit normals facing the side the segment came from
+    point: np.ndarray  # (k, 3) hit points on the surface proper
+    triangle: np.ndarray  # (k,) int64 triangle hit, -1 where none
+    front: np.ndarray  # (k,) bool: entered through the winding normal's side
+
+    def hits(self, cand: np.ndarray) -> Hits:
+        """The segments that hit, as :class:`Hits` of the segments ``cand`` indexes."""
+        hit = self.hit
+        return Hits(cand[hit], self.t[hit], self.normal[hit], self.point[hit], self.triangle[hit])
 
 
 HIERARCHY_CACHE = 8  # colliders remembered between frame intervals

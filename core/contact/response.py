@@ -39,30 +39,12 @@ def reflect(u: np.ndarray, n: np.ndarray, restitution: float, friction: float,
     return ut * keep[:, None] + un_new[:, None] * n
 
 
-def _first_hits(colliders, start, x, s_start, s_end):
-    """Earliest collider entry of each segment start -> x: (collider index or -1, t, local
-    normal, local hit point, surface element or -1)."""
-    count = len(x)
-    best_t = np.full(count, np.inf)
-    best = np.full(count, -1)
-    normals = np.zeros((count, 3))
-    locals_ = np.zeros((count, 3))
-    elements = np.full(count, -1, dtype=np.int64)
-    for ci, col in enumerate(colliders):
-        hits = col.first_hits(start, x, s_start, s_end)
-        better = hits.t < best_t[hits.index]
-        g = hits.index[better]
-        best_t[g] = hits.t[better]
-        best[g] = ci
-        normals[g] = hits.normal[better]
-        locals_[g] = hits.point[better]
-        elements[g] = -1 if hits.element is None else hits.element[better]
-    return best, best_t, normals, locals_, elements
-
-
 def respond(colliders: list[ColliderPath], x0: np.ndarray, x1: np.ndarray, v0: np.ndarray,
             v1: np.ndarray, s0: float, s1: float, h: float, rest_speed: float) -> Response:
     """Continuous collision response for a sub-step [s0, s1] of the frame interval.
+
+    Up to :data:`PASSES` passes: find each remaining path's first hit, bounce the points that
+    hit and restart their paths there; then push out whatever a collider still holds.
 
     Args:
         x0, v0: (n, 3) state before the sub-step; x1, v1: after integration (collision-free).
@@ -74,63 +56,22 @@ def respond(colliders: list[ColliderPath], x0: np.ndarray, x1: np.ndarray, v0: n
         the surface, carried to the sub-step's end with the surface; ``impulse``: the normal
         velocity change the bounce gave it).
     """
-    x, v = x1.copy(), v1.copy()
-    first = _FirstHits(len(x))
-    if not colliders or len(x) == 0:
-        return Response(x, v, 0, first.contacts())
-    start = x0.copy()
-    s_start = np.full(len(x), float(s0))
-    s_end = np.full(len(x), float(s1))
-    v_start = v0.copy()
-    hits = 0
-    active = np.arange(len(x))  # pass 1 tests everyone; later passes only re-test the hit ones
-    touched = []
+    first = _FirstHits(len(x1))
+    if not colliders or len(x1) == 0:
+        return Response(x1.copy(), v1.copy(), 0, first.contacts())
+    remainder = _Remainder(x0, x1, v0, v1, s0, s1, h)
+    active = np.arange(len(x1))  # pass 1 tests everyone; later passes only re-test the hit ones
+    hits, touched = 0, []
     for _ in range(PASSES):
-        best, best_t, normals, locals_, elements = _first_hits(
-            colliders, start[active], x[active], s_start[active], s_end[active])
-        if not (best >= 0).any():
+        nearest = _nearest_hits(colliders, remainder, active)
+        if not (nearest.collider >= 0).any():
             break
-        for ci, col in enumerate(colliders):
-            sub = np.nonzero(best == ci)[0]
-            if len(sub) == 0:
-                continue
-            idx = active[sub]
-            t = best_t[sub]
-            s_hit = s_start[idx] + t * (s_end[idx] - s_start[idx])
-            p_w, n_w = col.to_world(locals_[sub], normals[sub], s_hit)
-            v_hit = v_start[idx] + t[:, None] * (v[idx] - v_start[idx])
-            v_c = col.surface_velocity(locals_[sub], s_hit, elements[sub])
-            u = reflect(v_hit - v_c, n_w, col.frame.restitution, col.frame.friction, rest_speed)
-            # the forces keep acting for the rest of the sub-step after the impact
-            dv_after = (1.0 - t)[:, None] * (v[idx] - v_start[idx])
-            v_new = u + v_c + dv_after
-            remaining = (1.0 - t) * (s_end[idx] - s_start[idx]) / max(s1 - s0, 1e-300) * h
-            start[idx] = p_w + (SKIN + col.offset) * n_w
-            v_start[idx] = v_new
-            travel = v_new - 0.5 * dv_after
-            if col.hits_end_surface:
-                # the hit point lies on the surface as it is at the sub-step's END (a deforming
-                # mesh): the restart is at that time, and the rest of the motion is relative to
-                # that surface, or its own motion would be counted twice
-                travel = travel - v_c
-                s_start[idx] = s_end[idx]
-            else:
-                s_start[idx] = s_hit
-            x[idx] = start[idx] + remaining[:, None] * travel
-            v[idx] = v_new
-            hits += len(idx)
-            # where the surface carries the placed point by the sub-step's end (a deforming
-            # mesh's hit point already lies on its end-of-step surface)
-            end = start[idx] if col.hits_end_surface else start[idx] + remaining[:, None] * v_c
-            first.note(idx, n_w, v_c, col, end, u - (v_hit - v_c))
-        active = active[best >= 0]
+        hits += _bounce(colliders, remainder, active, nearest, rest_speed, first)
+        active = active[nearest.collider >= 0]
         touched.append(active)
     if touched:
-        moved = np.unique(np.concatenate(touched))
-        xs, vs = x[moved], v[moved]
-        hits += _push_out(colliders, xs, vs, s_end[moved], start[moved], s_start[moved])
-        x[moved], v[moved] = xs, vs
-    return Response(x, v, hits, first.contacts())
+        hits += remainder.push_out(colliders, np.unique(np.concatenate(touched)))
+    return Response(remainder.x, remainder.v, hits, first.contacts())
 
 
 class Response(NamedTuple):
@@ -140,6 +81,133 @@ class Response(NamedTuple):
     v: np.ndarray
     count: int
     first: Contacts
+
+
+class _Remainder:
+    """What is left of each point's path over the sub-step: from ``start`` (at parameter
+    ``s_start``, velocity ``v_start``) to ``x`` (at ``s_end``, velocity ``v``), all (n, 3) or
+    (n,). A bounce restarts a path at its hit point; the arrays are updated in place."""
+
+    def __init__(self, x0, x1, v0, v1, s0: float, s1: float, h: float):
+        self.x, self.v = x1.copy(), v1.copy()
+        self.start = x0.copy()
+        self.s_start = np.full(len(x1), float(s0))
+        self.s_end = np.full(len(x1), float(s1))
+        self.v_start = v0.copy()
+        self.span = max(s1 - s0, 1e-300)  # the sub-step's parameter length, h [s] long
+        self.h = h
+
+    def segments(self, idx: np.ndarray):
+        """Paths ``idx`` as the segments the colliders test: start, end, s_start, s_end."""
+        return self.start[idx], self.x[idx], self.s_start[idx], self.s_end[idx]
+
+    def restart(self, col: ColliderPath, idx: np.ndarray, impact: _Impact) -> np.ndarray:
+        """Restart paths ``idx`` at their impacts on ``col`` with the bounced velocity; returns
+        where the surface carries each placed point by the sub-step's end."""
+        t, v_c = impact.t, impact.surface_velocity
+        # the forces keep acting for the rest of the sub-step after the impact
+        dv_after = (1.0 - t)[:, None] * (self.v[idx] - self.v_start[idx])
+        v_new = impact.reflected + v_c + dv_after
+        remaining = (1.0 - t) * (self.s_end[idx] - self.s_start[idx]) / self.span * self.h
+        self.start[idx] = impact.point + (SKIN + col.offset) * impact.normal
+        self.v_start[idx] = v_new
+        travel = v_new - 0.5 * dv_after
+        if col.hits_end_surface:
+            # the hit point lies on the surface as it is at the sub-step's END (a deforming
+            # mesh): the restart is at that time, and the rest of the motion is relative to
+            # that surface, or its own motion would be counted twice
+            travel = travel - v_c
+            self.s_start[idx] = self.s_end[idx]
+        else:
+            self.s_start[idx] = impact.s
+        self.x[idx] = self.start[idx] + remaining[:, None] * travel
+        self.v[idx] = v_new
+        if col.hits_end_surface:  # the hit point already lies on the end-of-step surface
+            return self.start[idx]
+        return self.start[idx] + remaining[:, None] * v_c
+
+    def push_out(self, colliders: list[ColliderPath], moved: np.ndarray) -> int:
+        """:func:`_push_out` for the paths ``moved``; returns how many it moved."""
+        xs, vs = self.x[moved], self.v[moved]
+        count = _push_out(colliders, xs, vs, self.s_end[moved], self.start[moved],
+                          self.s_start[moved])
+        self.x[moved], self.v[moved] = xs, vs
+        return count
+
+
+class _Nearest(NamedTuple):
+    """Each tested path's earliest collider entry, in that collider's local frame."""
+
+    collider: np.ndarray  # (k,) index into the colliders, -1: no hit
+    t: np.ndarray  # (k,) fraction of the remaining path before the hit (inf: no hit)
+    normal: np.ndarray  # (k, 3) local unit normals
+    point: np.ndarray  # (k, 3) local hit points
+    element: np.ndarray  # (k,) int64 surface element hit, or -1
+
+    def take(self, sub: np.ndarray) -> _Nearest:
+        return _Nearest(*(a[sub] for a in self))
+
+
+def _nearest_hits(colliders: list[ColliderPath], remainder: _Remainder,
+                  active: np.ndarray) -> _Nearest:
+    """Earliest collider entry of each active path (``active`` indexes ``remainder``)."""
+    start, x, s_start, s_end = remainder.segments(active)
+    count = len(x)
+    nearest = _Nearest(np.full(count, -1), np.full(count, np.inf), np.zeros((count, 3)),
+                       np.zeros((count, 3)), np.full(count, -1, dtype=np.int64))
+    for ci, col in enumerate(colliders):
+        hits = col.first_hits(start, x, s_start, s_end)
+        better = hits.t < nearest.t[hits.index]
+        g = hits.index[better]
+        nearest.t[g] = hits.t[better]
+        nearest.collider[g] = ci
+        nearest.normal[g] = hits.normal[better]
+        nearest.point[g] = hits.point[better]
+        nearest.element[g] = -1 if hits.element is None else hits.element[better]
+    return nearest
+
+
+def _bounce(colliders: list[ColliderPath], remainder: _Remainder, active: np.ndarray,
+            nearest: _Nearest, rest_speed: float, first: _FirstHits) -> int:
+    """Bounce the active paths that hit, collider by collider, and restart them at their hit
+    points; returns how many bounced."""
+    count = 0
+    for ci, col in enumerate(colliders):
+        sub = np.nonzero(nearest.collider == ci)[0]
+        if len(sub) == 0:
+            continue
+        idx = active[sub]
+        impact = _impact(col, remainder, idx, nearest.take(sub), rest_speed)
+        end = remainder.restart(col, idx, impact)
+        first.note(idx, impact.normal, impact.surface_velocity, col, end,
+                   impact.reflected - impact.approach)
+        count += len(idx)
+    return count
+
+
+class _Impact(NamedTuple):
+    """Where and how k paths met one collider, in world space."""
+
+    t: np.ndarray  # (k,) fraction of the remaining path before the hit
+    s: np.ndarray  # (k,) frame-interval parameter of the hit
+    point: np.ndarray  # (k, 3) hit points on the surface proper [m]
+    normal: np.ndarray  # (k, 3) unit normals facing the side the points came from
+    surface_velocity: np.ndarray  # (k, 3) the surface's velocity there [m/s]
+    approach: np.ndarray  # (k, 3) the points' velocity at the hit, relative to the surface
+    reflected: np.ndarray  # (k, 3) their velocity after the bounce, relative to the surface
+
+
+def _impact(col: ColliderPath, remainder: _Remainder, idx: np.ndarray, hit: _Nearest,
+            rest_speed: float) -> _Impact:
+    """The impacts of paths ``idx`` on ``col`` (their nearest hits ``hit``) and the bounce."""
+    t = hit.t
+    s_hit = remainder.s_start[idx] + t * (remainder.s_end[idx] - remainder.s_start[idx])
+    p_w, n_w = col.to_world(hit.point, hit.normal, s_hit)
+    v_hit = remainder.v_start[idx] + t[:, None] * (remainder.v[idx] - remainder.v_start[idx])
+    v_c = col.surface_velocity(hit.point, s_hit, hit.element)
+    u_in = v_hit - v_c
+    u = reflect(u_in, n_w, col.frame.restitution, col.frame.friction, rest_speed)
+    return _Impact(t, s_hit, p_w, n_w, v_c, u_in, u)
 
 
 _VECTORS = ("point", "normal", "surface_velocity")  # noted per hit, (k, 3) each

@@ -3,10 +3,10 @@
 from .model import ParticleModel, ParticleModelBuilder, ParticleState
 from .output import emitter_arrays
 from .settings import EmitterFrame, EmitterSettings, SpringLink
-from .solver import FrameInputs, FrameReport, ParticleSolver
+from .solver import FrameInputs, FrameReport, ParticleSolver, ParticleSystem
 
 __all__ = [
     "EmitterFrame", "EmitterSettings", "FrameInputs", "FrameReport",
-    "ParticleModel", "ParticleModelBuilder", "ParticleSolver", "ParticleState", "SpringLink",
+    "ParticleModel", "ParticleModelBuilder", "ParticleSolver", "ParticleSystem", "ParticleState", "SpringLink",
     "emitter_arrays",
 ]

@@ -13,10 +13,16 @@ from .sources import open_edge_count
 
 @dataclass(frozen=True)
 class ParticleModel:
-    """Read-only description of a particle simulation: its emitters and seed."""
+    """Read-only description of a particle simulation: its emitters and seed.
+
+    ``emit_order``: emitter indices in the order they emit within a sub-step — mesh/origin
+    emitters first, then sub-emitters by depth (parents before children), so every emitter's
+    deaths of a sub-step are known before its sub-emitters burst.
+    """
 
     emitters: tuple[EmitterSettings, ...]
     seed: int = 0
+    emit_order: tuple[int, ...] = ()
 
     @property
     def emitter_count(self) -> int:
@@ -70,7 +76,22 @@ class ParticleModelBuilder:
         """
         for e in self._emitters:
             self._check_source(e, frame)
-        return ParticleModel(tuple(self._emitters), self.seed)
+        depth = [self._depth(i, frame) for i in range(len(self._emitters))]
+        order = sorted(range(len(self._emitters)), key=lambda i: (depth[i], i))
+        return ParticleModel(tuple(self._emitters), self.seed, tuple(order))
+
+    def _depth(self, i: int, frame: int | None) -> int:
+        """How many sub-emitter parents emitter ``i`` has above it (the one walk up the chain:
+        a cycle is an error naming the emitter)."""
+        e, seen = self._emitters[i], {i}
+        d = 0
+        while e.source == "DEATHS":
+            if e.parent in seen:
+                raise PhysanimError("sub-emitters form a cycle (an emitter is its own ancestor)",
+                                    obj=self._emitters[i].name, frame=frame, kind="emitter")
+            seen.add(e.parent)
+            e, d = self._emitters[e.parent], d + 1
+        return d
 
     def _check_source(self, e: EmitterSettings, frame: int | None) -> None:
         def fail(msg: str):
@@ -86,15 +107,8 @@ class ParticleModelBuilder:
             if open_edges:
                 fail(f"source is VOLUME but the mesh is not closed ({open_edges} open or "
                      "non-manifold edges) — close the mesh or emit from FACES")
-        if e.source == "DEATHS":
-            if not 0 <= e.parent < len(self._emitters):
-                fail(f"parent emitter index {e.parent} does not exist")
-            seen, p = {id(e)}, self._emitters[e.parent]
-            while p.source == "DEATHS":
-                if id(p) in seen:
-                    fail("sub-emitters form a cycle (an emitter is its own ancestor)")
-                seen.add(id(p))
-                p = self._emitters[p.parent]
+        if e.source == "DEATHS" and not 0 <= e.parent < len(self._emitters):
+            fail(f"parent emitter index {e.parent} does not exist")
 
 
 @dataclass

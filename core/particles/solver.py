@@ -23,6 +23,7 @@ from ..contact import ColliderFrame, ColliderPaths, ContactForce, respond, resti
 from ..errors import PhysanimError, SimulationError
 from ..forces import DampedSprings, Force, Gravity, ParticleView
 from ..integrators import Integrator, make_integrator
+from ..world import World, WorldFrame
 from .emit import Births, sample_births, sample_bursts
 from .model import ParticleModel, ParticleState
 from .settings import EmitterFrame
@@ -52,6 +53,18 @@ class FrameInputs:
     colliders: Sequence[ColliderFrame] = ()
     forces: Sequence[Force] = ()
 
+    @classmethod
+    def of(cls, frame: WorldFrame, emitters: Sequence[EmitterFrame]) -> FrameInputs:
+        """The particles' inputs: the world's interval and the emitters' values."""
+        return cls(frame.frame, frame.t0, frame.frame_dt, frame.gravity, emitters,
+                   frame.colliders, frame.forces)
+
+    @property
+    def world(self) -> WorldFrame:
+        """What every system shares of this interval."""
+        return WorldFrame(self.frame, self.t0, self.frame_dt, self.gravity, self.colliders,
+                          self.forces)
+
 
 @dataclass
 class FrameReport:
@@ -72,6 +85,41 @@ class FrameReport:
     integrator_steps: int = 0
     alive: int = 0
     per_emitter_births: list[int] = field(default_factory=list)
+
+
+@dataclass
+class _FrameStep:
+    """One frame interval of a particle state in progress (between begin and end of frame)."""
+
+    state: ParticleState
+    inputs: FrameInputs
+    paths: list  # the colliders' paths over the interval
+    h: float  # sub-step [s]
+    g: np.ndarray  # gravity (3,) [m/s^2]
+    rest_speed: float  # [m/s] a bounce slower than this ends in contact
+    births: list  # per emitter, this frame's Births (sub-emitters burst during the sub-steps)
+    report: FrameReport
+
+
+class ParticleSystem:
+    """A particle state and its solver as one system of a :class:`~physanim.core.world.World`;
+    its own per-frame input is the list of :class:`EmitterFrame` (one per emitter)."""
+
+    def __init__(self, solver: ParticleSolver, state: ParticleState, name: str = "particles"):
+        self.solver, self.state, self.name = solver, state, name
+        self.substeps = solver.substeps
+        self._step: _FrameStep | None = None
+
+    def begin_frame(self, frame: WorldFrame, paths: list, emitters: Sequence[EmitterFrame]):
+        self._step = self.solver.begin_frame(self.state, FrameInputs.of(frame, emitters), paths)
+
+    def substep(self, k: int) -> None:
+        self.solver.substep(self._step, k)
+
+    def end_frame(self) -> FrameReport:
+        report, self._step = self._step.report, None
+        report.alive = self.state.particle_count
+        return report
 
 
 class _ParticleOde:
@@ -132,7 +180,14 @@ class ParticleSolver:
 
     # -- the frame ------------------------------------------------------------------------------
     def advance(self, state: ParticleState, inputs: FrameInputs) -> FrameReport:
-        """Advance ``state`` (in place) from ``inputs.t0`` to ``inputs.t0 + inputs.frame_dt``."""
+        """Advance ``state`` (in place) from ``inputs.t0`` to ``inputs.t0 + inputs.frame_dt``:
+        a world of this one system."""
+        system = ParticleSystem(self, state)
+        world = World([system], self.colliders)
+        return world.advance(inputs.world, {system: inputs.emitters}).reports[system]
+
+    def begin_frame(self, state: ParticleState, inputs: FrameInputs, paths: list) -> _FrameStep:
+        """Check the interval's emitter inputs and sample its births (one draw per frame)."""
         model = self.model
         if len(inputs.emitters) != model.emitter_count:
             raise ValueError(f"frame {inputs.frame}: {len(inputs.emitters)} emitter inputs for "
@@ -143,32 +198,32 @@ class ParticleSolver:
             except ValueError as exc:
                 detail = str(exc).removeprefix(f'emitter "{e.name}": ')
                 raise PhysanimError(detail, obj=e.name, frame=inputs.frame, kind="emitter") from exc
-        report = FrameReport(per_emitter_births=[0] * model.emitter_count)
-        births = [self._sample(state, inputs, i) for i in range(model.emitter_count)]
-        paths = self.colliders.of(inputs.colliders, inputs.frame_dt)
         h = inputs.frame_dt / self.substeps
         g = np.asarray(inputs.gravity, dtype=np.float64)
-        rest_speed = 2.0 * float(np.linalg.norm(g)) * h + 1e-4
-        for k in range(self.substeps):
-            s0, s1 = k / self.substeps, (k + 1) / self.substeps
-            t = inputs.t0 + k * h
-            contact = ContactForce(resting_contacts(paths, state.particle_x, state.particle_v, s0,
-                                                    rest_speed), h)
-            x0, v0 = state.particle_x, state.particle_v
-            report.integrator_steps += self._integrate(
-                state, self._forces(state, inputs, g), contact, t, h, inputs)
-            done = respond(paths, x0, state.particle_x, v0, state.particle_v, s0, s1, h,
-                           rest_speed)
-            state.particle_x, state.particle_v = done.x, done.v
-            report.collisions += done.count
-            self._check(state, inputs, t + h)
-            deaths = self._age_kill(state, h)
-            report.deaths += sum(len(d[0]) for d in deaths)
-            self._emit(state, inputs, births, deaths, s0, s1, g, report)
-            self._check_bounds(state, inputs)
-            state.t = t + h
-        report.alive = state.particle_count
-        return report
+        return _FrameStep(state, inputs, paths, h, g, 2.0 * float(np.linalg.norm(g)) * h + 1e-4,
+                          [self._sample(state, inputs, i) for i in range(model.emitter_count)],
+                          FrameReport(per_emitter_births=[0] * model.emitter_count))
+
+    def substep(self, step: _FrameStep, k: int) -> None:
+        """Sub-step ``k`` of the interval: the passes of the module docstring."""
+        state, inputs, h = step.state, step.inputs, step.h
+        s0, s1 = k / self.substeps, (k + 1) / self.substeps
+        t = inputs.t0 + k * h
+        contact = ContactForce(resting_contacts(step.paths, state.particle_x, state.particle_v,
+                                                s0, step.rest_speed), h)
+        x0, v0 = state.particle_x, state.particle_v
+        step.report.integrator_steps += self._integrate(
+            state, self._forces(state, inputs, step.g), contact, t, h, inputs)
+        done = respond(step.paths, x0, state.particle_x, v0, state.particle_v, s0, s1, h,
+                       step.rest_speed)
+        state.particle_x, state.particle_v = done.x, done.v
+        step.report.collisions += done.count
+        self._check(state, inputs, t + h)
+        deaths = self._age_kill(state, h)
+        step.report.deaths += sum(len(d[0]) for d in deaths)
+        self._emit(state, inputs, step.births, deaths, s0, s1, step.g, step.report)
+        self._check_bounds(state, inputs)
+        state.t = t + h
 
     # -- passes ---------------------------------------------------------------------------------
     def _sample(self, state, inputs, i) -> Births:
@@ -256,24 +311,10 @@ class ParticleSolver:
             state.keep(~dead)
         return deaths
 
-    def _emit_order(self) -> list[int]:
-        """Mesh/origin emitters first, then sub-emitters by depth (parents before children), so
-        every emitter's deaths of a sub-step — including births that die at once — are known
-        before its sub-emitters burst. ``finalize`` rejected cycles, so depths are finite."""
-        emitters = self.model.emitters
-
-        def depth(i: int) -> int:
-            d = 0
-            while emitters[i].source == "DEATHS":
-                i, d = emitters[i].parent, d + 1
-            return d
-
-        return sorted(range(len(emitters)), key=lambda i: (depth(i), i))
-
     def _emit(self, state, inputs, births, deaths, s0, s1, g, report) -> None:
         last = s1 >= 1.0
         deaths = list(deaths)  # born-dead particles are added to their emitter's deaths below
-        for i in self._emit_order():
+        for i in self.model.emit_order:
             e = self.model.emitters[i]
             if e.source == "DEATHS":
                 b = sample_bursts(state.rngs[i], e, inputs.emitters[i], *deaths[e.parent])

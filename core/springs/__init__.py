@@ -2,7 +2,7 @@
 bending and virtual springs; explicit integrators or Baraff-Witkin implicit Euler."""
 from .model import (SpringMeshBuilder, SpringMeshModel, SpringMeshSettings, SpringMeshState,
                     VirtualSprings)
-from .solver import SpringFrameInputs, SpringMeshSolver
+from .solver import SpringDrive, SpringFrameInputs, SpringMeshSolver, SpringMeshSystem
 
-__all__ = ["SpringFrameInputs", "SpringMeshBuilder", "SpringMeshModel", "SpringMeshSettings",
-           "SpringMeshSolver", "SpringMeshState", "VirtualSprings"]
+__all__ = ["SpringDrive", "SpringFrameInputs", "SpringMeshBuilder", "SpringMeshModel", "SpringMeshSettings",
+           "SpringMeshSolver", "SpringMeshState", "SpringMeshSystem", "VirtualSprings"]

@@ -133,15 +133,22 @@ class SpringMeshModel:
         return len(self.rest_x)
 
     def state(self) -> SpringMeshState:
-        return SpringMeshState(self.rest_x.copy(), np.zeros_like(self.rest_x))
+        return SpringMeshState(self.rest_x.copy(), np.zeros_like(self.rest_x),
+                               [None] * len(self.virtual))
 
 
 @dataclass
 class SpringMeshState:
-    """Time-varying: vertex positions x (n, 3) [m] and velocities v (n, 3) [m/s], world space."""
+    """Time-varying: vertex positions x (n, 3) [m] and velocities v (n, 3) [m/s], world space.
+
+    ``attached``: per virtual-spring group, for ATTACH groups the vertices' rest positions in
+    the target's local space, bound by the first frame the state is advanced (None before, and
+    for other modes).
+    """
 
     x: np.ndarray
     v: np.ndarray
+    attached: list = field(default_factory=list)
 
 
 FAMILY_NAMES = ("edge", "shear", "bending (distance-2)")

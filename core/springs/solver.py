@@ -15,16 +15,18 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..bounds import DEFAULT_BOUNDS, StateBounds
-from ..errors import PhysanimError, SimulationError
 from ..contact import ColliderFrame, ColliderPaths, ContactForce, Contacts, respond, resting_contacts
-from ..forces import AnchorSprings, DampedSprings, Gravity, ParticleView, Wind
-from ..forces.springs import scatter_add
+from ..errors import PhysanimError, SimulationError
+from ..forces import AnchorSprings, DampedSprings, Gravity, Wind
 from ..integrators import make_integrator
 from ..transforms import TransformPath, inverse_affine, transform_points
+from ..world import World, WorldFrame
 from .forces import AngularSprings, LinearDrag, MassShared
 from .implicit import BaraffWitkin
 from .model import SpringMeshModel, SpringMeshState
+from .ode import MeshOde, SubstepForces
 from .strain import limit_strain
+from .wind import FaceWind
 
 TEAR_FACTOR = 50.0  # a spring stretched past this many rest lengths means the solve blew up
 LANDING_ROUNDS = 3  # re-solves of a sub-step whose vertices hit colliders (implicit only)
@@ -54,6 +56,41 @@ class SpringFrameInputs:
     winds: Sequence[Wind] = ()
     fields: Sequence = ()
 
+    @classmethod
+    def of(cls, frame: WorldFrame, drive: SpringDrive | None) -> SpringFrameInputs:
+        """A spring mesh's inputs: the world's interval (its wind objects blow on the faces,
+        the other forces act on the whole mesh) and what drives this mesh."""
+        drive = drive or SpringDrive()
+        return cls(frame.frame, frame.t0, frame.frame_dt, frame.gravity, drive.rest0,
+                   drive.rest1, drive.targets, frame.colliders,
+                   [f for f in frame.forces if isinstance(f, Wind)],
+                   [f for f in frame.forces if not isinstance(f, Wind)])
+
+    @property
+    def world(self) -> WorldFrame:
+        """What every system shares of this interval."""
+        return WorldFrame(self.frame, self.t0, self.frame_dt, self.gravity, self.colliders,
+                          [*self.winds, *self.fields])
+
+    @property
+    def drive(self) -> SpringDrive:
+        return SpringDrive(self.rest0, self.rest1, self.targets)
+
+
+@dataclass(frozen=True)
+class SpringDrive:
+    """What drives one spring mesh over a frame interval (its own input to the world).
+
+    Attributes:
+        rest0, rest1: (n, 3) animated rest positions (world) at start/end — pin targets; None:
+            the model's rest shape.
+        targets: object name -> (m0, m1) world matrices of virtual-spring targets.
+    """
+
+    rest0: np.ndarray | None = None
+    rest1: np.ndarray | None = None
+    targets: dict = field(default_factory=dict)
+
 
 def _bounce(v: np.ndarray, landing: Contacts, rest_speed: float) -> None:
     """After a re-solved step the landing vertices are on the surface, still approaching it at
@@ -70,125 +107,41 @@ def _bounce(v: np.ndarray, landing: Contacts, rest_speed: float) -> None:
     v[idx] += (surface_vn + out - vn)[:, None] * n
 
 
-@dataclass(frozen=True)
-class FaceWind:
-    """Wind on faces: with p = strength (d + gusts) [N/m^2] the pressure vector, a triangle of
-    area A and unit normal n gets f = A [(p . n) n + c_t (p - (p . n) n)]: the pressure on the
-    side facing the wind plus skin friction along it (c_t = SKIN_FRICTION; it is what streams a
-    flag out). A third goes to each corner."""
+@dataclass
+class _FrameStep:
+    """One frame interval of a spring mesh in progress (between begin and end of frame)."""
 
-    SKIN_FRICTION = 0.25
-
-    triangles: np.ndarray
-    wind: Wind
-
-    def apply(self, p: ParticleView, f_out: np.ndarray) -> None:
-        tri = self.triangles
-        a, b, c = p.x[tri[:, 0]], p.x[tri[:, 1]], p.x[tri[:, 2]]
-        cross = np.cross(b - a, c - a)  # |cross| = 2 A, direction = normal
-        w = self.wind
-        pressure = np.broadcast_to(np.asarray(w.direction) * w.strength, cross.shape)
-        if w.noise:
-            pressure = pressure + (w.strength * w.noise) * w.field((a + b + c) / 3.0, p.t)
-        norm = np.sqrt(np.einsum("ij,ij->i", cross, cross))
-        area = 0.5 * norm
-        n = cross / np.where(norm > 0, norm, 1.0)[:, None]
-        normal = np.einsum("ij,ij->i", pressure, n)[:, None] * n
-        f = (area / 3.0)[:, None] * (normal + self.SKIN_FRICTION * (pressure - normal))
-        for k in range(3):
-            scatter_add(f_out, tri[:, k], f)
+    state: SpringMeshState
+    inputs: SpringFrameInputs
+    paths: list  # the colliders' paths over the interval
+    h: float  # sub-step [s]
+    g: np.ndarray  # gravity (3,) [m/s^2]
+    rest0: np.ndarray  # (n, 3) pin targets at the interval's start and end
+    rest1: np.ndarray
+    rest_speed: float  # [m/s] a bounce slower than this ends in contact
+    hits: int = 0  # collisions handled
 
 
-class _MeshSystem:
-    """The spring mesh as integrators see it: flat y = [x, v] with derivative [v, f/m], plus
-    the richer interface of the Baraff-Witkin stepper. Pinned vertices move with their targets.
+class SpringMeshSystem:
+    """A spring-mesh state and its solver as one system of a
+    :class:`~physanim.core.world.World`; its own per-frame input is a :class:`SpringDrive`."""
 
-    ``contact``: the vertices touching colliders. Explicit integrators see them as a constraint
-    on the accumulated forces (``constraint``, a :class:`ContactForce`); the implicit stepper
-    enforces ``contact`` as velocity constraints instead (``constraint`` None)."""
+    def __init__(self, solver: SpringMeshSolver, state: SpringMeshState, name: str | None = None):
+        self.solver, self.state = solver, state
+        self.name = solver.model.settings.name if name is None else name
+        self.substeps = solver.substeps
+        self._step: _FrameStep | None = None
 
-    def __init__(self, state: SpringMeshState, mass: np.ndarray, free: np.ndarray, forces: list,
-                 pin_x0: np.ndarray, pin_v: np.ndarray, t0: float, contact: Contacts,
-                 constraint: ContactForce | None):
-        self.state = state
-        self.mass = mass
-        self.free = free
-        self.forces = forces
-        self.contact = contact
-        self.constraint = constraint
-        self._pin_x0, self._pin_v, self._t0 = pin_x0, pin_v, t0
-        self.n = len(mass)
-        self.dim = 6 * self.n
+    def begin_frame(self, frame: WorldFrame, paths: list, drive: SpringDrive | None) -> None:
+        self._step = self.solver.begin_frame(self.state, SpringFrameInputs.of(frame, drive), paths)
 
-    # --- the Witkin & Baraff interface ---------------------------------------------------------
-    def get_state(self) -> np.ndarray:
-        return np.concatenate([self.state.x.ravel(), self.state.v.ravel()])
+    def substep(self, k: int) -> None:
+        self.solver.substep(self._step, k)
 
-    def set_state(self, y: np.ndarray) -> None:
-        n = self.n
-        self.state.x = y[:3 * n].reshape(n, 3).copy()
-        self.state.v = y[3 * n:].reshape(n, 3).copy()
-
-    def forces_at(self, t: float, x: np.ndarray, v: np.ndarray) -> np.ndarray:
-        f = np.zeros_like(x)
-        view = ParticleView(x, v, self.mass, t)
-        for force in self.forces:
-            force.apply(view, f)
-        if self.constraint is not None:
-            self.constraint.constrain(view, f)  # last: it cancels what presses into surfaces
-        return f
-
-    def derivative(self, t: float, y: np.ndarray) -> np.ndarray:
-        n = self.n
-        x, v = y[:3 * n].reshape(n, 3), y[3 * n:].reshape(n, 3)
-        a = self.forces_at(t, x, v) / self.mass[:, None]
-        a[~self.free] = 0.0
-        v = np.where(self.free[:, None], v, self._pin_v)
-        return np.concatenate([v.ravel(), a.ravel()])
-
-    # --- Baraff-Witkin extras ------------------------------------------------------------------
-    @property
-    def x(self):
-        return self.state.x
-
-    @x.setter
-    def x(self, value):
-        self.state.x = value
-
-    @property
-    def v(self):
-        return self.state.v
-
-    @v.setter
-    def v(self, value):
-        self.state.v = value
-
-    def energy(self, x: np.ndarray, v: np.ndarray) -> float:
-        """Kinetic + gravitational + spring + bending energy [J] of the free vertices' motion
-        (what an implicit step must not increase when nothing drives the mesh)."""
-        m = self.mass
-        e = 0.5 * float(np.sum(m[:, None] * v * v))
-        for force in self.forces:
-            if isinstance(force, Gravity):
-                e -= float(np.sum(m * (x @ np.asarray(force.g))))
-            elif isinstance(force, DampedSprings):
-                e += force.energy(x)
-            elif isinstance(force, AngularSprings) and len(force.hinge):
-                e += force.energy(x)
-        return e
-
-    def weight_norm(self) -> float:
-        g = next((f.g for f in self.forces if isinstance(f, Gravity)), (0.0, 0.0, 0.0))
-        return float(np.linalg.norm(g) * np.linalg.norm(self.mass[self.free])) or \
-            float(np.linalg.norm(self.mass))
-
-    def pinned_velocity(self, t: float) -> np.ndarray:
-        return self._pin_v
-
-    def linearize(self, t, x, v) -> list:
-        """Jacobian blocks of every force at (x, v) that has them, built once per implicit step."""
-        view = ParticleView(x, v, self.mass, t)
-        return [force.linearize(view) for force in self.forces if hasattr(force, "linearize")]
+    def end_frame(self) -> int:
+        """Collisions handled during the interval."""
+        hits, self._step = self._step.hits, None
+        return hits
 
 
 class SpringMeshSolver:
@@ -223,8 +176,8 @@ class SpringMeshSolver:
         self.free = ~model.pinned
         self._inv_mass = np.where(self.free, 1.0 / model.vertex_mass, 0.0)
         self._mass_share = model.vertex_mass / model.vertex_mass.sum()
+        self.drag = LinearDrag(model.settings.drag)
         self._check_stability(frame_dt / self.substeps, frame)
-        self._attach_local = self._attachments()
 
     def _fail(self, message: str, frame, cls=PhysanimError):
         return cls(message, obj=self.model.settings.name, frame=frame, kind="spring mesh")
@@ -243,103 +196,127 @@ class SpringMeshSolver:
             "substeps per frame) — use the IMPLICIT integrator, more substeps or a lower stiffness",
             frame)
 
-    def _attachments(self) -> list:
-        """Per ATTACH group: its vertices' rest positions in the target's local space; filled on
-        the first frame from the target's matrix then."""
-        return [None] * len(self.model.virtual)
+    # -- the frame ------------------------------------------------------------------------------
+    def advance(self, state: SpringMeshState, inputs: SpringFrameInputs) -> int:
+        """Advance ``state`` (in place) by one frame interval: a world of this one system.
+        Returns collisions handled."""
+        system = SpringMeshSystem(self, state)
+        world = World([system], self.colliders)
+        return world.advance(inputs.world, {system: inputs.drive}).reports[system]
 
-    def _virtual(self, inputs: SpringFrameInputs, t0: float, h: float, s0: float, s1: float):
+    def begin_frame(self, state: SpringMeshState, inputs: SpringFrameInputs,
+                    paths: list) -> _FrameStep:
+        h = inputs.frame_dt / self.substeps
+        g = np.asarray(inputs.gravity, dtype=np.float64)
+        rest0 = inputs.rest0 if inputs.rest0 is not None else self.model.rest_x
+        rest1 = inputs.rest1 if inputs.rest1 is not None else rest0
+        return _FrameStep(state, inputs, paths, h, g, rest0, rest1,
+                          2.0 * float(np.linalg.norm(g)) * h + 1e-4)
+
+    def substep(self, step: _FrameStep, k: int) -> None:
+        """Sub-step ``k``: the passes of the module docstring."""
+        state, inputs, h = step.state, step.inputs, step.h
+        s0, s1 = k / self.substeps, (k + 1) / self.substeps
+        t = inputs.t0 + k * h
+        pin_x1 = step.rest0 + s1 * (step.rest1 - step.rest0)
+        pin_v = (step.rest1 - step.rest0) / inputs.frame_dt
+        contact = resting_contacts(step.paths, state.x, state.v, s0, step.rest_speed)
+        forces = self._forces(step, t, s0, s1)
+        solved = self._solve(step, forces, contact, t, s0, s1, pin_x1, pin_v)
+        if solved is not None:
+            x, v, collided = solved
+            x[~self.free], v[~self.free] = pin_x1[~self.free], pin_v[~self.free]
+            state.x, state.v, step.hits = x, v, step.hits + collided
+        self._check(state, inputs.frame)
+
+    # -- passes ---------------------------------------------------------------------------------
+    def _forces(self, step: _FrameStep, t: float, s0: float, s1: float) -> SubstepForces:
+        """Gravity, springs, bending, drag, virtual springs, wind on faces, force objects."""
+        model, inputs = self.model, step.inputs
+        virtual = self._virtual(step.state, inputs, t, step.h, s0, s1)
+        return SubstepForces(
+            all=[Gravity(tuple(step.g)), self.springs, self.bending, self.drag, *virtual,
+                 *(FaceWind(model.triangles, w) for w in inputs.winds if len(model.triangles)),
+                 *(MassShared(f, self._mass_share) for f in inputs.fields)],
+            stiff=[self.springs, self.bending, self.drag, *virtual],
+            potentials=[self.springs, self.bending], gravity=step.g)
+
+    def _virtual(self, state: SpringMeshState, inputs: SpringFrameInputs, t0: float, h: float,
+                 s0: float, s1: float) -> list:
         forces = []
         for g, vs in enumerate(self.model.virtual):
-            if vs.mode == "PIN":
-                rest0 = inputs.rest0 if inputs.rest0 is not None else self.model.rest_x
-                rest1 = inputs.rest1 if inputs.rest1 is not None else rest0
-                a0 = rest0[vs.index] + s0 * (rest1[vs.index] - rest0[vs.index])
-                a1 = rest0[vs.index] + s1 * (rest1[vs.index] - rest0[vs.index])
-            else:
-                if vs.target not in inputs.targets:
-                    raise self._fail(f"virtual spring target \"{vs.target}\" has no transform",
-                                     inputs.frame)
-                path = TransformPath(*inputs.targets[vs.target])
-                m0, m1 = path.matrices(s0), path.matrices(s1)
-                if vs.mode == "ATTACH":
-                    if self._attach_local[g] is None:
-                        self._attach_local[g] = transform_points(
-                            inverse_affine(path.m0), self.model.rest_x[vs.index])
-                    a0 = transform_points(m0, self._attach_local[g])
-                    a1 = transform_points(m1, self._attach_local[g])
-                else:
-                    a0 = np.broadcast_to(m0[:3, 3], (len(vs.index), 3))
-                    a1 = np.broadcast_to(m1[:3, 3], (len(vs.index), 3))
+            a0, a1 = self._anchors(state, inputs, g, vs, s0, s1)
             forces.append(AnchorSprings(vs.index, a0, a1, t0, h,
                                         np.full(len(vs.index), vs.rest_length),
                                         vs.stiffness * vs.weight, vs.damping * vs.weight))
         return forces
 
-    def advance(self, state: SpringMeshState, inputs: SpringFrameInputs) -> int:
-        """Advance ``state`` (in place) by one frame interval. Returns collisions handled."""
-        model = self.model
-        h = inputs.frame_dt / self.substeps
-        g = np.asarray(inputs.gravity, dtype=np.float64)
-        rest0 = inputs.rest0 if inputs.rest0 is not None else model.rest_x
-        rest1 = inputs.rest1 if inputs.rest1 is not None else rest0
-        paths = self.colliders.of(inputs.colliders, inputs.frame_dt)
-        rest_speed = 2.0 * float(np.linalg.norm(g)) * h + 1e-4
-        hits = 0
-        for k in range(self.substeps):
-            s0, s1 = k / self.substeps, (k + 1) / self.substeps
-            t = inputs.t0 + k * h
-            pin_x1 = rest0 + s1 * (rest1 - rest0)
-            pin_v = (rest1 - rest0) / inputs.frame_dt
-            contact = resting_contacts(paths, state.x, state.v, s0, rest_speed)
-            forces = [Gravity(tuple(g)), self.springs, self.bending,
-                      LinearDrag(model.settings.drag)]
-            forces += self._virtual(inputs, t, h, s0, s1)
-            forces += [FaceWind(model.triangles, w) for w in inputs.winds if len(model.triangles)]
-            forces += [MassShared(f, self._mass_share) for f in inputs.fields]
-            implicit = isinstance(self.integrator, BaraffWitkin)
+    def _anchors(self, state, inputs: SpringFrameInputs, g: int, vs, s0: float, s1: float):
+        """Where virtual-spring group ``g``'s vertices are pulled at s0 and s1: the animated
+        rest shape (PIN), points fixed in the target (ATTACH, bound on the first frame) or the
+        target's origin (DISTANCE)."""
+        if vs.mode == "PIN":
+            rest0 = inputs.rest0 if inputs.rest0 is not None else self.model.rest_x
+            rest1 = inputs.rest1 if inputs.rest1 is not None else rest0
+            return (rest0[vs.index] + s0 * (rest1[vs.index] - rest0[vs.index]),
+                    rest0[vs.index] + s1 * (rest1[vs.index] - rest0[vs.index]))
+        if vs.target not in inputs.targets:
+            raise self._fail(f"virtual spring target \"{vs.target}\" has no transform",
+                             inputs.frame)
+        path = TransformPath(*inputs.targets[vs.target])
+        m0, m1 = path.matrices(s0), path.matrices(s1)
+        if vs.mode == "ATTACH":
+            if state.attached[g] is None:
+                state.attached[g] = transform_points(inverse_affine(path.m0),
+                                                     self.model.rest_x[vs.index])
+            return transform_points(m0, state.attached[g]), transform_points(m1, state.attached[g])
+        return (np.broadcast_to(m0[:3, 3], (len(vs.index), 3)),
+                np.broadcast_to(m1[:3, 3], (len(vs.index), 3)))
 
-            def system_with(constraints: Contacts, forces=forces, t=t, s0=s0, pin_v=pin_v,
-                            implicit=implicit):
-                return _MeshSystem(state, model.vertex_mass, self.free, forces,
-                                   rest0 + s0 * (rest1 - rest0), pin_v, t, constraints,
-                                   None if implicit else ContactForce(constraints, h))
+    def _solve(self, step: _FrameStep, forces: SubstepForces, contact: Contacts, t: float,
+               s0: float, s1: float, pin_x1, pin_v):
+        """Integrate, then respond to collisions on the vertices' paths; with IMPLICIT, a step
+        whose vertices hit a collider is solved again with them landing on it (up to
+        LANDING_ROUNDS times). Returns (x, v, collisions) after response, or None when there
+        are no colliders (the state holds the integrated step)."""
+        state, h, paths = step.state, step.h, step.paths
+        implicit = isinstance(self.integrator, BaraffWitkin)
 
-            system = system_with(contact)
-            x0, v0 = state.x.copy(), state.v.copy()
-            landing, collided, first = None, 0, None
-            for round_ in range(LANDING_ROUNDS + 1):
-                if round_:
-                    # vertices hit a surface during the step: solve the step again with them
-                    # as constraints landing on it, so their neighbours feel the stop through
-                    # the springs instead of a projection after the fact (which stretches stiff
-                    # springs: energy from nowhere)
-                    state.x, state.v = x0.copy(), v0.copy()
-                    system = system_with(landing)
-                self._step(system, t, h, pin_x1, pin_v, inputs.frame)
-                if landing is not None:
-                    _bounce(state.v, landing, rest_speed)
-                if not paths:
-                    break
-                x, v, count, hit = respond(paths, x0, state.x, v0, state.v, s0, s1, h,
-                                           rest_speed)
-                collided = max(collided, count)  # the first round finds the step's collisions
-                first = (x, v) if first is None else first
-                more = None if not (implicit and round_ < LANDING_ROUNDS) else \
-                    self._landing(landing if landing is not None else contact, hit, x0, h)
-                if more is None:
-                    break
-                landing = more
-            if landing is not None and system.energy(*first) < system.energy(x, v):
-                # a safeguard: landing constraints must not end with more energy than
-                # projecting the hits after the first solve (a stiff mesh whose landing
-                # vertices are forced apart can store more spring energy than that)
-                x, v = first
-            if paths:
-                x[~self.free], v[~self.free] = pin_x1[~self.free], pin_v[~self.free]
-                state.x, state.v, hits = x, v, hits + collided
-            self._check(state, inputs.frame)
-        return hits
+        def ode_with(constraints: Contacts) -> MeshOde:
+            return MeshOde(state, self.model.vertex_mass, self.free, forces, pin_v, constraints,
+                           None if implicit else ContactForce(constraints, h))
+
+        ode = ode_with(contact)
+        x0, v0 = state.x.copy(), state.v.copy()
+        landing, collided, first = None, 0, None
+        for round_ in range(LANDING_ROUNDS + 1):
+            if round_:
+                # vertices hit a surface during the step: solve the step again with them as
+                # constraints landing on it, so their neighbours feel the stop through the
+                # springs instead of a projection after the fact (which stretches stiff
+                # springs: energy from nowhere)
+                state.x, state.v = x0.copy(), v0.copy()
+                ode = ode_with(landing)
+            self._step(ode, t, h, pin_x1, pin_v, step.inputs.frame)
+            if landing is not None:
+                _bounce(state.v, landing, step.rest_speed)
+            if not paths:
+                return None
+            x, v, count, hit = respond(paths, x0, state.x, v0, state.v, s0, s1, h,
+                                       step.rest_speed)
+            collided = max(collided, count)  # the first round finds the step's collisions
+            first = (x, v) if first is None else first
+            more = None if not (implicit and round_ < LANDING_ROUNDS) else \
+                self._landing(landing if landing is not None else contact, hit, x0, h)
+            if more is None:
+                break
+            landing = more
+        if landing is not None and ode.energy(*first) < ode.energy(x, v):
+            # a safeguard: landing constraints must not end with more energy than projecting
+            # the hits after the first solve (a stiff mesh whose landing vertices are forced
+            # apart can store more spring energy than that)
+            x, v = first
+        return x, v, collided
 
     def _step(self, system, t: float, h: float, pin_x1, pin_v, frame) -> None:
         """One integrator step, then pins exactly on their targets and the strain limit."""

@@ -5,6 +5,8 @@ import math
 
 import numpy as np
 
+from physanim.core.collision.shapes import grid_mesh
+from physanim.core.contact import ColliderFrame
 from physanim.core.particles import ParticleModelBuilder
 
 
@@ -53,3 +55,19 @@ def rotation(axis, angle) -> np.ndarray:
     m = np.eye(4)
     m[:3, :3] = np.eye(3) + math.sin(angle) * k + (1 - math.cos(angle)) * k @ k
     return m
+
+
+def sheet(n: int, size: float):
+    """A flat n x n vertex grid of side ``size`` centred on the origin in z = 0, normals +z:
+    (vertices, triangles)."""
+    mesh = grid_mesh(n, size)
+    return mesh.vertices - [size / 2, size / 2, 0.0], mesh.triangles
+
+
+def mesh_collider(name, verts, tris, m0=None, m1=None, verts1=None, **kw) -> ColliderFrame:
+    """A MESH collider: vertices ``verts`` (moving to ``verts1``), matrix m0 -> m1 (identity,
+    still by default); ``kw`` are ColliderFrame settings."""
+    m0 = np.eye(4) if m0 is None else m0
+    m1 = m0 if m1 is None else m1
+    return ColliderFrame(name, "MESH", m0, m1, vertices0=verts,
+                         vertices1=verts if verts1 is None else verts1, triangles=tris, **kw)

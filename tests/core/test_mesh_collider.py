@@ -16,7 +16,7 @@ from physanim.core.particles import (
 )
 from physanim.core.contact import SKIN
 from physanim.tests.core.helpers import (
-    place as _place, rotation as _rotation,
+    mesh_collider as _mesh_collider, place as _place, rotation as _rotation, sheet as _sheet,
     translation as _translate,
 )
 
@@ -35,60 +35,9 @@ def _inputs(frame, colliders, gravity=(0.0, 0.0, -G)):
                        emitters=[EmitterFrame(active=False)], colliders=colliders)
 
 
-def _sheet(n, size):
-    """A flat n x n vertex grid of side ``size`` centred on the origin in z = 0, normals +z."""
-    mesh = grid_mesh(n, size)
-    return mesh.vertices - [size / 2, size / 2, 0.0], mesh.triangles
-
-
-def _mesh_collider(name, verts, tris, m0=None, m1=None, verts1=None, **kw):
-    m0 = np.eye(4) if m0 is None else m0
-    m1 = m0 if m1 is None else m1
-    return ColliderFrame(name, "MESH", m0, m1, vertices0=verts,
-                         vertices1=verts if verts1 is None else verts1, triangles=tris, **kw)
-
-
 # -- tunnelling ---------------------------------------------------------------------------------
 
-def test_fast_particles_never_cross_a_thin_mesh():
-    # 100 m/s with one sub-step: 4.2 m per step across a zero-thickness sheet, from both faces,
-    # oblique, and straight down onto its shared edges and vertices (where a segment could slip
-    # between two triangles). All bounce; particles aimed beside the sheet pass.
-    speed, k = 100.0, 0.5
-    verts, tris = _sheet(9, 10.0)  # vertices every 1.25 m
-    sheet = _mesh_collider("Glass", verts, tris, restitution=k, friction=0.0)
-    rng = np.random.default_rng(0)
-    n = 60
-    xy = rng.uniform(-4.5, 4.5, size=(n, 2))
-    xy[:20] = np.round(xy[:20] / 1.25) * 1.25  # exactly over vertices
-    xy[20:30, 0] = np.round(xy[20:30, 0] / 1.25) * 1.25  # exactly over edges
-    tilt = rng.uniform(-0.2, 0.2, size=(n, 2)) * speed
-    tilt[:30] = 0.0  # straight down onto the vertices and edges
-    above = np.column_stack([xy, np.full(n, 1.0)])
-    below = np.column_stack([xy, np.full(n, -1.0)])
-    beside = np.column_stack([xy + 20.0, np.full(n, 1.0)])
-    down = np.column_stack([tilt, np.full(n, -speed)])
-    up = np.column_stack([tilt, np.full(n, speed)])
-    model = _model()
-    state = model.state()
-    _place(state, above, down)
-    _place(state, below, up)
-    _place(state, beside, down)
-    solver = ParticleSolver(model, "SYMPLECTIC_EULER", substeps=1)
-    report = solver.advance(state, _inputs(0, [sheet]))
-    z, vz = state.particle_x[:, 2], state.particle_v[:, 2]
-    assert report.collisions == 2 * n
-    assert np.all(z[:n] > 0.0) and np.all(z[n:2 * n] < 0.0)
-    assert np.all(z[2 * n:] < -speed * DT / 2)
-    # reflected with restitution, gravity for the rest of the step: |vz -+ k speed| <= (1+k) g h
-    np.testing.assert_allclose(vz[:n], k * speed, rtol=0, atol=(1 + k) * G * DT)
-    np.testing.assert_allclose(vz[n:2 * n], -k * speed, rtol=0, atol=(1 + k) * G * DT)
-    np.testing.assert_allclose(state.particle_v[:2 * n, :2], np.vstack([tilt, tilt]))  # mu = 0
-    for f in range(1, 4):
-        solver.advance(state, _inputs(f, [sheet]))
-        assert np.all(state.particle_x[:n, 2] > 0.0)
-        assert np.all(state.particle_x[n:2 * n, 2] < 0.0)
-
+# fast particles against a thin mesh: test_particles_collisions.py, shared with the analytic plane
 
 def test_fast_rotating_mesh_sweeps_resting_particles_without_crossing():
     # A revolving door: a thin vertical sheet (local xz plane, |x| <= 2, 0 <= z <= 2) spinning
@@ -157,34 +106,9 @@ def test_deforming_mesh_lifts_resting_particles():
     np.testing.assert_allclose(state.particle_x[:, 2], 0.3 + SKIN, atol=1e-9)
 
 
-# -- bounce, rest and friction ------------------------------------------------------------------
+# -- rest and friction ------------------------------------------------------------------------
 
-@pytest.mark.parametrize("k", [0.3, 0.7, 1.0])
-def test_bounce_on_mesh_ground_reaches_restitution_squared_height(k):
-    # As for the analytic half space (test_particles_closed_forms): RK4 is exact in free flight;
-    # 0 - g h^2 <= apex - k^2 H <= k v_i h + SKIN + g h^2.
-    H, substeps = 2.0, 8
-    h = DT / substeps
-    v_i = math.sqrt(2.0 * G * H)
-    verts, tris = _sheet(5, 20.0)
-    ground = _mesh_collider("Ground", verts, tris, restitution=k, friction=0.0)
-    model = _model()
-    state = model.state()
-    _place(state, [0.3, -0.2, H], [0.0, 0.0, 0.0])
-    solver = ParticleSolver(model, "RK4", substeps=substeps)
-    apex = None
-    for f in range(40):
-        report = solver.advance(state, _inputs(f, [ground]))
-        assert state.particle_x[0, 2] >= 0.0
-        if state.particle_v[0, 2] > 0.0:
-            assert report.collisions == 1
-            z, vz = state.particle_x[0, 2], state.particle_v[0, 2]
-            apex = z + vz * vz / (2.0 * G)
-            break
-    assert apex is not None, "the particle never bounced"
-    slack = G * h * h
-    assert -slack <= apex - k * k * H <= k * v_i * h + SKIN + slack
-
+# the bounce height on a mesh ground: test_particles_closed_forms.py, shared with the half space
 
 def test_resting_on_mesh_ground_does_not_sink_or_jitter():
     verts, tris = _sheet(6, 20.0)

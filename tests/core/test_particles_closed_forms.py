@@ -1,5 +1,6 @@
-"""Particle solver against closed forms: projectile, bounce height, friction on a slope, drag,
-springs. Each tolerance is derived (in a comment) from the integrator's order and the step size.
+"""Particle solver against closed forms: projectile, bounce height (on a half space and on a
+mesh), friction on a slope, drag, springs. Each tolerance is derived (in a comment) from the
+integrator's order and the step size.
 """
 from __future__ import annotations
 
@@ -13,7 +14,9 @@ from physanim.core.forces import DampedSprings, Drag, ParticleView
 from physanim.core.particles import (
     EmitterFrame, EmitterSettings, FrameInputs, ParticleSolver, SpringLink,
 )
-from physanim.tests.core.helpers import particle_model as _model, translation as _translate
+from physanim.tests.core.helpers import (
+    mesh_collider, particle_model as _model, sheet, translation as _translate,
+)
 
 G = 9.81
 FPS = 24
@@ -92,21 +95,33 @@ def test_projectile_symplectic_euler_first_order_known_error(substeps):
 
 # -- restitution ----------------------------------------------------------------------------------
 
+def _ground(kind, k):
+    """A frictionless ground in z = 0 of restitution k, the analytic half space or a flat mesh,
+    and the (x, y) to drop onto it at (on the mesh, beside its vertices: one is at the origin)."""
+    if kind == "MESH":
+        verts, tris = sheet(5, 20.0)
+        return mesh_collider("Ground", verts, tris, restitution=k, friction=0.0), (0.3, -0.2)
+    ground = ColliderFrame("Ground", "HALF_SPACE", np.eye(4), np.eye(4), restitution=k,
+                           friction=0.0)
+    return ground, (0.0, 0.0)
+
+
+@pytest.mark.parametrize("kind", ["HALF_SPACE", "MESH"])
 @pytest.mark.parametrize("k", [0.3, 0.7, 1.0])
-def test_bounce_apex_is_restitution_squared_times_height(k):
+def test_bounce_apex_is_restitution_squared_times_height(k, kind):
     # RK4 is exact in free flight, so after the bounce z + vz^2 / (2 g) is the apex exactly.
     # The response moves the rest of the hit sub-step along the reflected velocity without
     # gravity: that adds k v_i tau (tau <= h) to the apex, plus SKIN; the chord-vs-parabola
-    # time-of-impact error is below g h^2. So 0 - g h^2 <= apex - k^2 H <= k v_i h + SKIN + g h^2.
+    # time-of-impact error is below g h^2. So 0 - g h^2 <= apex - k^2 H <= k v_i h + SKIN + g h^2,
+    # on either kind of ground.
     H = 2.0
     substeps = 8
     h = DT / substeps
     v_i = math.sqrt(2.0 * G * H)
     model = _model(EmitterSettings("Ball"))
     state = model.state()
-    _place(state, [0.0, 0.0, H], [0.0, 0.0, 0.0])
-    ground = ColliderFrame("Ground", "HALF_SPACE", np.eye(4), np.eye(4), restitution=k,
-                           friction=0.0)
+    ground, xy = _ground(kind, k)
+    _place(state, [*xy, H], [0.0, 0.0, 0.0])
     solver = ParticleSolver(model, "RK4", substeps=substeps)
     apex = None
     for f in range(40):

@@ -1,5 +1,6 @@
-"""Analytic colliders: no tunnelling, moving colliders, exact bounce normals on transformed
-spheres and boxes, and fast-spinning colliders that never swallow a particle.
+"""Analytic colliders: no tunnelling (through a thin sheet: the analytic plane and a triangle
+mesh), moving colliders, exact bounce normals on transformed spheres and boxes, and fast-spinning
+colliders that never swallow a particle.
 """
 from __future__ import annotations
 
@@ -12,8 +13,8 @@ from physanim.core.contact import ColliderFrame
 from physanim.core.particles import EmitterFrame, EmitterSettings, FrameInputs, ParticleSolver
 from physanim.core.contact import SKIN
 from physanim.tests.core.helpers import (
-    particle_model as _model, place as _place,
-    rotation as _rotation, translation as _translate,
+    mesh_collider, particle_model as _model, place as _place, rotation as _rotation, sheet,
+    translation as _translate,
 )
 
 G = 9.81
@@ -37,21 +38,41 @@ def _local(m, x):
 
 # -- tunnelling ---------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("speed", [100.0, 1000.0])
-def test_fast_particles_never_cross_a_thin_plane(speed):
-    # One sub-step per frame: a 1000 m/s particle moves 42 m per step across a plane of zero
-    # thickness. Continuous detection must bounce every particle aimed at the plane (from
-    # either side) and let the ones aimed beside its bounded square (|x|, |y| > 5) pass.
-    k = 0.5
-    plane = _scale(5.0, 5.0, 1.0)
-    collider = ColliderFrame("Glass", "PLANE", plane, plane, restitution=k, friction=0.0)
-    grid = np.array([(x, y) for x in np.linspace(-4.5, 4.5, 7) for y in np.linspace(-4.5, 4.5, 7)])
-    n = len(grid)
-    above = np.column_stack([grid, np.full(n, 1.0)])
-    below = np.column_stack([grid, np.full(n, -1.0)])
-    beside = np.column_stack([grid + 20.0, np.full(n, 1.0)])
+def _thin_sheet(kind, k, speed):
+    """A frictionless sheet of zero thickness over |x|, |y| <= 5 in z = 0 and where to shoot at
+    it: (collider, xy (n, 2) [m], tilt (n, 2): the shots' horizontal velocity [m/s])."""
     rng = np.random.default_rng(0)
-    tilt = rng.uniform(-0.2, 0.2, size=(n, 2)) * speed  # oblique, still landing on the plane
+    if kind == "PLANE":
+        plane = _scale(5.0, 5.0, 1.0)
+        collider = ColliderFrame("Glass", "PLANE", plane, plane, restitution=k, friction=0.0)
+        ticks = np.linspace(-4.5, 4.5, 7)
+        xy = np.array([(x, y) for x in ticks for y in ticks])
+        tilt = rng.uniform(-0.2, 0.2, size=(len(xy), 2)) * speed  # oblique, still landing on it
+        return collider, xy, tilt
+    verts, tris = sheet(9, 10.0)  # vertices every 1.25 m
+    collider = mesh_collider("Glass", verts, tris, restitution=k, friction=0.0)
+    n = 60
+    xy = rng.uniform(-4.5, 4.5, size=(n, 2))
+    xy[:20] = np.round(xy[:20] / 1.25) * 1.25  # exactly over vertices
+    xy[20:30, 0] = np.round(xy[20:30, 0] / 1.25) * 1.25  # exactly over edges
+    tilt = rng.uniform(-0.2, 0.2, size=(n, 2)) * speed
+    tilt[:30] = 0.0  # straight down onto the vertices and edges
+    return collider, xy, tilt
+
+
+@pytest.mark.parametrize("kind,speed", [("PLANE", 100.0), ("PLANE", 1000.0), ("MESH", 100.0)])
+def test_fast_particles_never_cross_a_thin_sheet(kind, speed):
+    # One sub-step per frame: a 1000 m/s particle moves 42 m per step across a sheet of zero
+    # thickness (the analytic plane, or a triangle mesh: there also straight down onto its shared
+    # edges and vertices, where a segment could slip between two triangles). Continuous detection
+    # must bounce every particle aimed at the sheet (from either side) and let the ones aimed
+    # beside its bounded square (|x|, |y| > 5) pass.
+    k = 0.5
+    collider, xy, tilt = _thin_sheet(kind, k, speed)
+    n = len(xy)
+    above = np.column_stack([xy, np.full(n, 1.0)])
+    below = np.column_stack([xy, np.full(n, -1.0)])
+    beside = np.column_stack([xy + 20.0, np.full(n, 1.0)])
     v_down = np.column_stack([tilt, np.full(n, -speed)])
     v_up = np.column_stack([tilt, np.full(n, speed)])
     model = _model(EmitterSettings("Shot"))

@@ -1,0 +1,68 @@
+"""Will a bake fit? Upper bounds of its particle count, memory and cache size, checked before
+anything is simulated; a bake that would not fit fails with the estimate in the message."""
+from __future__ import annotations
+
+import math
+import os
+import shutil
+
+from ..core.errors import PhysanimError
+from ..core.integrators import make_integrator
+from .cache_paths import cache_root
+from .extract import Roles, emitter_chain
+
+BYTES_PER_PARTICLE_FRAME = 4 * (1 + 3 + 3 + 1 + 1 + 1 + 4 + 3 + 3)  # cache arrays of output.py
+BYTES_PER_PARTICLE_STATE = 8 * 16  # float64 state + integrator stages, per particle
+MEMORY_BUDGET = 16 * 2**30  # the bake refuses to start when its estimate exceeds this
+
+
+def estimate(scene, roles: Roles) -> tuple[float, float]:
+    """Peak alive particles and cache bytes of a bake, from rates and lifetimes (upper bounds).
+
+    A sub-emitter bursts its rate (+ random) where each of its parent's particles dies: at most
+    every parent birth dies within the bake, so its births per frame are its parent's times that.
+    """
+    s = scene.physanim
+    frames = max(0, s.frame_end - s.frame_start) + 1
+    baked = {ob.name for ob in roles.emitters}
+    peak = cache_bytes = 0.0
+    for ob in roles.emitters:
+        chain = emitter_chain(ob)
+        top = chain[-1].physanim.emitter
+        if top.source == 'DEATHS' or any(o.name not in baked for o in chain):
+            continue  # a chain without a mesh/origin emitter on top never emits
+        p = ob.physanim.emitter
+        life = p.lifetime + p.lifetime_random
+        if len(chain) == 1:
+            active = max(0, min(p.frame_end, s.frame_end) - max(p.frame_start, s.frame_start) + 1)
+            peak += (p.rate + p.rate_random) * min(life, active) if active else 0.0
+            cache_bytes += ((p.rate + p.rate_random) * active * min(life, frames)
+                            * BYTES_PER_PARTICLE_FRAME)
+        else:
+            births = math.prod(o.physanim.emitter.rate + o.physanim.emitter.rate_random
+                               for o in reversed(chain))
+            peak += births * min(life, frames)
+            cache_bytes += births * frames * min(life, frames) * BYTES_PER_PARTICLE_FRAME
+    return peak, cache_bytes
+
+
+def check_budget(scene, roles: Roles) -> None:
+    """Fail naming the scene when the estimated memory or cache size does not fit."""
+    peak, cache_bytes = estimate(scene, roles)
+    stages = make_integrator(scene.physanim.integrator, scene.physanim.tolerance).stages
+    memory = peak * BYTES_PER_PARTICLE_STATE * (1 + stages)
+    if memory > MEMORY_BUDGET:
+        raise PhysanimError(
+            f"an estimated {peak:,.0f} particles alive at once need about "
+            f"{memory / 2**30:.1f} GiB of memory (limit {MEMORY_BUDGET / 2**30:.0f} GiB) — "
+            "lower rates or lifetimes", obj=scene.name, kind="scene")
+    root = cache_root(scene)
+    probe = root
+    while not os.path.exists(probe) and os.path.dirname(probe) != probe:
+        probe = os.path.dirname(probe)
+    free = shutil.disk_usage(probe).free
+    if cache_bytes > free:
+        raise PhysanimError(
+            f"the cache needs an estimated {cache_bytes / 2**30:.2f} GiB but only "
+            f"{free / 2**30:.2f} GiB are free at \"{root}\" — free space or lower rates",
+            obj=scene.name, kind="scene")

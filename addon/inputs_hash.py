@@ -1,0 +1,131 @@
+"""Is a bake outdated? A digest of what a bake depends on that does not change with the current
+frame: property values that are not animated, and the keyframes/drivers of those that are. The
+bake stores it with the cache; the panels compare it with the scene's."""
+from __future__ import annotations
+
+import hashlib
+import json
+
+import bpy
+import numpy as np
+
+from . import compat, convert
+from .extract import Roles, emitter_chain, gather, made_by_bake
+
+def _animated_paths(id_data) -> set[str]:
+    ad = getattr(id_data, "animation_data", None)
+    if ad is None:
+        return set()
+    paths = {fc.data_path for fc in ad.drivers}
+    if ad.action is not None:
+        paths |= {fc.data_path for fc in _fcurves(ad)}
+    return paths
+
+
+def _rna_dump(pg, prefix: str = "", animated: frozenset = frozenset()) -> dict:
+    out = {}
+    for prop in pg.bl_rna.properties:
+        key = prop.identifier
+        if key in ("rna_type", "result", "bake_hash", "bake_info", "enabled"):
+            continue
+        path = f"{prefix}{key}"
+        if path in animated:
+            continue  # its keys are hashed instead: the current value depends on the frame
+        value = getattr(pg, key)
+        if prop.type == 'POINTER':
+            out[key] = value.name if isinstance(value, bpy.types.ID) else (
+                _rna_dump(value, path + ".", animated) if value is not None else None)
+        elif prop.type == 'COLLECTION':
+            out[key] = [_rna_dump(item, f"{path}[{i}].", animated) for i, item in enumerate(value)]
+        elif getattr(prop, "is_array", False):
+            out[key] = [round(float(v), 9) for v in value]
+        else:
+            out[key] = value if not isinstance(value, float) else round(value, 9)
+    return out
+
+
+def _animation_dump(id_data) -> list:
+    ad = getattr(id_data, "animation_data", None)
+    if ad is None:
+        return []
+    keys = []
+    curves = list(_fcurves(ad)) if ad.action is not None else []
+    for fc in curves:
+        co = np.empty(len(fc.keyframe_points) * 2, np.float32)
+        fc.keyframe_points.foreach_get("co", co)
+        keys.append((fc.data_path, fc.array_index, hashlib.sha1(co.tobytes()).hexdigest()))
+    for fc in ad.drivers:
+        keys.append((fc.data_path, fc.array_index, fc.driver.expression))
+    return sorted(keys)
+
+
+def _fcurves(ad):
+    return compat.action_fcurves(ad)
+
+
+def _input_modifiers(ob) -> list:
+    """Modifiers that feed a bake: not the bake's own, and not those after the spring-mesh cache
+    (they deform the played-back result)."""
+    out = []
+    for m in ob.modifiers:
+        if m.type == 'MESH_CACHE' and m.name == "physanim":
+            break
+        if not made_by_bake(m):
+            out.append((m.type, m.name, m.show_render, m.show_viewport))
+    return out
+
+
+def _object_record(ob, role: str | None) -> dict:
+    """Everything about one object a bake reads, independent of the current frame."""
+    animated = frozenset(_animated_paths(ob))
+    record = {"name": ob.name, "type": ob.type, "anim": _animation_dump(ob),
+              "parent": _object_record(ob.parent, None) if ob.parent else None,
+              "parent_type": ob.parent_type, "parent_bone": ob.parent_bone,
+              "constraints": [(c.type, c.name, round(c.influence, 7), c.mute)
+                              for c in ob.constraints],
+              "modifiers": _input_modifiers(ob)}
+    for channel in ("location", "rotation_euler", "rotation_quaternion", "rotation_axis_angle",
+                    "scale", "delta_location", "delta_rotation_euler", "delta_scale"):
+        if channel not in animated:
+            record[channel] = [round(float(v), 7) for v in getattr(ob, channel)]
+    record["rotation_mode"] = ob.rotation_mode
+    if role is not None:
+        record["props"] = _rna_dump(getattr(ob.physanim, role), f"physanim.{role}.", animated)
+    if ob.type == 'MESH' and role is not None:
+        co = np.empty(len(ob.data.vertices) * 3, np.float32)
+        ob.data.vertices.foreach_get("co", co)
+        record["mesh"] = (hashlib.sha1(co.tobytes()).hexdigest(), len(ob.data.polygons),
+                          _animation_dump(ob.data.shape_keys) if ob.data.shape_keys else [])
+    return record
+
+
+def inputs_hash(scene, ob, role: str, roles: Roles | None = None) -> str:
+    """Digest of everything the bake of ``ob`` in ``role`` ("emitter" or "spring_mesh") depends
+    on: scene settings, every collider and force, the object (with its parent chain), for
+    sub-emitters their parent emitter, for spring meshes their virtual-spring targets."""
+    roles = roles if roles is not None else gather(scene)
+    h = hashlib.sha256()
+    settings = _rna_dump(scene.physanim)
+    settings.update(fps=convert.fps(scene), gravity=convert.gravity(scene),
+                    anim=_animation_dump(scene), role=role)
+    h.update(json.dumps(settings, sort_keys=True).encode())
+    records = []
+    if role == "emitter":
+        records += [_object_record(o, "emitter") for o in emitter_chain(ob)]
+    else:
+        records.append(_object_record(ob, role))
+        targets = {v.target.name: v.target for v in ob.physanim.spring_mesh.virtual_springs
+                   if v.target is not None}
+        records += [_object_record(targets[name], None) for name in sorted(targets)]
+    records += [_object_record(o, "collider") for o in roles.colliders]
+    records += [_object_record(o, "force") for o in roles.forces]
+    h.update(json.dumps(records, sort_keys=True).encode())
+    return h.hexdigest()
+
+
+def emitter_hash(scene, emitter, roles: Roles | None = None) -> str:
+    return inputs_hash(scene, emitter, "emitter", roles)
+
+
+def scene_hash(hashes: list[str]) -> str:
+    return hashlib.sha256("".join(sorted(hashes)).encode()).hexdigest()

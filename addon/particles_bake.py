@@ -1,0 +1,139 @@
+"""The particle system of a bake: its emitters' caches, the core model, solver and state, the
+pre-roll of the first frame's births, and the frames it writes (npz per emitter and frame)."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..core.cache import CacheWriter
+from ..core.contact import ColliderPaths
+from ..core.errors import PhysanimError, SimulationError
+from ..core.particles import ParticleSolver, ParticleSystem, emitter_arrays
+from . import convert, limits
+from .cache_paths import emitter_cache_dir
+
+STREAM = "points"
+FLOAT32_MAX = float(np.finfo(np.float32).max)  # the cache stores float32
+
+
+class ParticleBake:
+    """All emitters of a bake, simulated as one particle system.
+
+    Args:
+        scene: the scene. emitters: the emitter objects (name order). hashes: per emitter name,
+        the inputs hash stored with its cache. stats: counts to add to (births, collisions,
+        peak alive).
+    """
+
+    def __init__(self, scene, emitters: list, hashes: dict[str, str], stats: dict):
+        self.scene, self.emitters, self.hashes = scene, emitters, hashes
+        self.writers: dict[str, CacheWriter] = {}
+        for ob in emitters:
+            self.writers[ob.name] = CacheWriter(emitter_cache_dir(scene, ob))
+        self.objects_limit = {ob.name for ob in emitters if ob.physanim.emitter.output == 'OBJECTS'}
+        self.births = {ob.name: 0 for ob in emitters}
+        self.stats = stats
+        self.system: ParticleSystem | None = None
+
+    @property
+    def label(self) -> str:
+        """What a failure report calls this system."""
+        names = ", ".join(f'"{ob.name}"' for ob in self.emitters)
+        return f"particles (emitter{'s' if len(self.emitters) > 1 else ''} {names})"
+
+    @property
+    def alive(self) -> int:
+        return self.system.state.particle_count if self.system is not None else 0
+
+    # -- set-up ---------------------------------------------------------------------------------
+    def prepare(self, extractor, depsgraph, frame: int, colliders: ColliderPaths) -> None:
+        """The frozen model at the bake's first frame, its solver and world system."""
+        self.model = extractor.build_model(depsgraph, frame)
+        s = self.scene.physanim
+        self.solver = ParticleSolver(self.model, s.integrator, s.substeps, s.tolerance,
+                                     limits.bounds(self.scene), colliders)
+
+    def start(self, frame: int, pre_roll) -> None:
+        """The state at the bake's first ``frame``. Births of frame f happen during the interval
+        f - 1 -> f, so they show at frame f (emission windows are inclusive: start = end is a
+        one-frame burst). When an emitter's window holds the first frame, that interval lies
+        before the bake: ``pre_roll()`` gives its inputs, simulated for the particles alone,
+        which start the bake with ages up to one frame."""
+        inputs = pre_roll()
+        state = self.model.state(convert.frame_time(self.scene, frame - (inputs is not None)))
+        self.system = ParticleSystem(self.solver, state)
+        if inputs is not None:
+            self.record(self.solver.advance(state, inputs), frame)
+        self.write_frame(frame)
+
+    # -- per frame ------------------------------------------------------------------------------
+    def record(self, report, frame: int) -> None:
+        """Count a frame's births; fail early (before anything is replaced) when the Objects
+        output would get too many particles: each particle becomes an object."""
+        from .results import MAX_KEYED_OBJECTS
+
+        self.stats["births"] += report.births
+        self.stats["collisions"] += report.collisions
+        for i, ob in enumerate(self.emitters):
+            self.births[ob.name] += report.per_emitter_births[i]
+            if ob.name in self.objects_limit and self.births[ob.name] > MAX_KEYED_OBJECTS:
+                raise PhysanimError(
+                    f"{self.births[ob.name]:,} particles are too many for the Objects output "
+                    f"(limit {MAX_KEYED_OBJECTS:,}) — use the Points output or a lower rate",
+                    obj=ob.name, frame=frame, kind="emitter")
+
+    def write_frame(self, frame: int) -> None:
+        state = self.system.state
+        self._check_cache_range(state, frame)
+        to_frames = convert.fps(self.scene)
+        for i, ob in enumerate(self.emitters):
+            arrays = emitter_arrays(self.model, state, i, frame=frame)
+            arrays["age"] = (arrays["age"] * to_frames).astype(np.float32)
+            arrays["life"] = (arrays["life"] * to_frames).astype(np.float32)
+            self.writers[ob.name].write_frame(STREAM, frame, arrays)
+        self.stats["peak"] = max(self.stats["peak"], state.particle_count)
+
+    def _check_cache_range(self, state, frame: int) -> None:
+        """Positions and velocities must fit the float32 cache: a value beyond it would be
+        written as inf (silently) although the float64 simulation is still finite."""
+        for what, values in (("position", state.particle_x), ("velocity", state.particle_v),
+                             ("size", state.particle_size[:, None]),
+                             ("age", state.particle_age[:, None])):
+            bad = ~np.isfinite(values).all(axis=1)
+            if bad.any():
+                raise self._particle_error(state, int(np.argmax(bad)), frame,
+                                           f"{what} became {{value}} — nothing non-finite is "
+                                           "ever written to a bake", values)
+        for what, values, unit in (("position", state.particle_x, "m"),
+                                   ("velocity", state.particle_v, "m/s")):
+            big = (np.abs(values) > FLOAT32_MAX).any(axis=1)
+            if big.any():
+                raise self._particle_error(
+                    state, int(np.argmax(big)), frame,
+                    f"{what} reached {{value}} {unit}, beyond the cache's float32 range "
+                    f"(±{FLOAT32_MAX:.3g}) — check the emitter's motion and the forces", values)
+
+    def _particle_error(self, state, i: int, frame: int, message: str, values) -> SimulationError:
+        value = np.array2string(values[i], precision=4)
+        return SimulationError(f"particle {int(state.particle_id[i])} "
+                               f"{message.format(value=value)}",
+                               obj=self.model.emitters[int(state.particle_emitter[i])].name,
+                               frame=frame, kind="emitter")
+
+    # -- end ------------------------------------------------------------------------------------
+    def flush(self) -> None:
+        for writer in self.writers.values():
+            writer.flush()
+
+    def commit(self, meta: dict) -> dict[str, str]:
+        """Swap every emitter's new cache in; returns emitter name -> cache folder."""
+        paths = {ob.name: self.writers[ob.name].commit(dict(meta, emitter=ob.name,
+                                                            hash=self.hashes[ob.name]))
+                 for ob in self.emitters}
+        self.writers.clear()
+        return paths
+
+    def abort(self) -> None:
+        """Delete the partial caches; the previous bakes stay as they were."""
+        for writer in self.writers.values():
+            writer.abort()
+        self.writers.clear()

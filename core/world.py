@@ -1,0 +1,173 @@
+"""The world stepper: every system of a run advanced together, frame by frame, in sub-steps.
+
+One frame interval, as a table of contents (:meth:`World.advance`):
+
+    kinematic colliders  the colliders' motion over the interval, made once for every system
+                         (each sub-step samples it at its own times)
+    begin frame          each system takes the interval's inputs: the shared :class:`WorldFrame`
+                         and its own (emitter values, animated pin targets, ...)
+    sub-steps            every system's sub-steps in time order; one sub-step of a system runs
+                         its passes: forces -> integrate -> contacts -> response -> checks
+    end frame            each system's report of the interval
+
+Systems plug in through :class:`WorldSystem`: adding a kind of system (rigid bodies) adds a
+class, not a branch in this loop. A system that fails (bad input, a blow-up) is dropped and
+reported; the others go on, and only when no system is left does the failure stop the run.
+Systems may take different numbers of sub-steps per frame: their sub-steps interleave by end
+time (with the same count, all systems finish sub-step k before any starts k + 1).
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+from .bounds import DEFAULT_BOUNDS, StateBounds
+from .contact import ColliderFrame, ColliderPath, ColliderPaths
+from .errors import PhysanimError
+from .integrators import INTEGRATORS
+
+MAX_SUBSTEPS = 10_000  # per frame: keeps a bake finite
+
+
+@dataclass(frozen=True)
+class SolverSettings:
+    """How a system steps: the scene's solver options (a system may override its own).
+
+    Attributes:
+        integrator: one of :data:`physanim.core.integrators.INTEGRATORS`.
+        substeps: sub-steps per frame (1..MAX_SUBSTEPS).
+        tolerance: relative tolerance of the adaptive integrator (RK45) and implicit solves.
+        bounds: a simulated point beyond them (position or speed) stops the run with an error.
+    """
+
+    integrator: str = "SYMPLECTIC_EULER"
+    substeps: int = 1
+    tolerance: float = 1e-4
+    bounds: StateBounds = DEFAULT_BOUNDS
+
+    def __post_init__(self):
+        if self.integrator not in INTEGRATORS:
+            raise ValueError(f"unknown integrator {self.integrator!r}; choose one of "
+                             f"{', '.join(INTEGRATORS)}")
+        if (isinstance(self.substeps, bool) or int(self.substeps) != self.substeps
+                or not 1 <= self.substeps <= MAX_SUBSTEPS):
+            raise ValueError(f"substeps must be an integer in 1..{MAX_SUBSTEPS} "
+                             f"(got {self.substeps})")
+        object.__setattr__(self, "substeps", int(self.substeps))
+        if not (math.isfinite(self.tolerance) and self.tolerance > 0.0):
+            raise ValueError(f"tolerance must be finite and > 0 (got {self.tolerance!r})")
+
+
+@dataclass(frozen=True)
+class WorldFrame:
+    """What the scene says about one frame interval [t0, t0 + frame_dt], for every system.
+
+    Attributes:
+        frame: scene frame at the interval's start (named in messages).
+        t0: start time [s]. frame_dt: interval length [s].
+        gravity: (3,) [m/s^2], from the caller (the scene's).
+        colliders: colliders with their motion over the interval.
+        forces: force objects (drag, wind, attractors, ...) for the interval.
+    """
+
+    frame: int
+    t0: float
+    frame_dt: float
+    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
+    colliders: Sequence[ColliderFrame] = ()
+    forces: Sequence[Any] = ()
+
+
+class WorldSystem(Protocol):
+    """A system the world steps (particles, a spring mesh, ...).
+
+    Attributes:
+        name: what messages call it. substeps: its sub-steps per frame.
+    """
+
+    name: str
+    substeps: int
+
+    def begin_frame(self, frame: WorldFrame, paths: Sequence[ColliderPath], own: Any) -> None:
+        """Take the interval's inputs: ``paths`` are the colliders' motion over it, ``own`` what
+        only this system reads (None when the caller gave nothing)."""
+
+    def substep(self, k: int) -> None:
+        """Advance sub-step ``k`` (0..substeps-1) of the interval begun last."""
+
+    def end_frame(self) -> Any:
+        """Finish the interval; returns the system's report of it."""
+
+
+@dataclass
+class WorldReport:
+    """One frame interval: each system's report, and the systems that failed in it."""
+
+    reports: dict = field(default_factory=dict)  # system -> its end_frame() report
+    failed: list = field(default_factory=list)  # (system, exception), in the order they failed
+
+
+class World:
+    """Advances its systems frame by frame (see the module docstring).
+
+    Args:
+        systems: the systems, in the order they run within a sub-step time.
+        colliders: makes each interval's collider paths and keeps what lasts between intervals
+            (mesh hierarchies); owned by the caller, who releases it when the run ends.
+    """
+
+    def __init__(self, systems: Sequence[WorldSystem], colliders: ColliderPaths | None = None):
+        self.systems: list[WorldSystem] = list(systems)
+        self.colliders = ColliderPaths() if colliders is None else colliders
+
+    def advance(self, frame: WorldFrame, own: Mapping[WorldSystem, Any] | None = None
+                ) -> WorldReport:
+        """Advance every live system by the interval ``frame``; ``own[system]`` is that system's
+        own input. Failed systems are dropped and listed in the report.
+
+        Raises:
+            PhysanimError, ValueError: the failure that left no system running.
+        """
+        report = WorldReport()
+        paths = self.kinematic_colliders(frame)
+        for system in list(self.systems):
+            self._guarded(report, system, system.begin_frame, frame, paths,
+                          (own or {}).get(system))
+        for system, k in self.substep_order():
+            if system in self.systems:
+                self._guarded(report, system, system.substep, k)
+        for system in list(self.systems):
+            done = self._guarded(report, system, system.end_frame)
+            if system in self.systems:
+                report.reports[system] = done
+        return report
+
+    # -- passes ---------------------------------------------------------------------------------
+    def kinematic_colliders(self, frame: WorldFrame) -> list[ColliderPath]:
+        """The colliders' motion over the interval, shared by every system."""
+        return self.colliders.of(frame.colliders, frame.frame_dt)
+
+    def substep_order(self) -> list[tuple[WorldSystem, int]]:
+        """Every system's sub-steps, by end time (k + 1) / substeps, then system order."""
+        steps = [((k + 1) / s.substeps, i, k) for i, s in enumerate(self.systems)
+                 for k in range(s.substeps)]
+        return [(self.systems[i], k) for _, i, k in sorted(steps)]
+
+    def drop(self, system: WorldSystem) -> None:
+        """Take a system out of the run (its owner found it failed)."""
+        if system in self.systems:
+            self.systems.remove(system)
+
+    def _guarded(self, report: WorldReport, system: WorldSystem, call, *args):
+        """``call(*args)`` of one system: its failure drops that system, and stops the run
+        only when it was the last one."""
+        try:
+            return call(*args)
+        except (PhysanimError, ValueError) as exc:
+            report.failed.append((system, exc))
+            self.drop(system)
+            if not self.systems:
+                raise
+            return None
