@@ -11,7 +11,9 @@ Euler, midpoint, RK4 and the Dormand–Prince 5(4) pair are Butcher tableaux run
 :func:`rk_step` (as in ``scipy.integrate._ivp.rk``). :class:`Integrator.step` does the bookkeeping
 (read state, check the result is finite, write state) and subclasses implement ``_step_impl``.
 Modules: :mod:`.base` (interface, report, base class), :mod:`.runge_kutta` (explicit methods),
-:mod:`.implicit` (implicit Euler).
+:mod:`.implicit` (implicit Euler), :mod:`.krylov` (the matrix-free linear solvers of the implicit
+steppers: BiCGSTAB, and the projected preconditioned CG the spring meshes' Baraff-Witkin
+stepper, an :class:`Integrator` of :mod:`physanim.core.springs.implicit`, solves with).
 No integrator holds module-level state; :class:`AdaptiveRK` remembers its last good step size on
 the instance only.
 """
@@ -19,15 +21,17 @@ from __future__ import annotations
 
 import math
 
-from .base import Derivative, Integrator, StepReport, System
-from .implicit import ImplicitEuler, bicgstab
+from .base import Derivative, Integrator, JacobianSystem, StepReport, System
+from .implicit import ImplicitEuler
+from .krylov import bicgstab, projected_pcg
 from .runge_kutta import (DOPRI5_TABLEAU, EULER_TABLEAU, MAX_ADAPTIVE_STEPS, MIDPOINT_TABLEAU,
                           RK4_TABLEAU, AdaptiveRK, ExplicitRK, SymplecticEuler, Tableau, rk_step)
 
 __all__ = [
     "DOPRI5_TABLEAU", "EULER_TABLEAU", "INTEGRATORS", "MAX_ADAPTIVE_STEPS", "MIDPOINT_TABLEAU",
     "RK4_TABLEAU", "AdaptiveRK", "Derivative", "ExplicitRK", "ImplicitEuler", "Integrator",
-    "StepReport", "SymplecticEuler", "System", "Tableau", "bicgstab", "make_integrator", "rk_step",
+    "JacobianSystem", "StepReport", "SymplecticEuler", "System", "Tableau", "bicgstab",
+    "make_integrator", "projected_pcg", "rk_step",
 ]
 
 INTEGRATORS = ("EULER", "SYMPLECTIC_EULER", "MIDPOINT", "RK4", "RK45", "IMPLICIT")

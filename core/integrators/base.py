@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
@@ -16,7 +16,12 @@ Derivative = Callable[[float, np.ndarray], np.ndarray]
 
 class System(Protocol):
     """What an integrator needs (Witkin & Baraff): ``dim``; ``get_state() -> (dim,)`` float64;
-    ``set_state(y)``; ``derivative(t, y) -> (dim,)``, a pure function of ``t`` [s] and ``y``."""
+    ``set_state(y)``; ``derivative(t, y) -> (dim,)``, a pure function of ``t`` [s] and ``y``.
+
+    Optional capabilities are protocols of their own, which a stepper tests with ``isinstance``:
+    :class:`JacobianSystem` (an exact ``J u`` for implicit Euler). Steppers that need more than
+    this interface name their own protocol (the spring meshes' ``BaraffWitkinSystem``).
+    """
 
     dim: int
 
@@ -25,6 +30,15 @@ class System(Protocol):
     def set_state(self, y: np.ndarray) -> None: ...
 
     def derivative(self, t: float, y: np.ndarray) -> np.ndarray: ...
+
+
+@runtime_checkable
+class JacobianSystem(System, Protocol):
+    """A :class:`System` that also knows the product of its Jacobian with a vector:
+    ``jacobian_vector(t, y, u) -> (dim,)`` = ``df/dy (t, y) u``. Implicit Euler uses it instead
+    of finite differences of ``derivative``."""
+
+    def jacobian_vector(self, t: float, y: np.ndarray, u: np.ndarray) -> np.ndarray: ...
 
 
 @dataclass

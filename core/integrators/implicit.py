@@ -1,4 +1,4 @@
-"""Linearised implicit Euler for stiff systems, with the matrix-free BiCGSTAB solve it uses."""
+"""Linearised implicit Euler for stiff systems (its BiCGSTAB solve is in :mod:`.krylov`)."""
 from __future__ import annotations
 
 import math
@@ -6,61 +6,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..errors import SimulationError
-from .base import Integrator, StepReport, non_finite
-
-def bicgstab(
-    matvec: Callable[[np.ndarray], np.ndarray], b: np.ndarray, rtol: float = 1e-8,
-    max_iterations: int = 200,
-) -> tuple[np.ndarray, int]:
-    """Solve ``A x = b`` for a nonsymmetric ``A`` given only ``x -> A x`` (van der Vorst 1992).
-
-    Args:
-        matvec: product with ``A``, ``(n,) -> (n,)``.
-        b: right-hand side, shape ``(n,)``.
-        rtol: stop when ``|b - A x| <= rtol * |b|``.
-        max_iterations: iteration cap (each iteration costs two ``matvec`` calls).
-
-    Returns:
-        ``(x, iterations)``. Raises SimulationError when ``b`` is non-finite, on breakdown, or
-        without convergence within ``max_iterations``.
-    """
-    b_norm = float(np.linalg.norm(b))
-    if not math.isfinite(b_norm):
-        raise non_finite(b, "the linear system's right-hand side")
-    x = np.zeros_like(b)
-    if b_norm == 0.0:
-        return x, 0
-    goal = rtol * b_norm
-    r, r_hat, p, v = b.copy(), b.copy(), np.zeros_like(b), np.zeros_like(b)
-    rho = alpha = omega = 1.0
-    for iteration in range(1, max_iterations + 1):
-        rho_new = float(r_hat @ r)
-        if not math.isfinite(rho_new) or rho_new == 0.0 or omega == 0.0:
-            break  # breakdown: the Krylov recurrences would divide by zero
-        p = r + (rho_new / rho) * (alpha / omega) * (p - omega * v)
-        v = matvec(p)
-        r_hat_v = float(r_hat @ v)
-        if r_hat_v == 0.0:
-            break
-        alpha = rho_new / r_hat_v
-        s = r - alpha * v
-        if np.linalg.norm(s) <= goal:
-            return x + alpha * p, iteration
-        t = matvec(s)
-        t_t = float(t @ t)
-        if t_t == 0.0:
-            break
-        omega = float(t @ s) / t_t
-        x = x + alpha * p + omega * s
-        r = s - omega * t
-        if np.linalg.norm(r) <= goal:
-            return x, iteration
-        rho = rho_new
-    raise SimulationError(
-        f"implicit solve failed after {iteration} of {max_iterations} iterations at relative "
-        f"residual {np.linalg.norm(r) / b_norm:.3g} (target {rtol:g}) — use smaller substeps"
-    )
+from .base import Integrator, JacobianSystem, StepReport, non_finite
+from .krylov import bicgstab
 
 
 class ImplicitEuler(Integrator):
@@ -69,9 +16,10 @@ class ImplicitEuler(Integrator):
     Solves ``(I - h J) dy = h f(t, y)`` with ``J = df/dy`` at ``(t, y)`` and sets ``y += dy``:
     first order, stable for any ``h`` on damped and oscillating linear systems (it damps them).
     ``J u`` is matrix-free, ``(f(t, y + eps u) - f(t, y)) / eps`` with
-    ``eps = sqrt(machine eps) * (1 + |y|) / |u|``, unless the system defines
-    ``jacobian_vector(t, y, u) -> (dim,)`` (then used instead and not counted in
-    ``StepReport.evaluations``). Linear systems are solved by :func:`bicgstab`.
+    ``eps = sqrt(machine eps) * (1 + |y|) / |u|``, unless the system is a
+    :class:`~.base.JacobianSystem` (its ``jacobian_vector(t, y, u)`` is then used instead and
+    not counted in ``StepReport.evaluations``). Linear systems are solved by
+    :func:`~.krylov.bicgstab`.
 
     With ``second_order`` (``y = [x, v]``, ``f = [v, a]``) the same solution is found from the
     velocity system of Baraff & Witkin, "Large steps in cloth simulation" (1998):
@@ -101,18 +49,7 @@ class ImplicitEuler(Integrator):
         f0 = system.derivative(t, y)
         if not np.all(np.isfinite(f0)):
             raise non_finite(f0, "the derivative")
-        jacobian_vector = getattr(system, "jacobian_vector", None)
-        y_scale = 1.0 + float(np.linalg.norm(y))
-
-        def jv(u: np.ndarray) -> np.ndarray:
-            if jacobian_vector is not None:
-                return np.asarray(jacobian_vector(t, y, u), dtype=np.float64)
-            u_norm = float(np.linalg.norm(u))
-            if u_norm == 0.0:
-                return np.zeros_like(u)
-            eps = self.FD_SCALE * y_scale / u_norm
-            report.evaluations += 1
-            return (system.derivative(t, y + eps * u) - f0) / eps
+        jv = self._jacobian_product(system, t, y, f0, report)
 
         def solve(matvec, b):
             return bicgstab(matvec, b, rtol=self.rtol, max_iterations=self.max_iterations)[0]
@@ -126,3 +63,21 @@ class ImplicitEuler(Integrator):
         rhs = dt * (f0[n:] + dt * jv(np.concatenate([v, zero]))[n:])
         dv = solve(lambda w: w - jv(np.concatenate([dt * dt * w, dt * w]))[n:], rhs)
         return y + np.concatenate([dt * (v + dv), dv]), report
+
+    def _jacobian_product(self, system, t: float, y: np.ndarray, f0: np.ndarray,
+                          report: StepReport) -> Callable[[np.ndarray], np.ndarray]:
+        """``u -> J u`` at ``(t, y)``: the system's own product, or a forward difference of
+        ``derivative`` from ``f0`` (each counted in ``report.evaluations``)."""
+        if isinstance(system, JacobianSystem):
+            return lambda u: np.asarray(system.jacobian_vector(t, y, u), dtype=np.float64)
+        y_scale = 1.0 + float(np.linalg.norm(y))
+
+        def jv(u: np.ndarray) -> np.ndarray:
+            u_norm = float(np.linalg.norm(u))
+            if u_norm == 0.0:
+                return np.zeros_like(u)
+            eps = self.FD_SCALE * y_scale / u_norm
+            report.evaluations += 1
+            return (system.derivative(t, y + eps * u) - f0) / eps
+
+        return jv

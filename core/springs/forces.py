@@ -80,18 +80,11 @@ class AngularSprings:
     damping: float
 
     def __post_init__(self):
+        # derived once from the frozen fields (scatter order of the (h, 4) hinge vertices)
         object.__setattr__(self, "_flat", flat_index(np.asarray(self.hinge).ravel()))
-        object.__setattr__(self, "_last", [None, None, None])  # x copy, x, gradients
-
-    def _gradients(self, x: np.ndarray):
-        """(theta, grad) at x, remembered so that :meth:`linearize` at the same, unchanged
-        positions reuses the gradients (forces, then the Jacobian, of one implicit step)."""
-        theta, grad = dihedral_angles_and_gradients(x, self.hinge)
-        self._last[:] = [x.copy(), x, grad]
-        return theta, grad
 
     def _forces(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
-        theta, grad = self._gradients(x)
+        theta, grad = dihedral_angles_and_gradients(x, self.hinge)
         delta = wrap_angle(theta - self.rest)
         rate = np.einsum("hkc,hkc->h", grad, v[self.hinge])
         torque = self.stiffness * delta + self.damping * rate
@@ -102,9 +95,9 @@ class AngularSprings:
             scatter_add(f_out, None, self._forces(p.x, p.v).reshape(-1, 3), self._flat)
 
     def linearize(self, p: ParticleView) -> LinearizedHinges:
-        copy, same, grad = self._last
-        if not (same is p.x and np.array_equal(copy, p.x)):
-            grad = self._gradients(p.x)[1]
+        """Jacobian blocks at ``p.x``; the gradients are recomputed, not remembered from
+        :meth:`apply` (a force object holds no state of a step)."""
+        grad = dihedral_gradients(p.x, self.hinge)
         return LinearizedHinges(self.hinge, grad, self.stiffness, self.damping)
 
     def energy(self, x: np.ndarray) -> float:

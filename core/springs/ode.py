@@ -75,22 +75,6 @@ class MeshOde:
         return np.concatenate([v.ravel(), a.ravel()])
 
     # --- Baraff-Witkin extras ------------------------------------------------------------------
-    @property
-    def x(self):
-        return self.state.x
-
-    @x.setter
-    def x(self, value):
-        self.state.x = value
-
-    @property
-    def v(self):
-        return self.state.v
-
-    @v.setter
-    def v(self, value):
-        self.state.v = value
-
     def energy(self, x: np.ndarray, v: np.ndarray) -> float:
         """Kinetic + gravitational + spring + bending energy [J] of the free vertices' motion
         (what an implicit step must not increase when nothing drives the mesh)."""

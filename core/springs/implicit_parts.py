@@ -1,0 +1,152 @@
+"""What the Baraff-Witkin stepper (:mod:`.implicit`) asks of a system and the records one step
+passes between its passes: the velocity filter (pins and contacts), the linear system, the
+Newton result, the solve pattern, and the memory carried from step to step."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, NamedTuple, Protocol
+
+import numpy as np
+
+from ..integrators import System
+from ..integrators.krylov import Product
+from .multigrid import AggregationHierarchy
+from .sparse import BlockPattern, MatrixBuilder
+
+if TYPE_CHECKING:
+    from ..contact import Contacts
+
+
+class JacobianBlocks(Protocol):
+    """One force's Jacobian at one state, as 3 x 3 blocks (what ``linearize`` returns a list of;
+    :mod:`physanim.core.forces.springs`, :mod:`.forces`)."""
+
+    #: (m, k) the fixed index array of the vertices each row couples, or None (per-vertex blocks)
+    clique: np.ndarray | None
+
+    def add_to(self, builder: MatrixBuilder, cx: float, cv: float) -> None:
+        """Put ``cx df/dx + cv df/dv`` into an assembled matrix."""
+
+    def product(self, cx: float, cv: float, u: np.ndarray, out: np.ndarray) -> None:
+        """``out += (cx df/dx + cv df/dv) u``, matrix-free, u and out (n, 3)."""
+
+
+class BaraffWitkinSystem(System, Protocol):
+    """What :class:`BaraffWitkin` steps: a :class:`~physanim.core.integrators.System` whose state
+    is ``y = [x.ravel(), v.ravel()]``, positions x and velocities v (n, 3), and that offers the
+    forces and Jacobians at any state and the constraints of a step.
+
+    Attributes:
+        mass: (n,) vertex masses [kg]. free: (n,) bool, False for pinned vertices.
+        contact: the vertices touching colliders (:class:`~physanim.core.contact.Contacts`,
+            sorted by index): constrained to move with the surface along its normal while
+            forces press them into it (or always, if ``held``).
+    """
+
+    mass: np.ndarray
+    free: np.ndarray
+    contact: Contacts
+
+    def pinned_velocity(self, t: float) -> np.ndarray:
+        """(n, 3) velocity of the pinned vertices at ``t`` [m/s] (rows of free ones unused)."""
+
+    def weight_norm(self) -> float:
+        """|M g| [N]: the force scale residuals are judged against."""
+
+    def forces_at(self, t: float, x: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """(n, 3) total force [N] at time ``t`` [s] and state ``(x, v)``."""
+
+    def linearize(self, t: float, x: np.ndarray, v: np.ndarray) -> list[JacobianBlocks]:
+        """The Jacobian blocks of every force at ``(t, x, v)``."""
+
+    def energy(self, x: np.ndarray, v: np.ndarray) -> float:
+        """Total conserved energy [J] (what a step must not increase when nothing drives it)."""
+
+
+@dataclass(frozen=True)
+class VelocityFilter:
+    """Baraff & Witkin's constraints on one step's velocity change dv (n, 3) [m/s]: pinned
+    vertices have a prescribed change; vertices pressed onto a collider have a prescribed normal
+    velocity (the surface's) and move freely along the surface.
+
+    Attributes:
+        given: (n, 3) the prescribed part of dv [m/s] (zero in the free directions).
+        free_scale: (n, 1) 1.0 for a free vertex, 0.0 for a pinned one.
+        pressed: (k,) vertices held on a collider, with their unit normals ``normal`` (k, 3).
+        contact: the step's contacts ``pressed`` was chosen from (friction reads them).
+    """
+
+    given: np.ndarray
+    free_scale: np.ndarray
+    pressed: np.ndarray
+    normal: np.ndarray
+    contact: Contacts
+
+    def project(self, u: np.ndarray) -> np.ndarray:
+        """Remove the constrained directions, in place (callers pass fresh arrays)."""
+        u *= self.free_scale
+        if len(self.pressed):
+            un = np.einsum("ij,ij->i", u[self.pressed], self.normal)
+            u[self.pressed] -= un[:, None] * self.normal
+        return u
+
+
+@dataclass(frozen=True)
+class Linearisation:
+    """One linearisation of a step: ``A = M - h df/dv - h^2 df/dx`` (as its product), the
+    right-hand side ``rhs`` (n, 3) [N s] and the preconditioner CG solves it with."""
+
+    rhs: np.ndarray
+    apply_a: Product
+    precondition: Product
+
+
+@dataclass
+class NewtonResult:
+    """What the Newton iterations of one step leave for the passes after them.
+
+    Attributes:
+        dv: (n, 3) velocity change [m/s]. iterations: CG iterations spent.
+        reaction: (n, 3) the constraints' impulses of the first solve [N s] (None: no solve).
+        last: the last linearisation (None: no solve). energy: the energy at the step's end
+            when the Newton check computed it and accepted the step there, else None [J].
+    """
+
+    dv: np.ndarray
+    iterations: int = 0
+    reaction: np.ndarray | None = None
+    last: Linearisation | None = None
+    energy: float | None = None
+
+
+class SolvePattern(NamedTuple):
+    """The block pattern of a mesh's matrix and its multigrid hierarchy (None: block Jacobi),
+    built from the cliques of the Jacobian blocks and kept while they stay the same arrays."""
+
+    cliques: list
+    pattern: BlockPattern
+    hierarchy: AggregationHierarchy | None
+
+
+@dataclass
+class StepMemory:
+    """What a :class:`BaraffWitkin` stepper carries from one step to the next; all of it only
+    speeds the next step up.
+
+    Attributes:
+        warm: the last two steps' solutions dv (n, 3), newest first: the next first guess.
+        warm_t: the step time [s] of ``warm[0]``.
+        end: ``(x, v, energy)`` at the end of the last step, when the Newton check computed it.
+    """
+
+    warm: list = field(default_factory=list)
+    warm_t: float | None = None
+    end: tuple | None = None
+
+
+def positions_and_velocities(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Views ``(x, v)``, each (n, 3), of a spring mesh's flat state ``y = [x, v]`` (6 n,)."""
+    n = y.shape[0] // 6
+    if y.shape[0] != 6 * n:
+        raise ValueError(f"a spring mesh's state has 6 values per vertex (got {y.shape[0]})")
+    return y[:3 * n].reshape(n, 3), y[3 * n:].reshape(n, 3)
