@@ -171,11 +171,6 @@ class BakeJob:
 
     # -- progress -------------------------------------------------------------------------------
     @property
-    def particles_live(self) -> bool:
-        """Whether the particle system is still baking (it has emitters and has not failed)."""
-        return self.particles is not None
-
-    @property
     def alive(self) -> int:
         """Particles alive now (0 once the particle system failed)."""
         return self.particles.alive if self.particles is not None else 0

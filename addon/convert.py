@@ -12,16 +12,24 @@ def fps(scene) -> float:
     return scene.render.fps / scene.render.fps_base
 
 
+def seconds_per_frame(scene) -> float:
+    """Length of one frame [s]."""
+    return 1.0 / fps(scene)
+
+
+def frames_to_seconds(scene, frames):
+    """A duration or frame number (float or numpy array) in seconds; the core's clock starts at
+    frame 0."""
+    return frames * seconds_per_frame(scene)
+
+
 def frame_time(scene, frame: float) -> float:
-    """Time [s] of a frame; the core's clock starts at frame 0."""
-    return frame / fps(scene)
-
-
-def frames_to_seconds(scene, frames: float) -> float:
-    return frames / fps(scene)
+    """Time [s] of a frame."""
+    return frames_to_seconds(scene, frame)
 
 
 def seconds_to_frames(scene, seconds):
+    """A duration or time [s] (float or numpy array) in frames."""
     return seconds * fps(scene)
 
 

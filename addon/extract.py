@@ -157,7 +157,6 @@ class Extractor:
     def __init__(self, scene, roles: Roles):
         self.scene = scene
         self.roles = roles
-        self.fps = convert.fps(scene)
         self.index = {o.name: i for i, o in enumerate(roles.emitters)}
         self._vertex_counts: dict[str, int] = {}
         self._collider_tris: dict[str, np.ndarray] = {}
@@ -316,7 +315,9 @@ class Extractor:
             between: :meth:`sample_motion` results at evenly spaced sub-frames strictly between
                 ``a`` and ``b``, so curved motion is followed within the frame.
         """
-        to_s = 1.0 / self.fps
+        def seconds(frames):
+            return convert.frames_to_seconds(self.scene, frames)
+
         between = between or []
 
         def keys(kind: int, i: int, m0, m1):
@@ -329,8 +330,8 @@ class Extractor:
         for i, ((m0, v0, _), (m1, v1, val)) in enumerate(zip(a.emitters, b.emitters)):
             emitters.append(EmitterFrame(
                 rate=val["rate"], rate_random=val["rate_random"], speed=val["speed"],
-                speed_random=val["speed_random"], lifetime=val["lifetime"] * to_s,
-                lifetime_random=val["lifetime_random"] * to_s, mass=val["mass"],
+                speed_random=val["speed_random"], lifetime=seconds(val["lifetime"]),
+                lifetime_random=seconds(val["lifetime_random"]), mass=val["mass"],
                 size=val["size"], size_random=val["size_random"], spread=val["spread"],
                 inherit_velocity=val["inherit_velocity"], active=val["active"],
                 matrix0=m0, matrix1=m1, matrices=keys(0, i, m0, m1), verts0=v0, verts1=v1))
@@ -341,7 +342,8 @@ class Extractor:
                      in enumerate(zip(self.roles.colliders, a.colliders, b.colliders))]
         forces = [_framed(ob, a.frame, "force", self._force, ob, m, f)
                   for ob, (m, f) in zip(self.roles.forces, a.forces)]
-        return FrameInputs(frame=a.frame, t0=a.frame * to_s, frame_dt=(b.frame - a.frame) * to_s,
+        return FrameInputs(frame=a.frame, t0=seconds(a.frame),
+                           frame_dt=seconds(b.frame - a.frame),
                            gravity=convert.gravity(self.scene), emitters=emitters,
                            colliders=colliders, forces=forces)
 

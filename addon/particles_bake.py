@@ -84,11 +84,10 @@ class ParticleBake:
     def write_frame(self, frame: int) -> None:
         state = self.system.state
         self._check_cache_range(state, frame)
-        to_frames = convert.fps(self.scene)
         for i, ob in enumerate(self.emitters):
             arrays = emitter_arrays(self.model, state, i, frame=frame)
-            arrays["age"] = (arrays["age"] * to_frames).astype(np.float32)
-            arrays["life"] = (arrays["life"] * to_frames).astype(np.float32)
+            for key in ("age", "life"):  # frames, as Blender shows them
+                arrays[key] = convert.seconds_to_frames(self.scene, arrays[key]).astype(np.float32)
             self.writers[ob.name].write_frame(STREAM, frame, arrays)
         self.stats["peak"] = max(self.stats["peak"], state.particle_count)
 

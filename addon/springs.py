@@ -107,7 +107,7 @@ class SpringMeshBake:
         integrator = s.integrator if p.integrator == 'SCENE' else p.integrator
         substeps = p.substeps or s.substeps
         self.solver = SpringMeshSolver(self.model, integrator, substeps, s.tolerance,
-                                       1.0 / convert.fps(self.scene), frame,
+                                       convert.seconds_per_frame(self.scene), frame,
                                        limits.bounds(self.scene), self.colliders)
         self.state = self.model.state()
         self.system = SpringMeshSystem(self.solver, self.state)

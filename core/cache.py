@@ -122,10 +122,6 @@ class CacheWriter:
             raise RuntimeError("cache writer already committed or aborted")
         return self.partial_dir / name
 
-    def stream_path(self, stream: str) -> Path:
-        """Where ``stream`` will live once committed."""
-        return self.cache_dir / stream
-
     def commit(self, meta: Mapping) -> Path:
         """Write ``meta.json`` and replace the previous bake (if any) with this one."""
         if self._closed:

@@ -37,7 +37,3 @@ class PhysanimError(ValueError):
 
 class SimulationError(PhysanimError):
     """The simulation diverged or produced a non-finite value."""
-
-
-class CancelledError(Exception):
-    """A bake was cancelled by the user; the previous cache is left untouched."""

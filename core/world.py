@@ -51,10 +51,11 @@ class SolverSettings:
         if self.integrator not in INTEGRATORS:
             raise ValueError(f"unknown integrator {self.integrator!r}; choose one of "
                              f"{', '.join(INTEGRATORS)}")
-        if (isinstance(self.substeps, bool) or int(self.substeps) != self.substeps
-                or not 1 <= self.substeps <= MAX_SUBSTEPS):
-            raise ValueError(f"substeps must be an integer in 1..{MAX_SUBSTEPS} "
-                             f"(got {self.substeps})")
+        if isinstance(self.substeps, bool) or int(self.substeps) != self.substeps \
+                or self.substeps < 1:
+            raise ValueError(f"substeps must be an integer >= 1 (got {self.substeps})")
+        if self.substeps > MAX_SUBSTEPS:
+            raise ValueError(f"substeps must be at most {MAX_SUBSTEPS} (got {self.substeps})")
         object.__setattr__(self, "substeps", int(self.substeps))
         if not (math.isfinite(self.tolerance) and self.tolerance > 0.0):
             raise ValueError(f"tolerance must be finite and > 0 (got {self.tolerance!r})")

@@ -43,11 +43,6 @@ class Groups:
     def group_count(self) -> int:
         return len(self.counts)
 
-    @property
-    def gid(self) -> np.ndarray:
-        """(m,) group index of each point."""
-        return np.repeat(np.arange(self.group_count), self.counts)
-
     def reduce(self, ufunc, values: np.ndarray) -> np.ndarray:
         """``ufunc`` reduced over each group of per-point ``values`` (m, ...) -> (g, ...)."""
         return ufunc.reduceat(values, self.first, axis=0)
@@ -140,6 +135,7 @@ class BoundingVolume:
 
     name = "abstract"
     width = 0
+    is_box = False  # an axis-aligned box laid out as [lo (3), hi (3)] (segment tests use it)
 
     def fit(self, points, starts=None, counts=None) -> np.ndarray:
         """Tightest volume of this kind's construction around each group of points.

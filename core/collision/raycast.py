@@ -155,7 +155,7 @@ def _first_hits(bvh: BVH, p0: np.ndarray, p1: np.ndarray):
     n_v = n_p = 0
     # axis-aligned boxes: a segment's own box culls with comparisons only; for a short one it
     # is nearly as selective as the exact slab test, which only long segments add
-    boxes = getattr(bvh.kind, "is_box", False)
+    boxes = bvh.kind.is_box
     if boxes:
         lo, hi = np.minimum(p0, p1) - margin, np.maximum(p0, p1) + margin
         short = norm_rows(d) <= SHORT * float(bvh.node_size[0])  # relative to the mesh's size

@@ -22,8 +22,8 @@ from ..bounds import DEFAULT_BOUNDS, StateBounds
 from ..contact import ColliderFrame, ColliderPaths, ContactForce, respond, resting_contacts
 from ..errors import PhysanimError, SimulationError
 from ..forces import DampedSprings, Force, Gravity, ParticleView
-from ..integrators import Integrator, make_integrator
-from ..world import World, WorldFrame
+from ..integrators import make_integrator
+from ..world import SolverSettings, World, WorldFrame
 from .emit import Births, sample_births, sample_bursts
 from .model import ParticleModel, ParticleState
 from .settings import EmitterFrame
@@ -157,8 +157,7 @@ class ParticleSolver:
 
     Args:
         model: the frozen model.
-        integrator: an integrator name of :data:`physanim.core.integrators.INTEGRATORS` or an
-            :class:`Integrator`.
+        integrator: an integrator name of :data:`physanim.core.integrators.INTEGRATORS`.
         substeps: sub-steps per frame (>= 1).
         tolerance: error tolerance of the adaptive integrator.
         bounds: a particle beyond them (position or speed) stops the bake with an error.
@@ -166,16 +165,14 @@ class ParticleSolver:
             caller baking several systems passes one to all of them; default: a new one).
     """
 
-    def __init__(self, model: ParticleModel, integrator: str | Integrator = "SYMPLECTIC_EULER",
+    def __init__(self, model: ParticleModel, integrator: str = "SYMPLECTIC_EULER",
                  substeps: int = 1, tolerance: float = 1e-4, bounds: StateBounds = DEFAULT_BOUNDS,
                  colliders: ColliderPaths | None = None):
-        if int(substeps) != substeps or substeps < 1:
-            raise ValueError(f"substeps must be an integer >= 1 (got {substeps})")
+        self.settings = SolverSettings(integrator, substeps, tolerance, bounds)
         self.model = model
         self.bounds = bounds
-        self.integrator = (make_integrator(integrator, tolerance) if isinstance(integrator, str)
-                           else integrator)
-        self.substeps = int(substeps)
+        self.integrator = make_integrator(integrator, tolerance)
+        self.substeps = self.settings.substeps
         self.colliders = ColliderPaths() if colliders is None else colliders
 
     # -- the frame ------------------------------------------------------------------------------

@@ -20,7 +20,7 @@ from ..errors import PhysanimError, SimulationError
 from ..forces import AnchorSprings, DampedSprings, Gravity, Wind
 from ..integrators import make_integrator
 from ..transforms import TransformPath, inverse_affine, transform_points
-from ..world import World, WorldFrame
+from ..world import SolverSettings, World, WorldFrame
 from .forces import AngularSprings, LinearDrag, MassShared
 from .implicit import BaraffWitkin
 from .model import SpringMeshModel, SpringMeshState
@@ -159,12 +159,11 @@ class SpringMeshSolver:
     def __init__(self, model: SpringMeshModel, integrator: str = "IMPLICIT", substeps: int = 1,
                  tolerance: float = 1e-4, frame_dt: float = 1 / 24, frame: int | None = None,
                  bounds: StateBounds = DEFAULT_BOUNDS, colliders: ColliderPaths | None = None):
-        if int(substeps) != substeps or substeps < 1:
-            raise ValueError(f"substeps must be an integer >= 1 (got {substeps})")
+        self.settings = SolverSettings(integrator, substeps, tolerance, bounds)
         self.model = model
         self.bounds = bounds
         self.colliders = ColliderPaths() if colliders is None else colliders
-        self.substeps = int(substeps)
+        self.substeps = self.settings.substeps
         self.integrator_name = integrator
         self.integrator = (BaraffWitkin() if integrator == "IMPLICIT"
                            else make_integrator(integrator, tolerance))

@@ -15,6 +15,8 @@ import pytest
 from bpy_extras.object_utils import world_to_camera_view
 from mathutils import Euler, Vector
 
+from physanim.tests.blender import probes
+
 
 def _module(ext, name):
     return importlib.import_module(f"{ext.__name__}.addon.{name}")
@@ -240,7 +242,7 @@ def test_instances_carry_the_point_attributes(points, instancing, compat):
     for name in names[:1] + names[2:]:  # each instance's value on all of its realized vertices
         values = np.unique(realized[name], axis=0)
         assert np.array_equal(values, np.unique(arrays[name], axis=0)), name
-    direct = compat.evaluated_instance_attributes(obj, bpy.context.evaluated_depsgraph_get(),
+    direct = probes.evaluated_instance_attributes(obj, bpy.context.evaluated_depsgraph_get(),
                                                   names)
     if compat.HAS_GEOMETRY_SET:  # 4.5+: read the instance domain itself
         order = np.argsort(direct["id"])
@@ -507,7 +509,7 @@ def test_a_hidden_instance_object_still_instances(points, instancing, tmp_path):
 
 
 def test_eevee_renders_colour_and_alpha(points, instancing, compat, tmp_path):
-    scene = _render_scene(compat.eevee_engine_id())  # software OpenGL here: keep it tiny
+    scene = _render_scene(probes.eevee_engine_id())  # software OpenGL here: keep it tiny
     scene.render.resolution_x, scene.render.resolution_y = 40, 30
     scene.eevee.taa_render_samples = 1
     red, blue, invisible = _coloured_particles(points, instancing)
