@@ -152,7 +152,9 @@ def build_physanim_scene(sc: Scene, folder: str):
     p.source = 'FACES'
     p.direction = 'NORMAL'
     p.rate, p.rate_random = sc.rate, 0.0
-    p.frame_start, p.frame_end = 1, 1 + sc.emit_frames  # active while start <= frame < end
+    # inclusive window: the births of frame f happen during f - 1 -> f, so frames 2..1 + emit
+    # emit during [1, 1 + emit], as Blender's system (frames 1..1 + emit) and the core run do
+    p.frame_start, p.frame_end = 2, 1 + sc.emit_frames
     p.lifetime, p.lifetime_random = sc.lifetime, 0.0
     p.speed, p.speed_random = SPEED, 0.0
     p.spread = 0.0

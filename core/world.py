@@ -102,6 +102,34 @@ class WorldSystem(Protocol):
         """Finish the interval; returns the system's report of it."""
 
 
+class SolverSystem:
+    """A :class:`WorldSystem` made of a solver and the state it advances. The solver offers
+    ``substeps``, ``begin_frame(state, inputs, paths) -> step`` and ``substep(step, k)``;
+    subclasses say what the solver's inputs are (:meth:`inputs`) and what the frame reports
+    (:meth:`report`)."""
+
+    def __init__(self, solver, state, name: str):
+        self.solver, self.state, self.name = solver, state, name
+        self.substeps = solver.substeps
+        self._step = None  # the frame interval in progress
+
+    def inputs(self, frame: WorldFrame, own: Any):
+        raise NotImplementedError
+
+    def report(self, step) -> Any:
+        raise NotImplementedError
+
+    def begin_frame(self, frame: WorldFrame, paths: Sequence[ColliderPath], own: Any) -> None:
+        self._step = self.solver.begin_frame(self.state, self.inputs(frame, own), paths)
+
+    def substep(self, k: int) -> None:
+        self.solver.substep(self._step, k)
+
+    def end_frame(self) -> Any:
+        step, self._step = self._step, None
+        return self.report(step)
+
+
 @dataclass
 class WorldReport:
     """One frame interval: each system's report, and the systems that failed in it."""

@@ -23,7 +23,7 @@ from ..contact import ColliderFrame, ColliderPaths, ContactForce, respond, resti
 from ..errors import PhysanimError, SimulationError
 from ..forces import DampedSprings, Force, Gravity, ParticleView
 from ..integrators import make_integrator
-from ..world import SolverSettings, World, WorldFrame
+from ..world import SolverSettings, SolverSystem, World, WorldFrame
 from .emit import Births, sample_births, sample_bursts
 from .model import ParticleModel, ParticleState
 from .settings import EmitterFrame
@@ -101,25 +101,19 @@ class _FrameStep:
     report: FrameReport
 
 
-class ParticleSystem:
+class ParticleSystem(SolverSystem):
     """A particle state and its solver as one system of a :class:`~physanim.core.world.World`;
     its own per-frame input is the list of :class:`EmitterFrame` (one per emitter)."""
 
     def __init__(self, solver: ParticleSolver, state: ParticleState, name: str = "particles"):
-        self.solver, self.state, self.name = solver, state, name
-        self.substeps = solver.substeps
-        self._step: _FrameStep | None = None
+        super().__init__(solver, state, name)
 
-    def begin_frame(self, frame: WorldFrame, paths: list, emitters: Sequence[EmitterFrame]):
-        self._step = self.solver.begin_frame(self.state, FrameInputs.of(frame, emitters), paths)
+    def inputs(self, frame: WorldFrame, emitters: Sequence[EmitterFrame]) -> FrameInputs:
+        return FrameInputs.of(frame, emitters)
 
-    def substep(self, k: int) -> None:
-        self.solver.substep(self._step, k)
-
-    def end_frame(self) -> FrameReport:
-        report, self._step = self._step.report, None
-        report.alive = self.state.particle_count
-        return report
+    def report(self, step: _FrameStep) -> FrameReport:
+        step.report.alive = self.state.particle_count
+        return step.report
 
 
 class _ParticleOde:

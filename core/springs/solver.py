@@ -20,7 +20,7 @@ from ..errors import PhysanimError, SimulationError
 from ..forces import AnchorSprings, DampedSprings, Gravity, Wind
 from ..integrators import make_integrator
 from ..transforms import TransformPath, inverse_affine, transform_points
-from ..world import SolverSettings, World, WorldFrame
+from ..world import SolverSettings, SolverSystem, World, WorldFrame
 from .forces import AngularSprings, LinearDrag, MassShared
 from .implicit import BaraffWitkin
 from .model import SpringMeshModel, SpringMeshState
@@ -122,26 +122,19 @@ class _FrameStep:
     hits: int = 0  # collisions handled
 
 
-class SpringMeshSystem:
+class SpringMeshSystem(SolverSystem):
     """A spring-mesh state and its solver as one system of a
-    :class:`~physanim.core.world.World`; its own per-frame input is a :class:`SpringDrive`."""
+    :class:`~physanim.core.world.World`; its own per-frame input is a :class:`SpringDrive`.
+    A frame reports the collisions handled."""
 
     def __init__(self, solver: SpringMeshSolver, state: SpringMeshState, name: str | None = None):
-        self.solver, self.state = solver, state
-        self.name = solver.model.settings.name if name is None else name
-        self.substeps = solver.substeps
-        self._step: _FrameStep | None = None
+        super().__init__(solver, state, solver.model.settings.name if name is None else name)
 
-    def begin_frame(self, frame: WorldFrame, paths: list, drive: SpringDrive | None) -> None:
-        self._step = self.solver.begin_frame(self.state, SpringFrameInputs.of(frame, drive), paths)
+    def inputs(self, frame: WorldFrame, drive: SpringDrive | None) -> SpringFrameInputs:
+        return SpringFrameInputs.of(frame, drive)
 
-    def substep(self, k: int) -> None:
-        self.solver.substep(self._step, k)
-
-    def end_frame(self) -> int:
-        """Collisions handled during the interval."""
-        hits, self._step = self._step.hits, None
-        return hits
+    def report(self, step: _FrameStep) -> int:
+        return step.hits
 
 
 class SpringMeshSolver:
