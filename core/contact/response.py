@@ -60,14 +60,15 @@ def respond(colliders: list[ColliderPath], x0: np.ndarray, x1: np.ndarray, v0: n
     if not colliders or len(x1) == 0:
         return Response(x1.copy(), v1.copy(), 0, first.contacts())
     remainder = _Remainder(x0, x1, v0, v1, s0, s1, h)
-    active = np.arange(len(x1))  # pass 1 tests everyone; later passes only re-test the hit ones
+    active = None  # pass 1 tests everyone (no gather); later passes only re-test the hit ones
     hits, touched = 0, []
     for _ in range(PASSES):
         nearest = _nearest_hits(colliders, remainder, active)
-        if not (nearest.collider >= 0).any():
+        hit = nearest.collider >= 0
+        if not hit.any():
             break
         hits += _bounce(colliders, remainder, active, nearest, rest_speed, first)
-        active = active[nearest.collider >= 0]
+        active = np.nonzero(hit)[0] if active is None else active[hit]
         touched.append(active)
     if touched:
         hits += remainder.push_out(colliders, np.unique(np.concatenate(touched)))
@@ -97,8 +98,11 @@ class _Remainder:
         self.span = max(s1 - s0, 1e-300)  # the sub-step's parameter length, h [s] long
         self.h = h
 
-    def segments(self, idx: np.ndarray):
-        """Paths ``idx`` as the segments the colliders test: start, end, s_start, s_end."""
+    def segments(self, idx: np.ndarray | None):
+        """Paths ``idx`` (None: all, without copying) as the segments the colliders test:
+        start, end, s_start, s_end."""
+        if idx is None:
+            return self.start, self.x, self.s_start, self.s_end
         return self.start[idx], self.x[idx], self.s_start[idx], self.s_end[idx]
 
     def restart(self, col: ColliderPath, idx: np.ndarray, impact: _Impact) -> np.ndarray:
@@ -149,8 +153,9 @@ class _Nearest(NamedTuple):
 
 
 def _nearest_hits(colliders: list[ColliderPath], remainder: _Remainder,
-                  active: np.ndarray) -> _Nearest:
-    """Earliest collider entry of each active path (``active`` indexes ``remainder``)."""
+                  active: np.ndarray | None) -> _Nearest:
+    """Earliest collider entry of each active path (``active`` indexes ``remainder``; None:
+    every path)."""
     start, x, s_start, s_end = remainder.segments(active)
     count = len(x)
     nearest = _Nearest(np.full(count, -1), np.full(count, np.inf), np.zeros((count, 3)),
@@ -167,16 +172,16 @@ def _nearest_hits(colliders: list[ColliderPath], remainder: _Remainder,
     return nearest
 
 
-def _bounce(colliders: list[ColliderPath], remainder: _Remainder, active: np.ndarray,
+def _bounce(colliders: list[ColliderPath], remainder: _Remainder, active: np.ndarray | None,
             nearest: _Nearest, rest_speed: float, first: _FirstHits) -> int:
-    """Bounce the active paths that hit, collider by collider, and restart them at their hit
-    points; returns how many bounced."""
+    """Bounce the active paths (None: all) that hit, collider by collider, and restart them at
+    their hit points; returns how many bounced."""
     count = 0
     for ci, col in enumerate(colliders):
         sub = np.nonzero(nearest.collider == ci)[0]
         if len(sub) == 0:
             continue
-        idx = active[sub]
+        idx = sub if active is None else active[sub]
         impact = _impact(col, remainder, idx, nearest.take(sub), rest_speed)
         end = remainder.restart(col, idx, impact)
         first.note(idx, impact.normal, impact.surface_velocity, col, end,
