@@ -1,0 +1,227 @@
+"""Rigid bodies: per-body settings -> builder -> frozen Model (structure of arrays) -> State.
+
+A body is simulated at its centre of mass: the State holds x (centre of mass, world), q (unit
+quaternion [w, x, y, z] of the body's axes: the object's rotation), P (linear momentum) and L
+(angular momentum), as Witkin & Baraff teach; v = P / M, I(t) = R I_body R^T, w = I(t)^-1 L.
+Keeping L (not w) makes torque-free motion conserve angular momentum exactly.
+
+Shapes live in the body's local frame (the object's axes, its scale already applied), centred
+on the shape's own centre ``body_shape_offset`` away from the centre of mass.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import PhysanimError
+from . import quaternion as quat
+from .mass import MassProperties
+
+SHAPES = ("SPHERE", "BOX", "CAPSULE", "HULL")
+SPHERE, BOX, CAPSULE, HULL = range(4)
+MAX_SPEED = 1.0e5  # [m/s], [rad/s]: initial velocities beyond this are input errors
+
+
+def _frozen(a, dtype=np.float64) -> np.ndarray:
+    a = np.array(a, dtype=dtype)
+    a.flags.writeable = False
+    return a
+
+
+@dataclass(frozen=True)
+class RigidBodySettings:
+    """One body, in world units (the object's scale applied to its shape).
+
+    Attributes:
+        name: the object's name (messages).
+        shape: one of :data:`SHAPES`.
+        mass_properties: mass [kg], centre of mass (local, from the object's origin) and the
+            inertia tensor about it (local axes).
+        half_extents: (3,) BOX half sizes [m]; CAPSULE: half_extents[2] is the half length of
+            its axis (local Z) between the cap centres.
+        radius: SPHERE and CAPSULE radius [m].
+        hull: (m, 3) HULL vertices, local (from the object's origin) [m].
+        shape_centre: (3,) where the shape's centre lies, local from the object's origin.
+        restitution, friction: contact coefficients (combined with the other side's).
+        linear_damping, angular_damping: fraction of velocity lost per second [1/s].
+        kinematic: follows its animation; pushes others, is not pushed.
+        position, orientation: the object's origin [m] and rotation (unit quaternion) at start.
+        velocity, angular_velocity: of the centre of mass at start [m/s], [rad/s] (world).
+    """
+
+    name: str
+    shape: str
+    mass_properties: MassProperties
+    half_extents: tuple = (0.0, 0.0, 0.0)
+    radius: float = 0.0
+    hull: np.ndarray | None = None
+    shape_centre: tuple = (0.0, 0.0, 0.0)
+    restitution: float = 0.0
+    friction: float = 0.5
+    linear_damping: float = 0.04
+    angular_damping: float = 0.1
+    kinematic: bool = False
+    position: tuple = (0.0, 0.0, 0.0)
+    orientation: tuple = (1.0, 0.0, 0.0, 0.0)
+    velocity: tuple = (0.0, 0.0, 0.0)
+    angular_velocity: tuple = (0.0, 0.0, 0.0)
+
+    def __post_init__(self):
+        def fail(message: str):
+            raise PhysanimError(message, obj=self.name, kind="rigid body")
+
+        if self.shape not in SHAPES:
+            fail(f"unknown shape {self.shape!r}; choose one of {', '.join(SHAPES)}")
+        for key in ("restitution", "friction", "linear_damping", "angular_damping", "radius"):
+            value = getattr(self, key)
+            if not (math.isfinite(value) and value >= 0.0):
+                fail(f"{key} must be finite and >= 0 (got {value})")
+        if self.restitution > 1.0:
+            fail(f"restitution must be at most 1 (got {self.restitution})")
+        for key in ("half_extents", "shape_centre", "position", "velocity", "angular_velocity"):
+            value = np.asarray(getattr(self, key), dtype=np.float64)
+            if value.shape != (3,) or not np.isfinite(value).all():
+                fail(f"{key} must be 3 finite numbers (got {getattr(self, key)})")
+        for key in ("velocity", "angular_velocity"):
+            if np.abs(getattr(self, key)).max() > MAX_SPEED:
+                fail(f"{key} {tuple(getattr(self, key))} is beyond {MAX_SPEED:g}")
+        q = np.asarray(self.orientation, dtype=np.float64)
+        if q.shape != (4,) or not np.isfinite(q).all() or abs(np.linalg.norm(q) - 1.0) > 1e-6:
+            fail(f"orientation must be a unit quaternion (got {self.orientation})")
+        if self.shape == "BOX" and min(self.half_extents) <= 0.0:
+            fail(f"a box needs positive sizes (got half extents {tuple(self.half_extents)})")
+        if self.shape in ("SPHERE", "CAPSULE") and self.radius <= 0.0:
+            fail(f"a {self.shape.lower()} needs a positive radius (got {self.radius})")
+        if self.shape == "HULL" and (self.hull is None or len(self.hull) < 4):
+            fail("a convex hull needs at least 4 vertices that enclose a volume")
+
+
+@dataclass(frozen=True)
+class RigidBodyModel:
+    """Read-only arrays of every body (n of them); hull vertices concatenated.
+
+    Attributes:
+        body_name: names. body_shape: (n,) int8 codes of :data:`SHAPES`.
+        body_half: (n, 3) box half extents / capsule half length in [2] [m].
+        body_radius: (n,) [m]. body_shape_offset: (n, 3) shape centre from the centre of mass,
+            local [m]. body_com: (n, 3) centre of mass from the object's origin, local [m].
+        body_bound: (n,) radius of a sphere about the centre of mass holding the shape [m].
+        body_mass, body_inv_mass: (n,) [kg], [1/kg] (0 for kinematic bodies).
+        body_inertia, body_inv_inertia: (n, 3, 3) about the centre of mass, local axes
+            (inverse 0 for kinematic bodies).
+        body_restitution, body_friction, body_linear_damping, body_angular_damping: (n,).
+        body_kinematic: (n,) bool.
+        hull_points: (m, 3) hull vertices from the centre of mass, local [m];
+        body_hull_start, body_hull_count: (n,) each body's range in it (0 for other shapes).
+    """
+
+    body_name: tuple[str, ...]
+    body_shape: np.ndarray
+    body_half: np.ndarray
+    body_radius: np.ndarray
+    body_shape_offset: np.ndarray
+    body_com: np.ndarray
+    body_bound: np.ndarray
+    body_mass: np.ndarray
+    body_inv_mass: np.ndarray
+    body_inertia: np.ndarray
+    body_inv_inertia: np.ndarray
+    body_restitution: np.ndarray
+    body_friction: np.ndarray
+    body_linear_damping: np.ndarray
+    body_angular_damping: np.ndarray
+    body_kinematic: np.ndarray
+    hull_points: np.ndarray
+    body_hull_start: np.ndarray
+    body_hull_count: np.ndarray
+    initial: tuple = field(repr=False, default=())  # (x, q, P, L) at the start
+
+    @property
+    def body_count(self) -> int:
+        return len(self.body_name)
+
+    def state(self) -> RigidBodyState:
+        x, q, p, l_ = (a.copy() for a in self.initial)
+        return RigidBodyState(x, q, p, l_)
+
+
+@dataclass
+class RigidBodyState:
+    """Time-varying, (n, ...) each: body_x centre of mass [m], body_q unit quaternion,
+    body_P linear momentum [kg m/s], body_L angular momentum about the centre of mass
+    [kg m^2/s], all world. ``contact_key``/``contact_impulse``: the last frame's accumulated
+    contact impulses (normal, two tangents [N s]) by persistent contact key, to warm-start."""
+
+    body_x: np.ndarray
+    body_q: np.ndarray
+    body_P: np.ndarray
+    body_L: np.ndarray
+    contact_key: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    contact_impulse: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+
+    def origins(self, model: RigidBodyModel) -> np.ndarray:
+        """(n, 3) world positions of the objects' origins (x - R com)."""
+        return self.body_x - quat.rotate(self.body_q, model.body_com)
+
+
+class RigidBodyBuilder:
+    """Collects bodies (:meth:`add_body` returns the index); :meth:`finalize` freezes them."""
+
+    def __init__(self):
+        self._bodies: list[RigidBodySettings] = []
+
+    def add_body(self, settings: RigidBodySettings) -> int:
+        self._bodies.append(settings)
+        return len(self._bodies) - 1
+
+    def finalize(self) -> RigidBodyModel:
+        b = self._bodies
+        n = len(b)
+        com = np.array([s.mass_properties.com for s in b], dtype=np.float64).reshape(n, 3)
+        offset = np.array([s.shape_centre for s in b], dtype=np.float64).reshape(n, 3) - com
+        hulls = [np.asarray(s.hull, dtype=np.float64).reshape(-1, 3) - c if s.shape == "HULL"
+                 else np.zeros((0, 3)) for s, c in zip(b, com)]
+        counts = np.array([len(h) for h in hulls], dtype=np.int64)
+        starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64) if n else counts
+        half = np.array([s.half_extents for s in b], dtype=np.float64).reshape(n, 3)
+        radius = np.array([s.radius for s in b], dtype=np.float64)
+        kinematic = np.array([s.kinematic for s in b], dtype=bool)
+        mass = np.array([s.mass_properties.mass for s in b], dtype=np.float64)
+        inertia = np.array([s.mass_properties.inertia for s in b], dtype=np.float64).reshape(n, 3, 3)
+        inv_inertia = np.linalg.inv(inertia) if n else inertia.copy()
+        inv_inertia[kinematic] = 0.0
+        bound = np.array([_bound(s, o, h) for s, o, h in zip(b, offset, hulls)])
+        return RigidBodyModel(
+            tuple(s.name for s in b), _frozen([SHAPES.index(s.shape) for s in b], np.int8),
+            _frozen(half), _frozen(radius), _frozen(offset), _frozen(com), _frozen(bound),
+            _frozen(mass), _frozen(np.where(kinematic, 0.0, 1.0 / mass)), _frozen(inertia),
+            _frozen(inv_inertia),
+            *(_frozen([getattr(s, k) for s in b]) for k in (
+                "restitution", "friction", "linear_damping", "angular_damping")),
+            _frozen(kinematic, bool), _frozen(np.concatenate(hulls) if n else np.zeros((0, 3))),
+            _frozen(starts, np.int64), _frozen(counts, np.int64), self._initial(com, mass, inertia))
+
+    def _initial(self, com, mass, inertia) -> tuple:
+        b = self._bodies
+        n = len(b)
+        q = quat.normalized(np.array([s.orientation for s in b], dtype=np.float64).reshape(n, 4))
+        x = np.array([s.position for s in b], dtype=np.float64).reshape(n, 3) + quat.rotate(q, com)
+        v = np.array([s.velocity for s in b], dtype=np.float64).reshape(n, 3)
+        w = np.array([s.angular_velocity for s in b], dtype=np.float64).reshape(n, 3)
+        r = quat.to_matrix(q)
+        world_inertia = r @ inertia @ np.swapaxes(r, 1, 2)
+        return x, q, mass[:, None] * v, np.einsum("nij,nj->ni", world_inertia, w)
+
+
+def _bound(s: RigidBodySettings, offset: np.ndarray, hull: np.ndarray) -> float:
+    """Radius about the centre of mass of a sphere holding the body's shape."""
+    centre = float(np.linalg.norm(offset))
+    if s.shape == "SPHERE":
+        return centre + s.radius
+    if s.shape == "BOX":
+        return centre + float(np.linalg.norm(s.half_extents))
+    if s.shape == "CAPSULE":
+        return centre + s.radius + abs(s.half_extents[2])
+    return float(np.linalg.norm(hull, axis=1).max())
