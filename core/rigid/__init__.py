@@ -1,3 +1,11 @@
 """Rigid bodies (Witkin & Baraff's x, R, P, L): mass properties from shapes and meshes, a
 builder -> frozen model -> state, free motion with the angular momentum held, contacts found
-once per frame (broad phase, narrow phase by shape pair) and a soft-step contact solver."""
+by a broad phase and a narrow phase per shape pair (sphere, box, capsule, convex hull, the
+ground), and a soft-step contact solver with manifold blocks, warm starting and friction."""
+from .mass import MassProperties, box_mass, capsule_mass, polyhedron_mass, sphere_mass
+from .model import SHAPES, RigidBodyBuilder, RigidBodyModel, RigidBodySettings, RigidBodyState
+from .solver import RigidBodySolver, RigidBodySystem, RigidFrameInputs, RigidReport
+
+__all__ = ["SHAPES", "MassProperties", "RigidBodyBuilder", "RigidBodyModel", "RigidBodySettings",
+           "RigidBodySolver", "RigidBodyState", "RigidBodySystem", "RigidFrameInputs",
+           "RigidReport", "box_mass", "capsule_mass", "polyhedron_mass", "sphere_mass"]

@@ -29,7 +29,7 @@ import numpy as np
 CONTACT_HERTZ = 30.0  # stiffness of the soft contact [Hz] (at most a quarter of the step rate)
 STATIC_HERTZ = 60.0  # against bodies that do not move under impulses: stiffer
 DAMPING_RATIO = 10.0  # heavily over-damped: overlaps resolve without bounce
-MAX_PUSH = 3.0  # [m/s] fastest overlap recovery
+MAX_PUSH = 1.0  # [m/s] fastest overlap recovery (gentle: overlaps in a pile add up)
 RESTITUTION_THRESHOLD = 1.0  # [m/s] slower impacts do not bounce (a resting stack stays put)
 
 
@@ -108,9 +108,11 @@ class ContactSet:
         relative: (k,) normal relative velocity when found [m/s] (for restitution).
         impulse: (k, 3) accumulated impulse along normal, t1, t2 [N s].
         total: (k,) sum of the normal impulses applied this frame (0: never touched).
-        key: (k,) persistent ids (same features of the same bodies -> same key).
+        key: (k,) the pair of bodies (lower row * N + higher row).
         static: (k,) True when one side does not move under impulses.
-        groups: colour groups (index arrays).
+        slots: (m, S) the points of each manifold (the contacts of one pair), -1 padded.
+        groups: colour groups of manifolds (index arrays into ``slots``): no dynamic body is in
+            two manifolds of a group.
     """
 
     a: np.ndarray
@@ -128,10 +130,25 @@ class ContactSet:
     total: np.ndarray
     key: np.ndarray
     static: np.ndarray
+    slots: np.ndarray
     groups: list
 
     def __len__(self) -> int:
         return len(self.a)
+
+
+def manifolds(key: np.ndarray, a: np.ndarray, b: np.ndarray, dynamic: np.ndarray):
+    """Points grouped by pair (``key`` sorted or not): (slots (m, S) point indices, -1 padded;
+    colour groups of manifolds)."""
+    if not len(key):
+        return np.zeros((0, 1), np.int64), []
+    order = np.argsort(key, kind="stable")
+    uniq, first, count = np.unique(key[order], return_index=True, return_counts=True)
+    rank = np.arange(len(key)) - np.repeat(first, count)
+    slots = np.full((len(uniq), int(count.max())), -1, np.int64)
+    slots[np.repeat(np.arange(len(uniq)), count), rank] = order
+    head = slots[:, 0]
+    return slots, colour(a[head], b[head], dynamic)
 
 
 @dataclass
@@ -145,18 +162,40 @@ class Jacobians:
     wa: np.ndarray  # (k, 3, 3): I_a^-1 (r_a x d) for the three directions d
     wb: np.ndarray
     mass: np.ndarray  # (k, 3): 1 / (m_a^-1 + m_b^-1 + (r_a x d) I_a^-1 (r_a x d) + ...)
+    block: np.ndarray  # (m, S, S): pseudo-inverse of each manifold's normal coupling matrix
 
 
-def jacobians(cs: ContactSet, inv_mass: np.ndarray, inv_inertia: np.ndarray) -> Jacobians:
-    """Constraint rows of every contact for this sub-step's world inverse inertias."""
+def jacobians(cs: ContactSet, inv_mass: np.ndarray, inv_inertia: np.ndarray, ra: np.ndarray,
+              rb: np.ndarray) -> Jacobians:
+    """Constraint rows of every contact for the bodies' current world inverse inertias and
+    lever arms ra, rb (k, 3): from each body's centre of mass to one common world point, so an
+    impulse and its reaction act at the same point (angular momentum is conserved)."""
     dirs = np.stack([cs.normal, cs.t1, cs.t2], axis=1)  # (k, 3, 3)
-    ang_a = np.cross(cs.ra[:, None, :], dirs)
-    ang_b = np.cross(cs.rb[:, None, :], dirs)
+    ang_a = np.cross(ra[:, None, :], dirs)
+    ang_b = np.cross(rb[:, None, :], dirs)
     wa = np.einsum("kij,kdj->kdi", inv_inertia[cs.a], ang_a)
     wb = np.einsum("kij,kdj->kdi", inv_inertia[cs.b], ang_b)
     k = (inv_mass[cs.a] + inv_mass[cs.b])[:, None] + np.einsum("kdi,kdi->kd", ang_a, wa) + \
         np.einsum("kdi,kdi->kd", ang_b, wb)
-    return Jacobians(ang_a, ang_b, wa, wb, np.where(k > 0.0, 1.0 / np.maximum(k, 1e-300), 0.0))
+    return Jacobians(ang_a, ang_b, wa, wb, np.where(k > 0.0, 1.0 / np.maximum(k, 1e-300), 0.0),
+                     _blocks(cs, inv_mass, ang_a[:, 0], ang_b[:, 0], wa[:, 0], wb[:, 0]))
+
+
+def _blocks(cs: ContactSet, inv_mass, ang_a, ang_b, wa, wb) -> np.ndarray:
+    """Per manifold, the pseudo-inverse of K_ij = J_i M^-1 J_j^T over its points' normal rows
+    (one normal per manifold). Four coplanar points of a face leave K rank 3; the minimum-norm
+    solution then shares the load symmetrically, where point-by-point Gauss-Seidel would
+    favour whichever point comes first (and set a stack swaying)."""
+    slots = cs.slots
+    valid = slots >= 0
+    idx = np.where(valid, slots, 0)
+    head = idx[:, 0]
+    k = (inv_mass[cs.a[head]] + inv_mass[cs.b[head]])[:, None, None] + \
+        np.einsum("mic,mjc->mij", ang_a[idx], wa[idx]) + np.einsum("mic,mjc->mij", ang_b[idx], wb[idx])
+    pair = valid[:, :, None] & valid[:, None, :]
+    eye = np.broadcast_to(np.eye(slots.shape[1], dtype=bool), k.shape)
+    k = np.where(pair, k, np.where(eye, 1.0, 0.0))  # empty slots: decoupled unit rows
+    return np.linalg.pinv(k, rcond=1e-10, hermitian=True)
 
 
 def apply(v: np.ndarray, w: np.ndarray, cs: ContactSet, jac: Jacobians, idx: np.ndarray,
@@ -184,65 +223,121 @@ def relative_velocity(v, w, cs: ContactSet, jac: Jacobians, idx: np.ndarray) -> 
 
 def solve(v, w, cs: ContactSet, jac: Jacobians, inv_mass, separation: np.ndarray, h: float,
           soft: Softness, static_soft: Softness, use_bias: bool) -> None:
-    """One Gauss-Seidel sweep (colour by colour) over every contact: normal, then friction."""
-    for idx in cs.groups:
-        rel = relative_velocity(v, w, cs, jac, idx)
-        s = separation[idx]
-        stat = cs.static[idx]
-        bias_rate = np.where(stat, static_soft.bias_rate, soft.bias_rate)
-        m_scale = np.where(stat, static_soft.mass_scale, soft.mass_scale)
-        i_scale = np.where(stat, static_soft.impulse_scale, soft.impulse_scale)
-        speculative = s > 0.0
-        if use_bias:  # a speculative point may close its gap, an overlap is pushed out softly
-            bias = np.where(speculative, s / h, np.maximum(m_scale * bias_rate * s, -MAX_PUSH))
-            m_scale = np.where(speculative, 1.0, m_scale)
-            i_scale = np.where(speculative, 0.0, i_scale)
-        else:  # relax: remove the push-out velocity, keep the speculative limit
-            bias = np.where(speculative, s / h, 0.0)
-            m_scale, i_scale = 1.0, 0.0
-        acc = cs.impulse[idx]
-        n_old = acc[:, 0]
-        d_n = -jac.mass[idx, 0] * (m_scale * rel[:, 0] + bias) - i_scale * n_old
-        n_new = np.maximum(n_old + d_n, 0.0)
-        d = np.zeros((len(idx), 3))
-        d[:, 0] = n_new - n_old
-        cs.total[idx] += d[:, 0]
-        # friction from the velocities the normal impulse leaves (its change is along n only)
-        rel_t = rel[:, 1:] + _normal_effect(cs, jac, idx, d[:, 0], inv_mass)
-        t_old = acc[:, 1:]
-        t_new = t_old - jac.mass[idx, 1:] * rel_t
-        limit = cs.friction[idx] * n_new
-        norm = np.linalg.norm(t_new, axis=1)
-        t_new *= np.where(norm > limit, limit / np.maximum(norm, 1e-300), 1.0)[:, None]
-        d[:, 1:] = t_new - t_old
-        cs.impulse[idx] = np.column_stack([n_new, t_new])
-        apply(v, w, cs, jac, idx, d, inv_mass)
+    """One Gauss-Seidel sweep, colour by colour: each manifold's normal impulses solved
+    together (a block, falling back to point by point when one would pull), then friction
+    point by point."""
+    for group in cs.groups:
+        slots = cs.slots[group]
+        valid = slots >= 0
+        scales = _scales(cs, separation, np.where(valid, slots, 0), h, soft, static_soft,
+                         use_bias)
+        pulling = _normal_block(v, w, cs, jac, group, slots, valid, scales, inv_mass)
+        for k in range(slots.shape[1]):
+            column = slots[:, k]
+            seq = pulling & valid[:, k]
+            if seq.any():
+                _normal_points(v, w, cs, jac, column[seq], [x[seq, k] for x in scales],
+                               inv_mass)
+            pts = column[valid[:, k]]
+            if len(pts):
+                _friction(v, w, cs, jac, pts, inv_mass)
 
 
-def _normal_effect(cs, jac, idx, d_n, inv_mass) -> np.ndarray:
-    """Change of the tangential relative velocities (len(idx), 2) a normal impulse d_n makes."""
-    a, b = cs.a[idx], cs.b[idx]
-    n = cs.normal[idx]
-    dv = ((inv_mass[a] + inv_mass[b]) * d_n)[:, None] * n
-    dw_a = -d_n[:, None] * jac.wa[idx, 0]
-    dw_b = d_n[:, None] * jac.wb[idx, 0]
-    t = np.stack([cs.t1[idx], cs.t2[idx]], axis=1)
-    return (np.einsum("kdi,ki->kd", t, dv) + np.einsum("kdi,ki->kd", jac.ang_b[idx, 1:], dw_b)
-            - np.einsum("kdi,ki->kd", jac.ang_a[idx, 1:], dw_a))
+def _scales(cs, separation, idx, h, soft, static_soft, use_bias):
+    """(bias, mass scale, impulse scale), each shaped like ``idx``: a separated (speculative)
+    point may close its gap within the sub-step but no further; an overlap is pushed out
+    softly (with bias) or not at all (relax)."""
+    s = separation[idx]
+    stat = cs.static[idx]
+    speculative = s > 0.0
+    if not use_bias:
+        return np.where(speculative, s / h, 0.0), np.ones_like(s), np.zeros_like(s)
+    rate = np.where(stat, static_soft.bias_rate, soft.bias_rate)
+    m_scale = np.where(stat, static_soft.mass_scale, soft.mass_scale)
+    i_scale = np.where(stat, static_soft.impulse_scale, soft.impulse_scale)
+    bias = np.where(speculative, s / h, np.maximum(m_scale * rate * s, -MAX_PUSH))
+    return bias, np.where(speculative, 1.0, m_scale), np.where(speculative, 0.0, i_scale)
+
+
+def _normal_block(v, w, cs, jac, group, slots, valid, scales, inv_mass) -> np.ndarray:
+    """Solve each manifold's normal impulses at once; returns which manifolds would pull
+    (a negative impulse) and are left to the point-by-point pass."""
+    bias, m_scale, i_scale = scales
+    idx = np.where(valid, slots, 0)
+    rel = relative_velocity(v, w, cs, jac, idx.ravel())[:, 0].reshape(idx.shape)
+    fresh = valid & (cs.total[idx] == 0.0)  # not touched yet this frame: its approach speed
+    cs.relative[idx[fresh]] = rel[fresh]
+    old = np.where(valid, cs.impulse[idx, 0], 0.0)
+    rhs = np.where(valid, m_scale * rel + bias, 0.0)
+    d = np.where(valid, -np.einsum("gij,gj->gi", jac.block[group], rhs) - i_scale * old, 0.0)
+    pulling = ((old + d < 0.0) & valid).any(axis=1)
+    d = np.where(pulling[:, None], 0.0, d)
+    head = idx[:, 0]
+    a, b, n = cs.a[head], cs.b[head], cs.normal[head]
+    total = d.sum(axis=1)
+    v[a] -= (inv_mass[a] * total)[:, None] * n
+    v[b] += (inv_mass[b] * total)[:, None] * n
+    w[a] -= np.einsum("gs,gsi->gi", d, jac.wa[idx, 0])
+    w[b] += np.einsum("gs,gsi->gi", d, jac.wb[idx, 0])
+    done = valid & ~pulling[:, None]
+    cs.impulse[idx[done], 0] = (old + d)[done]
+    cs.total[idx[done]] += d[done]
+    return pulling
+
+
+def _normal_points(v, w, cs, jac, pts, scales, inv_mass) -> None:
+    """Normal impulses of points ``pts`` (one per manifold), each alone, clamped >= 0."""
+    bias, m_scale, i_scale = scales
+    rel = relative_velocity(v, w, cs, jac, pts)[:, 0]
+    fresh = cs.total[pts] == 0.0
+    cs.relative[pts[fresh]] = rel[fresh]
+    old = cs.impulse[pts, 0]
+    new = np.maximum(old - jac.mass[pts, 0] * (m_scale * rel + bias) - i_scale * old, 0.0)
+    d = np.zeros((len(pts), 3))
+    d[:, 0] = new - old
+    cs.impulse[pts, 0] = new
+    cs.total[pts] += d[:, 0]
+    apply(v, w, cs, jac, pts, d, inv_mass)
+
+
+def _friction(v, w, cs, jac, pts, inv_mass) -> None:
+    """Coulomb friction of points ``pts`` (one per manifold): the two tangent impulses clamped
+    to the cone friction * normal impulse."""
+    rel_t = relative_velocity(v, w, cs, jac, pts)[:, 1:]
+    old = cs.impulse[pts, 1:]
+    new = old - jac.mass[pts, 1:] * rel_t
+    limit = cs.friction[pts] * cs.impulse[pts, 0]
+    norm = np.linalg.norm(new, axis=1)
+    new *= np.where(norm > limit, limit / np.maximum(norm, 1e-300), 1.0)[:, None]
+    d = np.zeros((len(pts), 3))
+    d[:, 1:] = new - old
+    cs.impulse[pts, 1:] = new
+    apply(v, w, cs, jac, pts, d, inv_mass)
 
 
 def warm_start(v, w, cs: ContactSet, jac: Jacobians, inv_mass) -> None:
     """Apply the accumulated impulses (from the last sub-step, or the last frame's contacts
-    with the same key) before solving: resting contacts start where they ended."""
-    for idx in cs.groups:
-        cs.total[idx] += cs.impulse[idx, 0]
-        apply(v, w, cs, jac, idx, cs.impulse[idx], inv_mass)
+    at the same place) before solving: resting contacts start where they ended."""
+    for pts in _by_slot(cs):
+        cs.total[pts] += cs.impulse[pts, 0]
+        apply(v, w, cs, jac, pts, cs.impulse[pts], inv_mass)
+
+
+def _by_slot(cs: ContactSet):
+    """Point index arrays in which no dynamic body appears twice: per colour, per slot."""
+    for group in cs.groups:
+        slots = cs.slots[group]
+        for k in range(slots.shape[1]):
+            pts = slots[:, k][slots[:, k] >= 0]
+            if len(pts):
+                yield pts
 
 
 def restitution(v, w, cs: ContactSet, jac: Jacobians, inv_mass) -> None:
-    """Bounce: contacts that were approaching faster than RESTITUTION_THRESHOLD and took an
-    impulse leave at restitution times that speed."""
-    for idx in cs.groups:
+    """Bounce: contacts that were approaching faster than RESTITUTION_THRESHOLD when first
+    touched (within the frame) and took an impulse leave at restitution times that speed; each
+    bounces once (its approach speed is then forgotten)."""
+    for idx in _by_slot(cs):
         sel = idx[(cs.restitution[idx] > 0.0) & (cs.relative[idx] < -RESTITUTION_THRESHOLD)
                   & (cs.total[idx] > 0.0)]
         if not len(sel):
@@ -254,4 +349,5 @@ def restitution(v, w, cs: ContactSet, jac: Jacobians, inv_mass) -> None:
         d = np.zeros((len(sel), 3))
         d[:, 0] = n_new - n_old
         cs.impulse[sel, 0] = n_new
+        cs.relative[sel] = 0.0
         apply(v, w, cs, jac, sel, d, inv_mass)

@@ -18,6 +18,7 @@ import numpy as np
 from ..errors import PhysanimError
 from . import quaternion as quat
 from .mass import MassProperties
+from .warm import Remembered
 
 SHAPES = ("SPHERE", "BOX", "CAPSULE", "HULL")
 SPHERE, BOX, CAPSULE, HULL = range(4)
@@ -151,15 +152,14 @@ class RigidBodyModel:
 class RigidBodyState:
     """Time-varying, (n, ...) each: body_x centre of mass [m], body_q unit quaternion,
     body_P linear momentum [kg m/s], body_L angular momentum about the centre of mass
-    [kg m^2/s], all world. ``contact_key``/``contact_impulse``: the last frame's accumulated
-    contact impulses (normal, two tangents [N s]) by persistent contact key, to warm-start."""
+    [kg m^2/s], all world. ``contacts``: the last frame's contact impulses by place, to
+    warm-start the next frame (:mod:`.warm`)."""
 
     body_x: np.ndarray
     body_q: np.ndarray
     body_P: np.ndarray
     body_L: np.ndarray
-    contact_key: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
-    contact_impulse: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    contacts: Remembered = field(default_factory=Remembered.none)
 
     def origins(self, model: RigidBodyModel) -> np.ndarray:
         """(n, 3) world positions of the objects' origins (x - R com)."""

@@ -1,0 +1,286 @@
+"""Which bodies touch, once per frame: broad phase -> narrow phase by shape pair -> contact
+points with persistent keys (for warm starting).
+
+Bodies here are every body the contact solver sees (:class:`Bodies`): the rigid bodies, then
+the colliders of the frame as bodies that impulses do not move. Pairs are found by a uniform
+grid over boxes swept by each body's motion over the frame; a half-space (the ground) is
+tested against every body directly. Each pair gets a speculative margin that covers how far
+the two can approach within the frame, so the solver sees contacts before they happen.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..collision.broadphase import UniformGrid
+from . import narrow, narrow_hull
+from . import quaternion as quat
+from .hull_shape import HullSet
+from .model import BOX, CAPSULE, HULL, SPHERE
+
+HALF_SPACE = 4  # a collider's code: the solid below a plane (normal = local +Z)
+SPECULATIVE = 0.02  # [m] contacts this far apart are always reported
+FEATURES = 4096  # feature ids per pair in a contact key
+BOX_CORNERS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)],
+                       dtype=np.float64)
+
+
+@dataclass
+class Bodies:
+    """The contact solver's bodies for one frame (N of them): rigid bodies, then colliders.
+
+    Attributes:
+        shape: (N,) codes (model.SHAPES order, HALF_SPACE for a ground). half: (N, 3) box half
+            extents, capsule half length in [2]. radius: (N,). offset: (N, 3) shape centre
+            from the centre of mass, local. x: (N, 3) centre of mass. q: (N, 4) orientation.
+        v, w: (N, 3) velocities [m/s], [rad/s]. bound: (N,) radius of the shape about x.
+        dynamic: (N,) moved by impulses. friction, restitution: (N,).
+        hull_points, hull_start, hull_count: HULL vertices (local, from the centre of mass).
+        name: (N,) names (messages).
+        hulls: the HULL bodies' hulls (faces, edges), hull_index: (N,) each body's hull in it
+            (-1: not a hull).
+    """
+
+    shape: np.ndarray
+    half: np.ndarray
+    radius: np.ndarray
+    offset: np.ndarray
+    x: np.ndarray
+    q: np.ndarray
+    v: np.ndarray
+    w: np.ndarray
+    bound: np.ndarray
+    dynamic: np.ndarray
+    friction: np.ndarray
+    restitution: np.ndarray
+    hull_points: np.ndarray
+    hull_start: np.ndarray
+    hull_count: np.ndarray
+    name: tuple
+    hulls: HullSet | None = None
+    hull_index: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return len(self.shape)
+
+    def centres(self, rotations: np.ndarray) -> np.ndarray:
+        """(N, 3) world centres of the shapes."""
+        return self.x + np.einsum("nij,nj->ni", rotations, self.offset)
+
+
+@dataclass(frozen=True)
+class Found:
+    """Contact points between bodies a and b (k): world point midway between the surfaces,
+    unit normal from a to b, separation (< 0: overlap) and persistent key."""
+
+    a: np.ndarray
+    b: np.ndarray
+    point: np.ndarray
+    normal: np.ndarray
+    separation: np.ndarray
+    key: np.ndarray
+
+    @classmethod
+    def join(cls, parts: list[Found]) -> Found:
+        if not parts:
+            z = np.zeros(0, np.int64)
+            return cls(z, z, np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), z)
+        return cls(*(np.concatenate([getattr(p, f) for p in parts]) for f in
+                     ("a", "b", "point", "normal", "separation", "key")))
+
+
+def find_contacts(bodies: Bodies, frame_dt: float, gravity: np.ndarray) -> Found:
+    """Every contact point of the frame (speculative ones included)."""
+    rot = quat.to_matrix(bodies.q)
+    reach = _reach(bodies, frame_dt, gravity)
+    ground = bodies.shape == HALF_SPACE
+    parts = [_half_spaces(bodies, rot, reach, ground)]
+    i, j = _candidate_pairs(bodies, reach, ground)
+    margin = SPECULATIVE + reach[i] + reach[j]
+    centre = bodies.centres(rot)
+    for kinds, run in _KINDS:
+        sel = _of_kind(bodies.shape, i, j, kinds)
+        if len(sel[0]):
+            a, b, at = sel
+            parts.append(_keyed(bodies, a, b, run(bodies, rot, centre, a, b, margin[at])))
+    return Found.join(parts)
+
+
+def _reach(bodies: Bodies, frame_dt: float, gravity: np.ndarray) -> np.ndarray:
+    """(N,) how far any point of each body can move within the frame [m] (an upper bound)."""
+    speed = np.linalg.norm(bodies.v, axis=1) + np.linalg.norm(bodies.w, axis=1) * bodies.bound
+    fall = np.where(bodies.dynamic, 0.5 * float(np.linalg.norm(gravity)) * frame_dt ** 2, 0.0)
+    return speed * frame_dt + fall
+
+
+def _candidate_pairs(bodies: Bodies, reach: np.ndarray, ground: np.ndarray):
+    """(i, j) index pairs of bodies whose swept boxes overlap, at least one of them dynamic."""
+    idx = np.nonzero(~ground)[0]
+    if len(idx) < 2:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    grow = (bodies.bound + reach + 0.5 * SPECULATIVE)[idx, None]
+    pairs = UniformGrid().pairs(bodies.x[idx] - grow, bodies.x[idx] + grow)
+    i, j = idx[pairs[:, 0]], idx[pairs[:, 1]]
+    keep = bodies.dynamic[i] | bodies.dynamic[j]
+    return i[keep], j[keep]
+
+
+def _of_kind(shape, i, j, kinds):
+    """Pairs whose shapes are ``kinds`` (in either order), ordered as ``kinds``; and their
+    positions in (i, j)."""
+    ka, kb = kinds
+    direct = (shape[i] == ka) & (shape[j] == kb)
+    flipped = (shape[i] == kb) & (shape[j] == ka) & (ka != kb)
+    at = np.nonzero(direct | flipped)[0]
+    a = np.where(direct[at], i[at], j[at])
+    b = np.where(direct[at], j[at], i[at])
+    return a, b, at
+
+
+def _keyed(bodies: Bodies, a, b, pc: narrow.PairContacts) -> Found:
+    pa, pb = a[pc.pair], b[pc.pair]
+    lo, hi = np.minimum(pa, pb), np.maximum(pa, pb)
+    key = (lo * len(bodies) + hi) * FEATURES + pc.feature
+    return Found(pa, pb, pc.point, pc.normal, pc.separation, key)
+
+
+def _sphere_sphere(bd, rot, c, a, b, m):
+    return narrow.sphere_sphere(c[a], bd.radius[a], c[b], bd.radius[b], m)
+
+
+def _sphere_box(bd, rot, c, a, b, m):
+    return narrow.sphere_box(c[a], bd.radius[a], c[b], rot[b], bd.half[b], m)
+
+
+def _box_box(bd, rot, c, a, b, m):
+    return narrow.box_box(c[a], rot[a], bd.half[a], c[b], rot[b], bd.half[b], m)
+
+
+def _capsule_sphere(bd, rot, c, a, b, m):  # a: sphere, b: capsule -> call with the capsule first
+    return narrow.capsule_sphere(c[b], rot[b], bd.radius[b], bd.half[b, 2], c[a],
+                                 bd.radius[a], m).swapped()
+
+
+def _capsule_box(bd, rot, c, a, b, m):  # a: box, b: capsule
+    return narrow.capsule_box(c[b], rot[b], bd.radius[b], bd.half[b, 2], c[a], rot[a],
+                              bd.half[a], m).swapped()
+
+
+def _capsule_capsule(bd, rot, c, a, b, m):
+    return narrow.capsule_capsule(c[a], rot[a], bd.radius[a], bd.half[a, 2], c[b], rot[b],
+                                  bd.radius[b], bd.half[b, 2], m)
+
+
+def _sphere_hull(bd, rot, c, a, b, m):  # a: sphere, b: hull (at its centre of mass)
+    return narrow_hull.hull_sphere(bd.hulls, bd.x[b], rot[b], c[a], bd.radius[a], m,
+                                   index=bd.hull_index[b]).swapped()
+
+
+def _box_hull(bd, rot, c, a, b, m):
+    return narrow_hull.hull_box(bd.hulls, bd.x[b], rot[b], c[a], rot[a], bd.half[a], m,
+                                index=bd.hull_index[b]).swapped()
+
+
+def _capsule_hull(bd, rot, c, a, b, m):
+    return narrow_hull.hull_capsule(bd.hulls, bd.x[b], rot[b], c[a], rot[a], bd.radius[a],
+                                    bd.half[a, 2], m, index=bd.hull_index[b]).swapped()
+
+
+def _hull_hull(bd, rot, c, a, b, m):
+    return narrow_hull.hull_hull(bd.hulls, bd.x[a], rot[a], bd.hulls, bd.x[b], rot[b], m,
+                                 index_a=bd.hull_index[a], index_b=bd.hull_index[b])
+
+
+_KINDS = (((SPHERE, SPHERE), _sphere_sphere), ((SPHERE, BOX), _sphere_box),
+          ((BOX, BOX), _box_box), ((SPHERE, CAPSULE), _capsule_sphere),
+          ((BOX, CAPSULE), _capsule_box), ((CAPSULE, CAPSULE), _capsule_capsule),
+          ((SPHERE, HULL), _sphere_hull), ((BOX, HULL), _box_hull),
+          ((CAPSULE, HULL), _capsule_hull), ((HULL, HULL), _hull_hull))
+
+
+# --- half-spaces: every body's support points below the plane -----------------------------------
+
+def support_points(bodies: Bodies, rot: np.ndarray, idx: np.ndarray, normal: np.ndarray):
+    """World points of bodies ``idx`` that can touch a plane with outward ``normal`` (3,):
+    (owner (p,), feature (p,), point (p, 3)) — a sphere's lowest point, a box's corners, a
+    capsule's two lowest cap points, a hull's vertices."""
+    out = []
+    centre = bodies.centres(rot)[idx]
+    shape = bodies.shape[idx]
+    for code in (SPHERE, CAPSULE):
+        sel = np.nonzero(shape == code)[0]
+        ends = (0,) if code == SPHERE else (-1, 1)
+        for f, e in enumerate(ends):
+            axis = rot[idx[sel], :, 2] * (e * bodies.half[idx[sel], 2])[:, None]
+            p = centre[sel] + axis - bodies.radius[idx[sel], None] * normal
+            out.append((idx[sel], np.full(len(sel), f), p))
+    sel = np.nonzero(shape == BOX)[0]
+    if len(sel):
+        local = BOX_CORNERS[None, :, :] * bodies.half[idx[sel], None, :]
+        corners = centre[sel, None, :] + np.einsum("nij,ncj->nci", rot[idx[sel]], local)
+        out.append((np.repeat(idx[sel], 8), np.tile(np.arange(8), len(sel)),
+                    corners.reshape(-1, 3)))
+    sel = np.nonzero(shape == HULL)[0]
+    if len(sel):
+        body = idx[sel]
+        count = bodies.hull_count[body]
+        owner = np.repeat(body, count)
+        first = np.repeat(bodies.hull_start[body], count)
+        k = np.arange(len(owner)) - np.repeat(np.cumsum(count) - count, count)
+        local = bodies.hull_points[first + k]
+        out.append((owner, k, bodies.x[owner] + np.einsum("nij,nj->ni", rot[owner], local)))
+    if not out:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3))
+    return tuple(np.concatenate(parts) for parts in zip(*out))
+
+
+def _half_spaces(bodies: Bodies, rot: np.ndarray, reach: np.ndarray, ground: np.ndarray) -> Found:
+    """Contacts of every dynamic body with every half-space collider."""
+    parts = []
+    dyn = np.nonzero(bodies.dynamic & ~ground)[0]
+    for g in np.nonzero(ground)[0]:
+        n = rot[g, :, 2]
+        height = (bodies.x[dyn] - bodies.x[g]) @ n
+        near = dyn[height - bodies.bound[dyn] < SPECULATIVE + reach[dyn] + reach[g]]
+        owner, feature, p = support_points(bodies, rot, near, n)
+        sep = (p - bodies.x[g]) @ n - bodies.radius[g]  # radius: the collider's thickness
+        margin = SPECULATIVE + reach[owner] + reach[g]
+        keep = sep < margin
+        owner, feature, p, sep = owner[keep], feature[keep], p[keep], sep[keep]
+        sel = reduce_manifolds(owner, p, sep)
+        owner, feature, p, sep = owner[sel], feature[sel], p[sel], sep[sel]
+        point = p - 0.5 * sep[:, None] * n
+        key = (owner * len(bodies) + g) * FEATURES + feature
+        parts.append(Found(owner, np.full(len(owner), g), point,
+                           np.broadcast_to(-n, (len(owner), 3)).copy(), sep, key))
+    return Found.join(parts)
+
+
+def reduce_manifolds(owner: np.ndarray, p: np.ndarray, sep: np.ndarray) -> np.ndarray:
+    """Indices keeping at most 4 points per owner (a hull's many vertices on the ground): the
+    deepest, the farthest from it, the farthest from their line, and the farthest on the
+    other side of that line — the widest support with the deepest point in it."""
+    if not len(owner):
+        return np.zeros(0, np.int64)
+    order = np.argsort(owner, kind="stable")
+    uniq, first, count = np.unique(owner[order], return_index=True, return_counts=True)
+    if count.max() <= 4:
+        return order
+    slot = np.arange(len(order)) - np.repeat(first, count)
+    idx = np.full((len(uniq), int(count.max())), -1, np.int64)
+    idx[np.repeat(np.arange(len(uniq)), count), slot] = order
+    valid = idx >= 0
+    q = p[np.where(valid, idx, 0)]
+    rows = np.arange(len(uniq))
+    pick = [np.argmin(np.where(valid, sep[np.where(valid, idx, 0)], np.inf), axis=1)]
+    far = np.linalg.norm(q - q[rows, pick[0]][:, None], axis=2)
+    pick.append(np.argmax(np.where(valid, far, -1.0), axis=1))
+    axis = q[rows, pick[1]] - q[rows, pick[0]]
+    side = np.cross(axis[:, None, :], q - q[rows, pick[0]][:, None])
+    ref = side[rows, np.argmax(np.where(valid, np.linalg.norm(side, axis=2), -1.0), axis=1)]
+    signed = np.einsum("gki,gi->gk", side, ref)
+    pick.append(np.argmax(np.where(valid, signed, -np.inf), axis=1))
+    pick.append(np.argmin(np.where(valid, signed, np.inf), axis=1))
+    chosen = np.unique(np.stack([idx[rows, k] for k in pick], axis=1).ravel())
+    return chosen[chosen >= 0]

@@ -1,0 +1,316 @@
+"""The rigid-body system: one frame interval in sub-steps, as a world system.
+
+Per frame: pose the bodies that follow paths (kinematic bodies, colliders) -> find contacts
+(broad + narrow phase, speculative) -> warm-start them from last frame's impulses -> colour.
+Per sub-step: posed bodies to the sub-step's end -> gravity and damping -> warm start -> solve
+(soft, with push-out) -> integrate positions (orientation with L held) -> relax -> restitution
+(contacts first touched in this sub-step bounce) -> momenta. At the frame's end the impulses are
+kept for the next frame.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..bounds import DEFAULT_BOUNDS, StateBounds
+from ..contact import ColliderFrame, ColliderPaths
+from ..errors import SimulationError
+from ..transforms import TransformPath
+from ..world import SolverSystem, World, WorldFrame
+from . import contact_solver as cs_
+from . import dynamics, warm
+from . import quaternion as quat
+from .bodies import Posed, collider_bodies, frame_bodies
+from .collide import Bodies, Found, find_contacts
+from .hull_shape import HullSet
+from .model import HULL, RigidBodyModel, RigidBodyState
+
+DEFAULT_SUBSTEPS = 8
+# sub-steps between contact searches: contacts are found with the normals of their time, so
+# bodies that meet at speed need them refreshed within a frame (1/24 s is long)
+COLLIDE_EVERY = 2
+
+
+@dataclass
+class RigidFrameInputs:
+    """One frame interval of the rigid bodies' world.
+
+    Args:
+        frame: scene frame at the start (messages). t0 [s], frame_dt [s]. gravity (3,).
+        colliders: the frame's colliders. kinematic: body index -> (k + 1, 4, 4) world matrices
+            of a kinematic body's object over the interval (k >= 1).
+    """
+
+    frame: int
+    t0: float
+    frame_dt: float
+    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
+    colliders: Sequence[ColliderFrame] = ()
+    kinematic: dict = field(default_factory=dict)
+
+    @classmethod
+    def of(cls, frame: WorldFrame, kinematic: dict | None) -> RigidFrameInputs:
+        return cls(frame.frame, frame.t0, frame.frame_dt, frame.gravity, frame.colliders,
+                   kinematic or {})
+
+    @property
+    def world(self) -> WorldFrame:
+        return WorldFrame(self.frame, self.t0, self.frame_dt, self.gravity, self.colliders)
+
+
+@dataclass
+class RigidReport:
+    """A frame: contact points found, the deepest overlap [m] at its end, bodies moving."""
+
+    contacts: int = 0
+    overlap: float = 0.0
+    moving: int = 0
+
+
+@dataclass
+class _FrameStep:
+    state: RigidBodyState
+    inputs: RigidFrameInputs
+    h: float
+    g: np.ndarray
+    posed: Posed
+    posed_rows: np.ndarray  # rows of the posed bodies (kinematic bodies, then colliders)
+    bodies: Bodies
+    contacts: cs_.ContactSet | None
+    x0: np.ndarray | None  # (N, 3), (N, 4): poses when the contacts were found
+    q0: np.ndarray | None
+    v: np.ndarray  # (N, 3), (N, 3): every body's velocities during the sub-steps
+    w: np.ndarray
+    inv_mass: np.ndarray  # (N,)
+    places: np.ndarray | None  # (k, 3) each contact's place in its lower body (warm starting)
+    report: RigidReport
+
+
+class RigidBodySolver:
+    """Advances a :class:`RigidBodyState` frame by frame.
+
+    Args:
+        model: the frozen model. substeps: sub-steps per frame. bounds: a body beyond them is
+        an error. colliders: the caller's collider cache (unused by rigid bodies but shared).
+    """
+
+    def __init__(self, model: RigidBodyModel, substeps: int = DEFAULT_SUBSTEPS,
+                 bounds: StateBounds = DEFAULT_BOUNDS, colliders: ColliderPaths | None = None,
+                 collide_every: int = COLLIDE_EVERY):
+        if int(substeps) != substeps or substeps < 1:
+            raise ValueError(f"substeps must be an integer >= 1 (got {substeps})")
+        self.model, self.substeps, self.bounds = model, int(substeps), bounds
+        self.collide_every = max(1, int(collide_every))
+        self.colliders = ColliderPaths() if colliders is None else colliders
+        self.kinematic = np.nonzero(model.body_kinematic)[0]
+        self.dynamic = np.nonzero(~model.body_kinematic)[0]
+        self.hulls = _hulls(model)
+
+    # -- the frame ------------------------------------------------------------------------------
+    def advance(self, state: RigidBodyState, inputs: RigidFrameInputs) -> RigidReport:
+        """Advance ``state`` (in place) by one frame interval: a world of this one system."""
+        system = RigidBodySystem(self, state)
+        world = World([system], self.colliders)
+        return world.advance(inputs.world, {system: inputs.kinematic}).reports[system]
+
+    def begin_frame(self, state: RigidBodyState, inputs: RigidFrameInputs, paths) -> _FrameStep:
+        """Pose, find and prepare the frame's contacts."""
+        model = self.model
+        missing = [model.body_name[i] for i in self.kinematic if int(i) not in inputs.kinematic]
+        if missing:
+            raise ValueError(f"kinematic bodies without a path: {', '.join(missing)}")
+        colliders = collider_bodies(list(inputs.colliders), inputs.frame)
+        paths_ = [TransformPath(inputs.kinematic[int(i)][0], inputs.kinematic[int(i)][-1],
+                                inputs.kinematic[int(i)]) for i in self.kinematic]
+        posed = Posed(paths_ + colliders[3], np.concatenate(
+            [model.body_com[self.kinematic], np.zeros((len(colliders[3]), 3))]))
+        n = model.body_count
+        v = np.zeros((n, 3))
+        w = np.zeros((n, 3))
+        d = self.dynamic
+        v[d] = state.body_P[d] / model.body_mass[d, None]
+        w[d] = dynamics.angular_velocity(state.body_q[d], model.body_inv_inertia[d], state.body_L[d])
+        pv, pw = posed.velocity(0.0, 1.0, inputs.frame_dt)
+        nk = len(self.kinematic)
+        v[self.kinematic], w[self.kinematic] = pv[:nk], pw[:nk]
+        bodies = frame_bodies(model, state, colliders, posed, self.kinematic, (v, w), self.hulls)
+        bodies.v[n:], bodies.w[n:] = pv[nk:], pw[nk:]
+        g = np.asarray(inputs.gravity, dtype=np.float64)
+        rows = np.concatenate([self.kinematic, n + np.arange(len(colliders[0]))]).astype(np.int64)
+        inv_mass = np.concatenate([model.body_inv_mass, np.zeros(len(colliders[0]))])
+        step = _FrameStep(state, inputs, inputs.frame_dt / self.substeps, g, posed, rows, bodies,
+                          None, None, None, bodies.v.copy(), bodies.w.copy(), inv_mass, None,
+                          RigidReport())
+        self._collide(step, inputs.frame_dt, state.contacts)
+        return step
+
+    def _collide(self, step: _FrameStep, duration: float, memory: warm.Remembered) -> None:
+        """Find the contacts for the next ``duration`` [s] from the bodies' current poses and
+        velocities, warm-started from ``memory``."""
+        b = step.bodies
+        b.v, b.w = step.v.copy(), step.w.copy()
+        found = find_contacts(b, duration, step.g)
+        step.contacts = self._prepare(b, found, memory)
+        step.places = warm.places(found.a, found.b, found.point, b.x, b.q, len(b))[1]
+        step.x0, step.q0 = b.x.copy(), b.q.copy()
+        step.report.contacts = max(step.report.contacts, len(found.a))
+
+    def _remembered(self, step: _FrameStep) -> warm.Remembered:
+        cs = step.contacts
+        impulse = (cs.impulse[:, :1] * cs.normal + cs.impulse[:, 1:2] * cs.t1
+                   + cs.impulse[:, 2:] * cs.t2)
+        return warm.remember(cs.key, step.places, impulse)
+
+    def _prepare(self, bodies: Bodies, found: Found, memory: warm.Remembered) -> cs_.ContactSet:
+        """Contact constraints from the found points: anchors, combined coefficients, the
+        relative normal velocity (for restitution) and last frame's impulses by place
+        (:mod:`.warm`). The contact set's keys are the pairs, ``step.places`` the places."""
+        a, b, n = found.a, found.b, found.normal
+        ra, rb = found.point - bodies.x[a], found.point - bodies.x[b]
+        t1, t2 = cs_.tangents(n) if len(n) else (n.copy(), n.copy())
+        rel = np.einsum("ki,ki->k", n, (bodies.v[b] + np.cross(bodies.w[b], rb))
+                        - (bodies.v[a] + np.cross(bodies.w[a], ra)))
+        pair, local = warm.places(a, b, found.point, bodies.x, bodies.q, len(bodies))
+        size = np.where(bodies.dynamic, bodies.bound, np.inf)  # a collider's size says nothing
+        tolerance = warm.MATCH_FRACTION * np.minimum(size[a], size[b])
+        p = warm.recall(memory, pair, local, tolerance)  # world impulse vectors
+        impulse = np.stack([np.einsum("ki,ki->k", p, d) for d in (n, t1, t2)], 1) \
+            if len(a) else np.zeros((0, 3))
+        impulse[:, 0] = np.maximum(impulse[:, 0], 0.0)
+        dynamic = bodies.dynamic
+        slots, groups = cs_.manifolds(pair, a, b, dynamic)
+        return cs_.ContactSet(
+            a, b, n, t1, t2, ra, rb, found.separation - np.einsum("ki,ki->k", n, rb - ra),
+            np.sqrt(bodies.friction[a] * bodies.friction[b]),
+            np.maximum(bodies.restitution[a], bodies.restitution[b]), rel, impulse,
+            np.zeros(len(a)), pair, ~(dynamic[a] & dynamic[b]), slots, groups)
+
+    def substep(self, step: _FrameStep, k: int) -> None:
+        """Sub-step ``k``: the passes of the module docstring."""
+        h = step.h
+        s0, s1 = k / self.substeps, (k + 1) / self.substeps
+        if k and k % self.collide_every == 0:  # contacts again, from where the bodies are now
+            self._collide(step, (1.0 - s0) * step.inputs.frame_dt, self._remembered(step))
+        cs = step.contacts
+        self._move_posed(step, s0, s1)
+        self._forces(step)
+        soft = cs_.Softness.of(min(cs_.CONTACT_HERTZ, 0.25 / h), cs_.DAMPING_RATIO, h)
+        hard = cs_.Softness.of(min(cs_.STATIC_HERTZ, 0.5 / h), cs_.DAMPING_RATIO, h)
+        jac = self._jacobians(step)
+        cs_.warm_start(step.v, step.w, cs, jac, step.inv_mass)
+        cs_.solve(step.v, step.w, cs, jac, step.inv_mass, self._separation(step), h, soft, hard,
+                  True)
+        self._integrate(step)
+        jac = self._jacobians(step)  # the bodies moved: arms and inertias at their new poses
+        cs_.solve(step.v, step.w, cs, jac, step.inv_mass, self._separation(step), h, soft, hard,
+                  False)
+        cs_.restitution(step.v, step.w, cs, jac, step.inv_mass)
+        self._store(step, last=k == self.substeps - 1)
+
+    # -- passes ---------------------------------------------------------------------------------
+    def _move_posed(self, step: _FrameStep, s0: float, s1: float) -> None:
+        """Kinematic bodies and colliders to the sub-step's end, with the velocity that takes
+        them there (what they impart to the bodies they push)."""
+        if not len(step.posed):
+            return
+        x, q = step.posed.pose(s1)
+        v, w = step.posed.velocity(s0, s1, step.h)
+        rows = step.posed_rows
+        step.bodies.x[rows], step.bodies.q[rows] = x, q
+        step.v[rows], step.w[rows] = v, w
+
+    def _forces(self, step: _FrameStep) -> None:
+        """Gravity and damping on the dynamic bodies' velocities."""
+        d, m, h = self.dynamic, self.model, step.h
+        step.v[d] += h * step.g
+        step.v[d] *= (1.0 / (1.0 + h * m.body_linear_damping[d]))[:, None]
+        step.w[d] *= (1.0 / (1.0 + h * m.body_angular_damping[d]))[:, None]
+
+    def _inverse_inertia(self, step: _FrameStep, q: np.ndarray) -> np.ndarray:
+        """(N, 3, 3) world inverse inertia (0 for bodies impulses do not move)."""
+        out = np.zeros((len(step.bodies), 3, 3))
+        d = self.dynamic
+        out[d] = dynamics.world_tensor(q[d], self.model.body_inv_inertia[d])
+        return out
+
+    def _jacobians(self, step: _FrameStep) -> cs_.Jacobians:
+        """Constraint rows at the bodies' current poses: each contact's anchors, carried with
+        their bodies, meet at their midpoint — the common point both impulses act at."""
+        cs, b = step.contacts, step.bodies
+        turn = quat.multiply(b.q, quat.conjugate(step.q0))
+        pa = b.x[cs.a] + quat.rotate(turn[cs.a], cs.ra)
+        pb = b.x[cs.b] + quat.rotate(turn[cs.b], cs.rb)
+        mid = 0.5 * (pa + pb)
+        return cs_.jacobians(cs, step.inv_mass, self._inverse_inertia(step, b.q),
+                             mid - b.x[cs.a], mid - b.x[cs.b])
+
+    def _separation(self, step: _FrameStep) -> np.ndarray:
+        """Each contact's current separation from the bodies' motion since it was found."""
+        cs, b = step.contacts, step.bodies
+        turn = quat.multiply(b.q, quat.conjugate(step.q0))
+        dx = b.x - step.x0
+        pa = dx[cs.a] + quat.rotate(turn[cs.a], cs.ra)
+        pb = dx[cs.b] + quat.rotate(turn[cs.b], cs.rb)
+        return cs.base + np.einsum("ki,ki->k", cs.normal, pb - pa)
+
+    def _integrate(self, step: _FrameStep) -> None:
+        """Positions of the dynamic bodies; their orientation turns with L held, and w is
+        re-derived at the new orientation (so torque-free motion keeps L exactly)."""
+        d, m, h, b = self.dynamic, self.model, step.h, step.bodies
+        b.x[d] += h * step.v[d]
+        L = dynamics.angular_momentum(b.q[d], m.body_inertia[d], step.w[d])
+        b.q[d] = dynamics.integrate_orientation(b.q[d], m.body_inv_inertia[d], L, h)
+        step.w[d] = dynamics.angular_velocity(b.q[d], m.body_inv_inertia[d], L)
+
+    def _store(self, step: _FrameStep, last: bool) -> None:
+        """Momenta and poses into the State; at the frame's end, the impulses by place."""
+        d, m, b, state = self.dynamic, self.model, step.bodies, step.state
+        n = m.body_count
+        state.body_x[:] = b.x[:n]
+        state.body_q[:] = b.q[:n]
+        state.body_P[d] = m.body_mass[d, None] * step.v[d]
+        state.body_L[d] = dynamics.angular_momentum(b.q[d], m.body_inertia[d], step.w[d])
+        self._check(step)
+        if last:
+            state.contacts = self._remembered(step)
+            sep = self._separation(step)
+            step.report.overlap = float(max(0.0, -sep.min())) if len(sep) else 0.0
+            step.report.moving = int(np.count_nonzero(
+                np.linalg.norm(step.v[d], axis=1) > 1e-3))
+
+    def _check(self, step: _FrameStep) -> None:
+        state = step.state
+        bad = self.bounds.violation(state.body_x, step.v[:self.model.body_count])
+        if bad is not None:
+            raise SimulationError(f"{bad[1]} — check the initial velocities, overlaps at the "
+                                  "start and gravity, or use more substeps",
+                                  obj=self.model.body_name[bad[0]], frame=step.inputs.frame,
+                                  kind="rigid body")
+
+
+def _hulls(model: RigidBodyModel):
+    """(HullSet of the HULL bodies or None, (n,) each body's index in it, -1 for others)."""
+    rows = np.nonzero(model.body_shape == HULL)[0]
+    index = np.full(model.body_count, -1, np.int64)
+    if not len(rows):
+        return None, index
+    index[rows] = np.arange(len(rows))
+    return HullSet.from_ranges(model.hull_points, model.body_hull_start[rows],
+                               model.body_hull_count[rows],
+                               [model.body_name[i] for i in rows]), index
+
+
+class RigidBodySystem(SolverSystem):
+    """The rigid bodies as one system of a :class:`~physanim.core.world.World`; its own
+    per-frame input is the kinematic bodies' paths (body index -> matrices)."""
+
+    def __init__(self, solver: RigidBodySolver, state: RigidBodyState, name: str = "rigid bodies"):
+        super().__init__(solver, state, name)
+
+    def inputs(self, frame: WorldFrame, kinematic: dict | None) -> RigidFrameInputs:
+        return RigidFrameInputs.of(frame, kinematic)
+
+    def report(self, step: _FrameStep) -> RigidReport:
+        return step.report

@@ -1,0 +1,179 @@
+"""Rigid-body contacts against closed forms and measurable criteria: bounce apex ratios, friction
+on a slope, coming to rest, stacks, momentum, exchange of velocities, no tunnelling."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from physanim.core.contact import ColliderFrame
+from physanim.tests.core.rigid_helpers import DT, box, ground, run, sphere, world
+
+
+def _apexes(heights: np.ndarray) -> list[float]:
+    """Local maxima of a height track (apexes between bounces)."""
+    h = heights
+    return [h[i] for i in range(1, len(h) - 1) if h[i] > h[i - 1] and h[i] >= h[i + 1]]
+
+
+@pytest.mark.parametrize("e", [0.5, 0.8])
+def test_ball_bounce_apex_ratio_is_restitution_squared(e):
+    r = 0.1
+    model, solver, state = world(sphere("Ball", r, (0.0, 0.0, 1.0 + r), restitution=e,
+                                        linear_damping=0.0, angular_damping=0.0), substeps=16)
+    heights = []
+    run(solver, state, 96, colliders=[ground()],
+        each=lambda f, s: heights.append(s.body_x[0, 2] - r))
+    # apex heights sampled per frame: refine each by the parabola through the top 3 samples
+    apexes = _apexes(np.array(heights))
+    assert len(apexes) >= 2, heights
+    first = 1.0
+    ratio = apexes[0] / first
+    assert abs(ratio - e * e) <= 0.03, (apexes, e * e)
+    if len(apexes) > 1 and apexes[0] > 0.05:
+        assert abs(apexes[1] / apexes[0] - e * e) <= 0.03 + 0.02 / apexes[0], apexes
+
+
+def test_box_dropped_on_the_ground_comes_to_rest_within_a_second():
+    model, solver, state = world(box("Box", (0.5, 0.5, 0.5), (0.0, 0.0, 1.5)))
+    speeds, heights = [], []
+    run(solver, state, int(3.0 / DT), colliders=[ground()],
+        each=lambda f, s: (speeds.append(np.linalg.norm(s.body_P[0]) / model.body_mass[0]),
+                           heights.append(s.body_x[0, 2])))
+    after = int(1.0 / DT) + int(0.55 / DT)  # it lands after 0.45 s; at rest a second later
+    assert max(speeds[after:]) < 1e-3, speeds[after:]
+    assert np.ptp(heights[after:]) < 1e-4  # no jitter
+    assert abs(heights[-1] - 0.5) < 5e-3  # resting on its face, at most 5 mm into the ground
+
+
+@pytest.mark.parametrize("mu, tilt", [(0.6, math.radians(20.0)), (0.2, math.radians(30.0))])
+def test_box_on_a_slope_sticks_or_slides_by_coulomb(mu, tilt):
+    """mu > tan(theta): stays (drift < 1 mm in 5 s); mu < tan(theta): slides with
+    a = g (sin(theta) - mu cos(theta))."""
+    n = np.array([0.0, -math.sin(tilt), math.cos(tilt)])  # the slope's normal
+    down = np.array([0.0, -math.cos(tilt), -math.sin(tilt)])  # down the slope
+    half = 0.25
+    from physanim.core.rigid import quaternion as quat
+    q = quat.from_rotation_vector(np.array([[tilt, 0.0, 0.0]]))[0]
+    body = box("Box", (half, half, half), tuple(n * (half + 1e-3)), friction=mu,
+               orientation=tuple(q), linear_damping=0.0, angular_damping=0.0)
+    model, solver, state = world(body)
+    track = []
+    run(solver, state, int(5.0 / DT), colliders=[ground(friction=mu, tilt=tilt)],
+        each=lambda f, s: track.append(s.body_x[0].copy()))
+    track = np.array(track)
+    along = track @ down
+    settle = int(0.5 / DT)
+    if mu > math.tan(tilt):
+        assert abs(along[-1] - along[settle]) < 1e-3
+    else:
+        t = np.arange(len(along)) * DT
+        a_fit = np.polyfit(t[settle:], along[settle:], 2)[0] * 2.0
+        a_true = 9.81 * (math.sin(tilt) - mu * math.cos(tilt))
+        assert abs(a_fit - a_true) <= 0.02 * a_true, (a_fit, a_true)
+
+
+@pytest.mark.parametrize("count", [10, 20])
+def test_box_stack_stands(count):
+    size = 0.5
+    boxes = [box(f"B{k}", (size, size, size), (0.0, 0.0, size + 2 * size * k)) for k in range(count)]
+    model, solver, state = world(*boxes)
+    tops = []
+    run(solver, state, int(10.0 / DT), colliders=[ground()],
+        each=lambda f, s: tops.append(s.body_x[-1].copy()))
+    tops = np.array(tops)
+    second = int(1.0 / DT)
+    drift = np.linalg.norm(tops[second:] - tops[second], axis=1).max()
+    assert drift < 1e-3, drift
+    assert abs(tops[-1, 2] - (2 * count - 1) * size) < 0.01 * count  # still a stack
+
+
+def test_collisions_away_from_colliders_conserve_momentum():
+    rng = np.random.default_rng(3)
+    bodies = []
+    for k in range(12):
+        x = rng.uniform(-1.0, 1.0, 3)
+        v = -x * 4.0 + rng.normal(size=3)
+        w = rng.normal(size=3) * 3.0
+        make = box if k % 2 else sphere
+        size = (0.2, 0.3, 0.25) if k % 2 else 0.25
+        bodies.append(make(f"b{k}", size, tuple(x * 3.0), mass=1.0 + k, velocity=tuple(v),
+                           angular_velocity=tuple(w), linear_damping=0.0, angular_damping=0.0,
+                           restitution=0.3))
+    model, solver, state = world(*bodies)
+
+    def momenta(s):
+        P = s.body_P.sum(axis=0)
+        L = (np.cross(s.body_x, s.body_P) + s.body_L).sum(axis=0)
+        return P, L
+
+    P0, L0 = momenta(state)
+    reports = run(solver, state, 48, gravity=(0.0, 0.0, 0.0))
+    assert sum(r.contacts for r in reports) > 0  # they did collide
+    P1, L1 = momenta(state)
+    scale_p = np.abs(state.body_P).sum()
+    scale_l = np.abs(np.cross(state.body_x, state.body_P)).sum() + np.abs(state.body_L).sum()
+    assert np.linalg.norm(P1 - P0) <= 1e-9 * scale_p
+    assert np.linalg.norm(L1 - L0) <= 1e-9 * scale_l
+
+
+def test_equal_spheres_head_on_with_restitution_one_exchange_velocities():
+    a = sphere("A", 0.2, (-1.0, 0.0, 0.0), velocity=(3.0, 0.0, 0.0), restitution=1.0,
+               linear_damping=0.0, angular_damping=0.0)
+    b = sphere("B", 0.2, (1.0, 0.0, 0.0), restitution=1.0, linear_damping=0.0,
+               angular_damping=0.0)
+    model, solver, state = world(a, b)
+    run(solver, state, 24, gravity=(0.0, 0.0, 0.0))
+    np.testing.assert_allclose(state.body_P[0], [0.0, 0.0, 0.0], atol=0.03)
+    np.testing.assert_allclose(state.body_P[1], [3.0, 0.0, 0.0], atol=0.03)
+
+
+def test_bodies_overlapping_at_the_start_separate_without_explosion():
+    """A careless pile: six 1 m boxes each sunk 20 cm into the one below (and the ground)."""
+    boxes = [box(f"B{k}", (0.5, 0.5, 0.5), (0.05 * k, 0.02 * k, 0.3 + 0.8 * k)) for k in range(6)]
+    model, solver, state = world(*boxes)
+    fastest = []
+    run(solver, state, 72, colliders=[ground()],
+        each=lambda f, s: fastest.append(np.linalg.norm(s.body_P, axis=1).max()))
+    assert max(fastest) <= 5.0
+    assert max(fastest[-12:]) < 0.05  # and they settle
+
+
+def test_small_fast_box_never_passes_a_thin_wall():
+    """A 10 cm box at 100 m/s against a 1 cm wall (a Box collider 5 mm half thick)."""
+    wall = np.diag([0.005, 2.0, 2.0, 1.0])
+    wall[:3, 3] = (2.0, 0.0, 0.0)
+    collider = ColliderFrame("Wall", "BOX", wall, wall, 0.0, 0.3)
+    body = box("Bullet", (0.05, 0.05, 0.05), (0.0, 0.0, 0.0), velocity=(100.0, 0.0, 0.0))
+    model, solver, state = world(body)
+    xs = []
+    run(solver, state, 24, colliders=[collider], gravity=(0.0, 0.0, 0.0),
+        each=lambda f, s: xs.append(s.body_x[0, 0]))
+    assert max(xs) < 2.0 - 0.005 - 0.05 + 0.005, max(xs)
+
+
+def test_hull_rocks_fall_onto_a_box_and_the_ground_and_rest():
+    """Convex hulls (random rocks) against a box body, a sphere and the ground: no overlap
+    beyond a centimetre at any frame, the rocks and the table at rest in the end."""
+    from physanim.core.collision.hull import convex_hull
+    from physanim.core.rigid.mass import polyhedron_mass
+    from physanim.core.rigid.model import RigidBodySettings
+
+    rng = np.random.default_rng(5)
+    bodies = [box("Table", (1.0, 1.0, 0.25), (0.0, 0.0, 0.25), mass=2000.0),
+              sphere("Ball", 0.3, (1.5, 0.2, 0.3), mass=113.0)]  # all of density 1000
+    for k in range(4):
+        cloud = rng.normal(size=(40, 3)) * (0.3, 0.25, 0.2)
+        hull = convex_hull(cloud)
+        verts = hull.points[hull.vertices]
+        bodies.append(RigidBodySettings(
+            f"Rock{k}", "HULL", polyhedron_mass(hull.points, hull.triangles, density=1000.0),
+            hull=verts, position=(0.6 * k - 0.9, 0.1 * k, 1.5 + 0.7 * k)))
+    model, solver, state = world(*bodies)
+    reports = run(solver, state, int(4.0 / DT), colliders=[ground()])
+    assert max(r.overlap for r in reports) < 0.01
+    speeds = np.linalg.norm(state.body_P, axis=1) / model.body_mass
+    rest = [0, *range(2, model.body_count)]  # the ball may still roll: nothing stops it
+    assert speeds[rest].max() < 0.01, speeds
+    assert abs(state.body_x[1, 2] - 0.3) < 0.01  # the ball is on the ground
