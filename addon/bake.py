@@ -25,7 +25,7 @@ import bpy
 from ..core.contact import ColliderPaths
 from ..core.errors import PhysanimError
 from ..core.world import World
-from . import budget, convert, extract, inputs_hash, limits, springs
+from . import budget, convert, extract, inputs_hash, limits, rigid, rigid_keys, springs
 from .cache_paths import relative_path
 from .particles_bake import STREAM, ParticleBake
 
@@ -54,11 +54,14 @@ class BakeJob:
         self.world = World([], self.colliders)
         self.particles: ParticleBake | None = None
         self.meshes: list[springs.SpringMeshBake] = []
+        self.rigid: rigid.RigidBake | None = None
         from . import results
 
         results.suspend_refresh(self.scene)  # our own frame changes must not reload old bakes
         # the bake reads each spring mesh without its previous cache playing on top
         self.suspended = {ob.name: springs.suspend_modifier(ob) for ob in self.roles.spring_meshes}
+        # ... and each rigid body from its own animation, not an earlier bake's keys
+        self.rigid_suspended = {ob.name: rigid_keys.suspend(ob) for ob in self.roles.rigid_bodies}
         try:
             self._prepare(context)
         except BaseException:
@@ -68,9 +71,9 @@ class BakeJob:
     # -- set-up ---------------------------------------------------------------------------------
     def _roles(self, only: set[str] | None) -> extract.Roles:
         roles = extract.gather(self.scene, only)
-        if not roles.emitters and not roles.spring_meshes:
-            raise PhysanimError("nothing to bake: no object has a PhysAnim emitter or spring "
-                                "mesh enabled", obj=self.scene.name, kind="scene")
+        if not roles:
+            raise PhysanimError("nothing to bake: no object has a PhysAnim emitter, spring "
+                                "mesh or rigid body enabled", obj=self.scene.name, kind="scene")
         self.frame_start = self.settings.frame_start
         self.frame_end = self.settings.frame_end
         if self.frame_end < self.frame_start:
@@ -86,11 +89,14 @@ class BakeJob:
         self.mesh_hashes = {ob.name: inputs_hash.inputs_hash(self.scene, ob, "spring_mesh",
                                                              all_roles)
                             for ob in self.roles.spring_meshes}
+        self.rigid_hash = inputs_hash.rigid_hash(self.scene, self.roles.rigid_bodies, all_roles)
         if self.roles.emitters:
             self.particles = ParticleBake(self.scene, self.roles.emitters, self.hashes, self.stats)
         self.extractor = extract.Extractor(self.scene, self.roles)
         self.scene.frame_set(self.frame_start)
         depsgraph = context.evaluated_depsgraph_get()
+        if self.roles.rigid_bodies:
+            self._prepare_rigid(depsgraph)
         for i, ob in enumerate(self.roles.spring_meshes):
             self._unprepared = len(self.roles.spring_meshes) - i - 1  # still to come
             self._prepare_mesh(ob, depsgraph)
@@ -106,6 +112,16 @@ class BakeJob:
             with self._system(self.particles):
                 self.particles.start(self.frame_start, self._pre_roll)
                 self.world.systems.insert(0, self.particles.system)
+
+    def _prepare_rigid(self, depsgraph) -> None:
+        """The rigid bodies step first: the others may meet them within the same frame."""
+        self._unprepared += 1
+        bake = rigid.RigidBake(self.scene, self.roles.rigid_bodies, self.rigid_hash)
+        self.rigid = bake
+        with self._system(bake):
+            bake.prepare(depsgraph, self.frame_start, self.colliders)
+            self.world.systems.insert(0, bake.system)
+        self._unprepared -= 1
 
     def _prepare_mesh(self, ob, depsgraph) -> None:
         mesh = None
@@ -143,12 +159,17 @@ class BakeJob:
     def _drop(self, channel, exc: Exception) -> None:
         """A system failed: delete its partial cache, keep its previous bake, and go on with
         the others; re-raise when none is left."""
-        if channel is not self.particles and channel not in self.meshes:
+        if channel is not self.particles and channel is not self.rigid \
+                and channel not in self.meshes:
             return  # dropped already (a failure inside its own guarded work)
         channel.abort()
         self.world.drop(channel.system)
         if channel is self.particles:
             self.particles = None
+            self._failed(channel.label, None, exc)
+        elif channel is self.rigid:
+            self.rigid = None
+            self._restore_rigid()
             self._failed(channel.label, None, exc)
         else:
             self.meshes.remove(channel)
@@ -158,8 +179,15 @@ class BakeJob:
         if mesh is not None:
             springs.restore_modifier(bpy.data.objects[mesh], self.suspended.pop(mesh, None))
         self.failures.append((label, str(exc)))
-        if self.particles is None and not self.meshes and not self._unprepared:
+        if self.particles is None and self.rigid is None and not self.meshes \
+                and not self._unprepared:
             raise exc
+
+    def _restore_rigid(self) -> None:
+        """Earlier rigid-body keys back on their objects (the new bake did not finish)."""
+        for name, baked in self.rigid_suspended.items():
+            rigid_keys.restore(bpy.data.objects[name], baked)
+        self.rigid_suspended.clear()
 
     def _emitter_read(self, read) -> list:
         """``read()`` of emitter values: a failure there is the particle system's; [] once the
@@ -205,10 +233,14 @@ class BakeJob:
         between = []
         substeps = self.settings.substeps
         depsgraph = self.view_layer.depsgraph
+        self._rigid_between = []
         for k in range(1, substeps):  # sub-frame motion keys: one per sub-step boundary
             self.scene.frame_set(frame, subframe=k / substeps)
             between.append(self.extractor.sample_motion(emitters=False))
             between[-1][0].extend(self._emitter_read(self.extractor.emitter_motion))
+            if self.rigid is not None:
+                with self._system(self.rigid):
+                    self._rigid_between.append(rigid.kinematic_now(self.rigid))
         self.scene.frame_set(frame + 1)
         end = self.extractor.sample(depsgraph, frame + 1, emitters=False)
         end.emitters = self._emitter_read(lambda: self.extractor.sample_emitters(depsgraph,
@@ -221,6 +253,9 @@ class BakeJob:
         own, samples = {}, {}
         if self.particles is not None:
             own[self.particles.system] = inputs.emitters
+        if self.rigid is not None:
+            with self._system(self.rigid):
+                own[self.rigid.system] = self.rigid.begin(nxt, self._rigid_between)
         for mesh in list(self.meshes):
             with self._system(mesh):
                 samples[mesh.ob.name] = mesh.read(self.view_layer.depsgraph, nxt)
@@ -228,6 +263,9 @@ class BakeJob:
         return own, samples
 
     def _write(self, report, mesh_samples: dict, frame: int) -> None:
+        if self.rigid is not None:
+            with self._system(self.rigid):
+                self.rigid.write_frame(frame)
         if self.particles is not None:
             with self._system(self.particles):
                 self.particles.record(report.reports[self.particles.system], frame)
@@ -239,6 +277,8 @@ class BakeJob:
     def _channel(self, system):
         if self.particles is not None and system is self.particles.system:
             return self.particles
+        if self.rigid is not None and system is self.rigid.system:
+            return self.rigid
         return next(mesh for mesh in self.meshes if mesh.system is system)
 
     # -- end ------------------------------------------------------------------------------------
@@ -254,12 +294,23 @@ class BakeJob:
             mesh.writer.flush()
         if self.particles is not None:
             self.particles.flush()
+        if self.rigid is not None:
+            self.rigid.flush()
         emitters = self.particles.emitters if self.particles is not None else []
         paths = self.particles.commit(meta) if self.particles is not None else {}
         mesh_paths = {mesh.ob.name: mesh.commit(dict(meta, kind="spring_mesh", object=mesh.ob.name,
                                                      hash=self.mesh_hashes[mesh.ob.name]))
                       for mesh in self.meshes}
+        rigid_path = self.rigid.commit(dict(meta, hash=self.rigid_hash)) \
+            if self.rigid is not None else None
         results.resume_refresh(self.scene)
+        if self.rigid is not None:
+            rigid_keys.write_keys(self.scene, self.rigid.objects,
+                                  os.path.join(rigid_path, rigid.STREAM), self.frame_start,
+                                  self.frame_end)
+            for ob in self.rigid.objects:
+                ob.physanim.rigid_body.bake_hash = self.rigid_hash
+            self.rigid_suspended.clear()
         for ob in emitters:
             results.attach(context, self.scene, ob,
                            relative_path(os.path.join(paths[ob.name], STREAM)),
@@ -272,13 +323,16 @@ class BakeJob:
         self.scene.frame_set(self.original_frame)
         self.settings.bake_hash = inputs_hash.scene_hash(
             [*(self.hashes[ob.name] for ob in emitters),
-             *(self.mesh_hashes[mesh.ob.name] for mesh in self.meshes)])
+             *(self.mesh_hashes[mesh.ob.name] for mesh in self.meshes),
+             *([self.rigid_hash] if self.rigid is not None else [])])
         return self._summary(len(emitters))
 
     def _summary(self, emitters: int) -> str:
         took = time.perf_counter() - self.started
         stats = self.stats
         what = f", {len(self.meshes)} spring mesh(es)" if self.meshes else ""
+        if self.rigid is not None:
+            what += f", {len(self.rigid.objects)} rigid bod{'y' if len(self.rigid.objects) == 1 else 'ies'}"
         info = (f"baked {emitters} emitter(s){what}, frames {self.frame_start}-"
                 f"{self.frame_end}: {stats['births']:,} births, peak {stats['peak']:,} "
                 f"alive, {took:.2f} s")
@@ -307,6 +361,9 @@ class BakeJob:
         for ob in self.roles.spring_meshes:
             springs.restore_modifier(ob, self.suspended.get(ob.name))
         self.suspended.clear()
+        if self.rigid is not None:
+            self.rigid.abort()
+        self._restore_rigid()
         results.resume_refresh(self.scene)
         if self.scene.frame_current != self.original_frame:
             self.scene.frame_set(self.original_frame)

@@ -40,6 +40,11 @@ def spring_cache_dir(scene, ob) -> str:
                         safe_name(ob.name))
 
 
+def rigid_cache_dir(scene) -> str:
+    """Every rigid body of a scene bakes into one folder: they are one system."""
+    return os.path.join(cache_root(scene), safe_name(scene.name), "rigid_bodies")
+
+
 def relative_path(path: str) -> str:
     """'//'-relative path with forward slashes when the .blend is saved (else absolute)."""
     if bpy.data.filepath:

@@ -111,6 +111,20 @@ def action_fcurves(anim_data: bpy.types.AnimData | None) -> list[bpy.types.FCurv
     return curves
 
 
+def curves_of(action: bpy.types.Action | None, slot_identifier: str = "") -> list:
+    """The F-curves of ``action`` for the slot ``slot_identifier`` (4.4+; 4.2: all curves)."""
+    if action is None:
+        return []
+    if not HAS_SLOTS:
+        return list(action.fcurves)
+    slot = next((s for s in action.slots if s.identifier == slot_identifier), None)
+    if slot is None:
+        return []
+    return [fc for layer in action.layers for strip in layer.strips
+            if strip.type == 'KEYFRAME' and strip.channelbag(slot) is not None
+            for fc in strip.channelbag(slot).fcurves]
+
+
 def fcurve_ensure(bag: Any, data_path: str, index: int = 0) -> bpy.types.FCurve:
     """The F-curve ``data_path[index]`` of a channelbag (or 4.2 action), created when missing.
 

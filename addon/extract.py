@@ -28,6 +28,11 @@ class Roles:
     colliders: list = field(default_factory=list)
     forces: list = field(default_factory=list)
     spring_meshes: list = field(default_factory=list)
+    rigid_bodies: list = field(default_factory=list)
+
+    def __bool__(self) -> bool:
+        """Whether anything bakes."""
+        return bool(self.emitters or self.spring_meshes or self.rigid_bodies)
 
 
 def gather(scene, only: set[str] | None = None) -> Roles:
@@ -40,17 +45,20 @@ def gather(scene, only: set[str] | None = None) -> Roles:
     objects = sorted(scene.objects, key=lambda o: o.name)
     emitters = [o for o in objects if o.physanim.emitter.enabled]
     meshes = [o for o in objects if o.physanim.spring_mesh.enabled]
+    rigid = [o for o in objects if o.physanim.rigid_body.enabled]
     if only is not None:
-        unknown = only - {o.name for o in emitters} - {o.name for o in meshes}
+        unknown = only - {o.name for o in emitters + meshes + rigid}
         if unknown:
-            raise PhysanimError(f"not an emitter or spring mesh in scene \"{scene.name}\": "
-                                f"{', '.join(sorted(unknown))}")
+            raise PhysanimError(f"not an emitter, spring mesh or rigid body in scene "
+                                f"\"{scene.name}\": {', '.join(sorted(unknown))}")
         meshes = [o for o in meshes if o.name in only]
         chosen = {a.name for o in emitters if o.name in only for a in emitter_chain(o)}
         emitters = [o for o in emitters if o.name in chosen]
+        # rigid bodies push each other: choosing one bakes them all
+        rigid = rigid if any(o.name in only for o in rigid) else []
     return Roles(emitters,
                  [o for o in objects if o.physanim.collider.enabled],
-                 [o for o in objects if o.physanim.force.enabled], meshes)
+                 [o for o in objects if o.physanim.force.enabled], meshes, rigid)
 
 
 def emitter_chain(ob) -> list:

@@ -26,7 +26,7 @@ def _rna_dump(pg, prefix: str = "", animated: frozenset = frozenset()) -> dict:
     out = {}
     for prop in pg.bl_rna.properties:
         key = prop.identifier
-        if key in ("rna_type", "result", "bake_hash", "bake_info", "enabled"):
+        if key in ("rna_type", "result", "bake_hash", "bake_info", "enabled", *RIGID_BAKE_PROPS):
             continue
         path = f"{prefix}{key}"
         if path in animated:
@@ -75,8 +75,39 @@ def _input_modifiers(ob) -> list:
     return out
 
 
+RIGID_BAKE_PROPS = ("previous_action", "previous_slot", "previous_rotation_mode",
+                    "previous_basis", "baked_action")  # what a bake sets: not inputs
+TRANSFORM_PATHS = ("location", "rotation_euler", "rotation_quaternion", "rotation_axis_angle",
+                   "scale", "delta_location", "delta_rotation_euler", "delta_scale")
+
+
+def _own_motion(ob) -> dict:
+    """A rigid body's own animation and pose — before its bake's keys, which are outputs: the
+    action and pose the bake set aside when it has keyed the object, else the current ones."""
+    p = ob.physanim.rigid_body
+    if p.baked_action is not None:
+        action, slot, mode = p.previous_action, p.previous_slot, p.previous_rotation_mode
+        basis = list(p.previous_basis)
+    else:
+        ad = ob.animation_data
+        action = ad.action if ad is not None else None
+        slot = getattr(ad, "action_slot", None) if ad is not None else None
+        slot, mode = (slot.identifier if slot is not None else ""), ob.rotation_mode
+        basis = [v for row in ob.matrix_basis for v in row]
+    keys = []
+    for fc in compat.curves_of(action, slot):
+        co = np.empty(len(fc.keyframe_points) * 2, np.float32)
+        fc.keyframe_points.foreach_get("co", co)
+        keys.append((fc.data_path, fc.array_index, hashlib.sha1(co.tobytes()).hexdigest()))
+    moving = any(path in TRANSFORM_PATHS for path, _, _ in keys)
+    return {"keys": sorted(keys), "mode": mode,
+            "basis": None if moving else [round(float(v), 6) for v in basis]}
+
+
 def _object_record(ob, role: str | None) -> dict:
     """Everything about one object a bake reads, independent of the current frame."""
+    if role == "rigid_body":
+        return _rigid_record(ob)
     animated = frozenset(_animated_paths(ob))
     record = {"name": ob.name, "type": ob.type, "anim": _animation_dump(ob),
               "parent": _object_record(ob.parent, None) if ob.parent else None,
@@ -84,8 +115,7 @@ def _object_record(ob, role: str | None) -> dict:
               "constraints": [(c.type, c.name, round(c.influence, 7), c.mute)
                               for c in ob.constraints],
               "modifiers": _input_modifiers(ob)}
-    for channel in ("location", "rotation_euler", "rotation_quaternion", "rotation_axis_angle",
-                    "scale", "delta_location", "delta_rotation_euler", "delta_scale"):
+    for channel in TRANSFORM_PATHS:
         if channel not in animated:
             record[channel] = [round(float(v), 7) for v in getattr(ob, channel)]
     record["rotation_mode"] = ob.rotation_mode
@@ -97,6 +127,18 @@ def _object_record(ob, role: str | None) -> dict:
         record["mesh"] = (hashlib.sha1(co.tobytes()).hexdigest(), len(ob.data.polygons),
                           _animation_dump(ob.data.shape_keys) if ob.data.shape_keys else [])
     return record
+
+
+def _rigid_record(ob) -> dict:
+    """A rigid body's record: its own motion instead of its channels (its keys are outputs)."""
+    co = np.empty(len(ob.data.vertices) * 3, np.float32) if ob.type == 'MESH' else np.zeros(0)
+    if ob.type == 'MESH':
+        ob.data.vertices.foreach_get("co", co)
+    return {"name": ob.name, "type": ob.type, "own": _own_motion(ob),
+            "parent": _object_record(ob.parent, None) if ob.parent else None,
+            "parent_type": ob.parent_type, "modifiers": _input_modifiers(ob),
+            "props": _rna_dump(ob.physanim.rigid_body, "physanim.rigid_body."),
+            "mesh": hashlib.sha1(co.tobytes()).hexdigest()}
 
 
 def inputs_hash(scene, ob, role: str, roles: Roles | None = None) -> str:
@@ -129,3 +171,17 @@ def emitter_hash(scene, emitter, roles: Roles | None = None) -> str:
 
 def scene_hash(hashes: list[str]) -> str:
     return hashlib.sha256("".join(sorted(hashes)).encode()).hexdigest()
+
+
+def rigid_hash(scene, objects: list, roles: Roles | None = None) -> str:
+    """Digest of what the rigid bodies' bake depends on: scene settings, every rigid body, every
+    collider (they all push each other, so one hash covers them all)."""
+    roles = roles if roles is not None else gather(scene)
+    h = hashlib.sha256()
+    settings = _rna_dump(scene.physanim)
+    settings.update(fps=convert.fps(scene), gravity=convert.gravity(scene),
+                    anim=_animation_dump(scene), role="rigid_body")
+    records = [_object_record(o, "rigid_body") for o in objects]
+    records += [_object_record(o, "collider") for o in roles.colliders]
+    h.update(json.dumps([settings, records], sort_keys=True).encode())
+    return h.hexdigest()

@@ -12,14 +12,15 @@ import bpy
 from bpy.props import BoolProperty, EnumProperty, IntProperty
 
 from ..core.errors import PhysanimError
-from . import bake, cache_paths, results, springs
+from . import bake, cache_paths, results, rigid_keys, springs
 
 FRAME_BUDGET_S = 0.05  # modal: simulate for at most this long per timer tick, then redraw
 
 
 def _selected_names(context) -> set[str]:
     return {o.name for o in context.selected_objects
-            if o.physanim.emitter.enabled or o.physanim.spring_mesh.enabled}
+            if o.physanim.emitter.enabled or o.physanim.spring_mesh.enabled
+            or o.physanim.rigid_body.enabled}
 
 
 class PHYSANIM_OT_bake(bpy.types.Operator):
@@ -158,6 +159,13 @@ class PHYSANIM_OT_free_bake(bpy.types.Operator):
                     freed += 1
                     if folder:
                         remove_cache(folder)
+            rigid = [ob for ob in scene.objects if ob.physanim.rigid_body.baked_action is not None
+                     and (chosen is None or ob.name in chosen)]
+            for ob in rigid:  # rigid bodies: their keys go, their own animation comes back
+                freed += rigid_keys.free_keys(ob)
+            if rigid and not any(ob.physanim.rigid_body.baked_action is not None
+                                 for ob in scene.objects) and bpy.data.filepath:
+                remove_cache(cache_paths.rigid_cache_dir(scene))
             # leftovers of results the user deleted by hand: keyed objects and cache folders
             for ob in scene.objects:
                 if chosen is not None and ob.name not in chosen:
@@ -174,7 +182,8 @@ class PHYSANIM_OT_free_bake(bpy.types.Operator):
             self.report({'ERROR'}, str(exc))
             return {'CANCELLED'}
         if not results.result_objects(scene) and not any(
-                springs.cache_modifier(o) for o in scene.objects if o.type == 'MESH'):
+                springs.cache_modifier(o) for o in scene.objects if o.type == 'MESH') and not any(
+                o.physanim.rigid_body.baked_action is not None for o in scene.objects):
             scene.physanim.bake_hash = ""
             scene.physanim.bake_info = ""
         self.report({'INFO'}, f"freed {freed} bake(s)")

@@ -29,11 +29,16 @@ def bake_status(scene) -> tuple[str, str]:
             elif ob.physanim.spring_mesh.bake_hash != inputs_hash.inputs_hash(
                     scene, ob, "spring_mesh", roles):
                 outdated.append(ob.name)
+        if roles.rigid_bodies:
+            current = inputs_hash.rigid_hash(scene, roles.rigid_bodies, roles)
+            for ob in roles.rigid_bodies:
+                baked = ob.physanim.rigid_body.bake_hash
+                (missing if not baked else outdated if baked != current else []).append(ob.name)
     except Exception as exc:  # a panel must draw whatever the scene holds
         return f"Cannot check bake: {exc}", 'ERROR'
     if outdated:
         return f"Bake is outdated (the scene changed): {', '.join(outdated)}", 'ERROR'
-    everything = len(roles.emitters) + len(roles.spring_meshes)
+    everything = len(roles.emitters) + len(roles.spring_meshes) + len(roles.rigid_bodies)
     if missing and len(missing) == everything:
         return "Not baked", 'INFO'
     if missing:
@@ -71,6 +76,7 @@ class PHYSANIM_PT_object(_PhysicsPanel, bpy.types.Panel):
         row.prop(p.force, "enabled", toggle=True, icon='FORCE_WIND')
         if context.object.type == 'MESH':
             row.prop(p.spring_mesh, "enabled", toggle=True, icon='MOD_CLOTH')
+            row.prop(p.rigid_body, "enabled", toggle=True, icon='RIGID_BODY')
         draw_bake_buttons(self.layout.box(), context.scene)
 
 
@@ -310,6 +316,7 @@ class PHYSANIM_PT_scene(bpy.types.Panel):
         col.prop(s, "frame_end", text="End")
         layout.prop(s, "substeps")
         layout.prop(s, "integrator")
+        layout.prop(s, "rigid_substeps")
         if s.integrator == 'RK45':
             layout.prop(s, "tolerance")
         layout.prop(s, "seed")

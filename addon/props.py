@@ -267,6 +267,68 @@ class PHYSANIM_PG_spring_mesh(bpy.types.PropertyGroup):
     bake_hash: StringProperty(name="Bake Hash", options={'HIDDEN'})
 
 
+RIGID_SHAPE_ITEMS = [
+    ('AUTO', "Automatic", "What you see: a mesh that is exactly a box collides as a box, one "
+     "whose vertices all lie on a sphere as a sphere, any other as its convex hull"),
+    ('BOX', "Box", "The mesh's bounding box (in the object's axes)"),
+    ('SPHERE', "Sphere", "A sphere around the mesh's bounding box centre"),
+    ('CAPSULE', "Capsule", "A capsule along the object's local Z axis around the mesh"),
+    ('CONVEX_HULL', "Convex Hull", "The convex hull of the mesh's vertices"),
+]
+
+
+class PHYSANIM_PG_rigid_body(bpy.types.PropertyGroup):
+    enabled: BoolProperty(name="Rigid Body", options=STATIC,
+                          description="Simulate this object as a rigid body")
+    shape: EnumProperty(name="Shape", items=RIGID_SHAPE_ITEMS, default='AUTO', options=STATIC)
+    mass: FloatProperty(name="Mass", min=1.0e-6, max=1.0e9, default=1.0, unit='MASS',
+                        options=STATIC, description="Total mass, kg")
+    use_density: BoolProperty(name="Use Density", options=STATIC,
+                              description="Mass from the shape's volume times the density")
+    density: FloatProperty(name="Density", min=1.0e-6, max=1.0e6, default=1000.0,
+                           options=STATIC, description="kg/m³ (water: 1000, wood: 500-900, "
+                                                       "steel: 7850)")
+    restitution: FloatProperty(name="Restitution", min=0.0, max=1.0, default=0.0,
+                               subtype='FACTOR', options=STATIC,
+                               description="Bounciness, multiplied by the other side's (a "
+                                           "collider's or body's); impacts slower than 1 m/s "
+                                           "never bounce")
+    friction: FloatProperty(name="Friction", min=0.0, max=100.0, soft_max=2.0, default=0.5,
+                            options=STATIC, description="Coulomb friction coefficient "
+                                                        "(combined with the other side's)")
+    initial_velocity: FloatVectorProperty(name="Initial Velocity", size=3, unit='VELOCITY',
+                                          min=-1.0e5, max=1.0e5, options=STATIC,
+                                          description="World velocity at the start, m/s")
+    initial_angular_velocity: FloatVectorProperty(
+        name="Initial Angular Velocity", size=3, min=-1.0e4, max=1.0e4, options=STATIC,
+        description="World angular velocity at the start, rad/s")
+    kinematic: BoolProperty(name="Animated", options=STATIC,
+                            description="Follows its own animation and pushes other bodies "
+                                        "(is not pushed)")
+    linear_damping: FloatProperty(name="Damping", min=0.0, max=1.0e3, soft_max=1.0,
+                                  default=0.04, options=STATIC,
+                                  description="Fraction of linear velocity lost per second")
+    angular_damping: FloatProperty(name="Angular Damping", min=0.0, max=1.0e3, soft_max=1.0,
+                                   default=0.1, options=STATIC,
+                                   description="Fraction of angular velocity lost per second")
+    use_custom_com: BoolProperty(name="Custom Center of Mass", options=STATIC)
+    com: FloatVectorProperty(name="Center of Mass", size=3, unit='LENGTH', min=-1.0e5,
+                             max=1.0e5, options=STATIC,
+                             description="From the object's origin, in its axes (scaled), m")
+    use_custom_inertia: BoolProperty(name="Custom Inertia", options=STATIC)
+    inertia: FloatVectorProperty(name="Inertia", size=3, min=1.0e-12, max=1.0e12,
+                                 default=(1.0, 1.0, 1.0), options=STATIC,
+                                 description="Principal moments about the object's X, Y, Z "
+                                             "axes through the center of mass, kg m²")
+    previous_action: PointerProperty(type=bpy.types.Action, options={'HIDDEN'},
+                                     description="The animation the bake set aside")
+    previous_slot: StringProperty(options={'HIDDEN'})
+    previous_rotation_mode: StringProperty(options={'HIDDEN'})
+    previous_basis: FloatVectorProperty(size=16, options={'HIDDEN'})
+    baked_action: PointerProperty(type=bpy.types.Action, options={'HIDDEN'})
+    bake_hash: StringProperty(name="Bake Hash", options={'HIDDEN'})
+
+
 class PHYSANIM_PG_result(bpy.types.PropertyGroup):
     """Set on the points object a bake makes: where its per-frame cache lives."""
 
@@ -282,6 +344,7 @@ class PHYSANIM_PG_object(bpy.types.PropertyGroup):
     collider: PointerProperty(type=PHYSANIM_PG_collider)
     force: PointerProperty(type=PHYSANIM_PG_force)
     spring_mesh: PointerProperty(type=PHYSANIM_PG_spring_mesh)
+    rigid_body: PointerProperty(type=PHYSANIM_PG_rigid_body)
     result: PointerProperty(type=PHYSANIM_PG_result)
 
 
@@ -292,6 +355,10 @@ class PHYSANIM_PG_scene(bpy.types.PropertyGroup):
                           description="Simulation steps per frame", options=STATIC)
     integrator: EnumProperty(name="Integrator", items=INTEGRATOR_ITEMS, default='SYMPLECTIC_EULER',
                              options=STATIC)
+    rigid_substeps: IntProperty(name="Rigid Body Substeps", default=8, min=1, max=1000,
+                                soft_max=50, options=STATIC,
+                                description="Contact solver steps per frame for rigid bodies "
+                                            "(more: stiffer stacks, fewer: faster)")
     tolerance: FloatProperty(name="Tolerance", default=1.0e-4, min=1.0e-10, max=1.0,
                              precision=6, description="Error tolerance of the adaptive RK45", options=STATIC)
     seed: IntProperty(name="Seed", min=0, max=2**31 - 1, options=STATIC)
@@ -311,7 +378,8 @@ class PHYSANIM_PG_scene(bpy.types.PropertyGroup):
 
 
 CLASSES = (PHYSANIM_PG_stop, PHYSANIM_PG_emitter, PHYSANIM_PG_collider, PHYSANIM_PG_force,
-           PHYSANIM_PG_virtual, PHYSANIM_PG_spring_mesh, PHYSANIM_PG_result, PHYSANIM_PG_object,
+           PHYSANIM_PG_virtual, PHYSANIM_PG_spring_mesh, PHYSANIM_PG_rigid_body,
+           PHYSANIM_PG_result, PHYSANIM_PG_object,
            PHYSANIM_PG_scene)
 
 

@@ -104,7 +104,9 @@ class ContactSet:
         a, b: (k,) body rows. normal: (k, 3) unit, from a to b. t1, t2: (k, 3) tangents.
         ra, rb: (k, 3) anchors: the contact point from each body's centre of mass when found.
         base: (k,) base separation (see the module docstring) [m].
-        friction, restitution: (k,) combined coefficients.
+        friction, restitution: (k,) combined coefficients (friction: the geometric mean of the
+            two sides'; restitution: their product, so a body bounces only where both are
+            bouncy — a default, unbouncy box stays down on any collider).
         relative: (k,) normal relative velocity when found [m/s] (for restitution).
         impulse: (k, 3) accumulated impulse along normal, t1, t2 [N s].
         total: (k,) sum of the normal impulses applied this frame (0: never touched).

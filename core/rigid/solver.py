@@ -184,7 +184,7 @@ class RigidBodySolver:
         return cs_.ContactSet(
             a, b, n, t1, t2, ra, rb, found.separation - np.einsum("ki,ki->k", n, rb - ra),
             np.sqrt(bodies.friction[a] * bodies.friction[b]),
-            np.maximum(bodies.restitution[a], bodies.restitution[b]), rel, impulse,
+            bodies.restitution[a] * bodies.restitution[b], rel, impulse,
             np.zeros(len(a)), pair, ~(dynamic[a] & dynamic[b]), slots, groups)
 
     def substep(self, step: _FrameStep, k: int) -> None:

@@ -23,7 +23,7 @@ def test_ball_bounce_apex_ratio_is_restitution_squared(e):
     model, solver, state = world(sphere("Ball", r, (0.0, 0.0, 1.0 + r), restitution=e,
                                         linear_damping=0.0, angular_damping=0.0), substeps=16)
     heights = []
-    run(solver, state, 96, colliders=[ground()],
+    run(solver, state, 96, colliders=[ground(restitution=1.0)],  # combined: e * 1
         each=lambda f, s: heights.append(s.body_x[0, 2] - r))
     # apex heights sampled per frame: refine each by the parabola through the top 3 samples
     apexes = _apexes(np.array(heights))

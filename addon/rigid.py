@@ -1,0 +1,183 @@
+"""Rigid bodies in Blender: each tagged object -> core body settings (shape from what the user
+sees, mass properties from the shape), simulated as one system, streamed per frame into a cache
+and written at the end as location / rotation_quaternion keys (:mod:`.rigid_keys`).
+
+Shapes and mass properties are computed in the object's axes with its scale applied, so a
+scaled cube is a box of its visible size; the body's orientation is the object's rotation.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..core.cache import CacheWriter
+from ..core.collision.hull import convex_hull
+from ..core.contact import ColliderPaths
+from ..core.contact.fit import fit_analytic_shape
+from ..core.errors import PhysanimError
+from ..core.rigid import quaternion as quat
+from ..core.rigid.mass import (box_mass, capsule_mass, polyhedron_mass, sphere_mass,
+                               with_override)
+from ..core.rigid.model import RigidBodyBuilder, RigidBodySettings
+from ..core.rigid.solver import RigidBodySolver, RigidBodySystem
+from ..core.transforms import decompose
+from . import limits
+from .cache_paths import rigid_cache_dir
+from .extract import world_matrix
+from .mesh_read import evaluated_mesh
+
+STREAM = "bodies"
+SPHERE_TOLERANCE = 1e-3  # vertices within this fraction of the radius: the mesh is a sphere
+
+
+def shape_of(co: np.ndarray, tris: np.ndarray, choice: str) -> tuple[str, dict]:
+    """The core shape of a mesh (local vertices ``co`` with the object's scale applied) and
+    its parameters. Automatic: an axis-aligned box is a BOX, vertices all on a sphere a
+    SPHERE, anything else its CONVEX_HULL."""
+    lo, hi = co.min(axis=0), co.max(axis=0)
+    centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    if choice == 'AUTO':
+        fitted, _ = fit_analytic_shape(co, tris) if len(tris) else ("MESH", None)
+        dist = np.linalg.norm(co - centre, axis=1)
+        if fitted == "BOX":
+            choice = 'BOX'
+        elif len(co) >= 12 and np.ptp(dist) <= SPHERE_TOLERANCE * dist.max():
+            choice = 'SPHERE'
+        else:
+            choice = 'CONVEX_HULL'
+    if choice == 'BOX':
+        return "BOX", {"half_extents": tuple(half), "shape_centre": tuple(centre)}
+    if choice == 'SPHERE':
+        radius = float(np.linalg.norm(co - centre, axis=1).max())
+        return "SPHERE", {"radius": radius, "shape_centre": tuple(centre)}
+    if choice == 'CAPSULE':
+        radius = float(max(half[0], half[1]))
+        length = float(max(half[2] - radius, 0.0))
+        return "CAPSULE", {"radius": radius, "half_extents": (0.0, 0.0, length),
+                           "shape_centre": tuple(centre)}
+    hull = convex_hull(co)
+    if hull.dimension < 3:
+        return "HULL", {"hull": co}  # flat: the mass properties step says so, naming it
+    return "HULL", {"hull": hull.points[hull.vertices]}
+
+
+def mass_of(shape: str, params: dict, p, name: str):
+    """Mass properties from the shape (density or total mass), with the user's overrides."""
+    amount = {"density": p.density} if p.use_density else {"mass": p.mass}
+    if shape == "BOX":
+        props = box_mass(params["half_extents"], **amount)
+    elif shape == "SPHERE":
+        props = sphere_mass(params["radius"], **amount)
+    elif shape == "CAPSULE":
+        props = capsule_mass(params["radius"], params["half_extents"][2], **amount)
+    else:
+        hull = convex_hull(params["hull"])
+        if hull.dimension < 3:
+            raise PhysanimError("the mesh is flat (its convex hull has no volume) — give it "
+                                "thickness, or use the Box shape", obj=name, kind="rigid body")
+        props = polyhedron_mass(hull.points, hull.triangles, name=name, **amount)
+        return with_override(props, com=tuple(p.com) if p.use_custom_com else None,
+                             inertia=np.diag(p.inertia) if p.use_custom_inertia else None,
+                             name=name)
+    centre = np.asarray(params["shape_centre"])
+    props = with_override(props, com=tuple(centre + props.com))  # the shape's centre
+    return with_override(props, com=tuple(p.com) if p.use_custom_com else None,
+                         inertia=np.diag(p.inertia) if p.use_custom_inertia else None,
+                         name=name)
+
+
+def body_settings(ob, depsgraph, frame: int) -> RigidBodySettings:
+    """Core settings of a rigid-body object at the bake's first frame."""
+    if ob.type != 'MESH':
+        raise PhysanimError(f"a rigid body must be a mesh object (this is a {ob.type})",
+                            obj=ob.name, frame=frame, kind="rigid body")
+    p = ob.physanim.rigid_body
+    m = world_matrix(ob, frame, "rigid body")
+    origin, q, scale = decompose(m)
+    if np.any(scale <= 0.0):
+        raise PhysanimError(f"its scale {tuple(np.round(scale, 4))} is negative or zero — "
+                            "apply a positive scale", obj=ob.name, frame=frame, kind="rigid body")
+    mesh = evaluated_mesh(ob, depsgraph, triangles=True)
+    if len(mesh.co) == 0:
+        raise PhysanimError("the mesh has no vertices", obj=ob.name, frame=frame,
+                            kind="rigid body")
+    co = mesh.co * scale
+    shape, params = shape_of(co, mesh.triangles, p.shape)
+    try:
+        props = mass_of(shape, params, p, ob.name)
+        return RigidBodySettings(
+            ob.name, shape, props, restitution=p.restitution, friction=p.friction,
+            linear_damping=p.linear_damping, angular_damping=p.angular_damping,
+            kinematic=p.kinematic, position=tuple(origin), orientation=tuple(q),
+            velocity=tuple(p.initial_velocity),
+            angular_velocity=tuple(p.initial_angular_velocity), **params)
+    except PhysanimError as exc:
+        raise PhysanimError(exc.detail, obj=ob.name, frame=frame, kind="rigid body") from exc
+    except ValueError as exc:
+        raise PhysanimError(str(exc), obj=ob.name, frame=frame, kind="rigid body") from exc
+
+
+class RigidBake:
+    """All rigid bodies of a bake, simulated as one system; one cache stream for all."""
+
+    def __init__(self, scene, objects: list, inputs_hash: str):
+        self.scene, self.objects, self.inputs_hash = scene, objects, inputs_hash
+        self.writer = CacheWriter(rigid_cache_dir(scene))
+        self.system: RigidBodySystem | None = None
+        self.scale = {}
+
+    @property
+    def label(self) -> str:
+        names = ", ".join(f'"{ob.name}"' for ob in self.objects)
+        return f"rigid bodies ({names})"
+
+    def prepare(self, depsgraph, frame: int, colliders: ColliderPaths) -> None:
+        builder = RigidBodyBuilder()
+        for ob in self.objects:
+            builder.add_body(body_settings(ob, depsgraph, frame))
+            self.scale[ob.name] = decompose(world_matrix(ob, frame, "rigid body"))[2]
+        self.model = builder.finalize()
+        self.kinematic = [i for i, ob in enumerate(self.objects)
+                          if ob.physanim.rigid_body.kinematic]
+        self.solver = RigidBodySolver(self.model, self.scene.physanim.rigid_substeps,
+                                      limits.bounds(self.scene), colliders)
+        self.system = RigidBodySystem(self.solver, self.model.state())
+        self._last = self._kinematic_matrices(frame)
+        self.write_frame(frame)
+
+    def _kinematic_matrices(self, frame: int) -> dict:
+        return {i: world_matrix(self.objects[i], frame, "rigid body") for i in self.kinematic}
+
+    def begin(self, frame: int, between: list[dict]) -> dict:
+        """The kinematic bodies' paths over the interval to ``frame`` (the scene is there;
+        ``between``: their matrices at the sub-frames, read by the bake)."""
+        now = self._kinematic_matrices(frame)
+        paths = {i: np.stack([self._last[i], *(b[i] for b in between), now[i]])
+                 for i in self.kinematic}
+        self._last = now
+        return paths
+
+    def write_frame(self, frame: int) -> None:
+        state = self.system.state
+        self.writer.write_frame(STREAM, frame, {
+            "position": state.origins(self.model), "rotation": quat.normalized(state.body_q)})
+
+    def flush(self) -> None:
+        self.writer.flush()
+
+    def commit(self, meta: dict) -> str:
+        return self.writer.commit(dict(meta, kind="rigid_bodies",
+                                       objects=[ob.name for ob in self.objects]))
+
+    def abort(self) -> None:
+        self.writer.abort()
+
+
+def rigid_objects(scene) -> list:
+    return sorted((ob for ob in scene.objects if ob.physanim.rigid_body.enabled),
+                  key=lambda o: o.name)
+
+
+def kinematic_now(bake: RigidBake) -> dict:
+    """Matrices of the kinematic bodies at the scene's current (sub-)frame."""
+    frame = bake.scene.frame_current_final
+    return {i: world_matrix(bake.objects[i], frame, "rigid body") for i in bake.kinematic}

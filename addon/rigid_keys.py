@@ -1,0 +1,144 @@
+"""Rigid-body results: one key per frame on ``location`` and ``rotation_quaternion``, in bulk.
+
+The bake's keys go into an action of their own; the object's previous animation (action, slot,
+rotation mode) is set aside on the object and given back by Free Bake. Keys are the object's
+local transform (its parent's motion and parent inverse removed), so the evaluated world
+transform equals the simulated one; the scale channel is left as it was. The result needs no
+extension to play or render.
+"""
+from __future__ import annotations
+
+import bpy
+import numpy as np
+
+from ..core.cache import read_frame
+from ..core.rigid import quaternion as quat
+from . import compat, convert
+
+
+def _tracks(folder: str, frame_start: int, frame_end: int):
+    """(frames (f,), positions (f, n, 3), rotations (f, n, 4)) of the cached frames."""
+    frames, pos, rot = [], [], []
+    for f in range(frame_start, frame_end + 1):
+        a = read_frame(folder, f)
+        if a is not None:
+            frames.append(f)
+            pos.append(a["position"])
+            rot.append(a["rotation"])
+    return np.array(frames, np.float64), np.array(pos), np.array(rot)
+
+
+def _continuous(q: np.ndarray) -> np.ndarray:
+    """(f, 4) quaternions with signs chosen so that consecutive keys interpolate the short way."""
+    q = q.copy()
+    for k in range(1, len(q)):
+        if q[k] @ q[k - 1] < 0.0:
+            q[k] = -q[k]
+    return q
+
+
+def _local(ob, scene, frames, position, rotation):
+    """The object's local location and rotation per frame from its world pose: the parent's
+    world matrix (at each frame) and the parent inverse removed."""
+    if ob.parent is None:
+        return position, rotation
+    keep = scene.frame_current
+    loc, rot = np.empty_like(position), np.empty_like(rotation)
+    scale = np.array(ob.matrix_world.to_scale())
+    for k, f in enumerate(frames):
+        scene.frame_set(int(f))
+        parent = convert.matrix(ob.parent.matrix_world) @ convert.matrix(ob.matrix_parent_inverse)
+        world = np.eye(4)
+        world[:3, :3] = quat.to_matrix(rotation[k]) * scale
+        world[:3, 3] = position[k]
+        basis = np.linalg.inv(parent) @ world
+        lin = basis[:3, :3]
+        loc[k] = basis[:3, 3]
+        rot[k] = quat.from_matrix(lin / np.linalg.norm(lin, axis=0))[0]
+    scene.frame_set(keep)
+    return loc, rot
+
+
+def write_keys(scene, objects: list, folder: str, frame_start: int, frame_end: int) -> None:
+    """Key every dynamic body's location and rotation_quaternion once per frame."""
+    frames, pos, rot = _tracks(folder, frame_start, frame_end)
+    for i, ob in enumerate(objects):
+        if ob.physanim.rigid_body.kinematic or not len(frames):
+            continue
+        loc, q = _local(ob, scene, frames, pos[:, i], rot[:, i])
+        action = _baked_action(ob)
+        bag = compat.channelbag_for(ob, action)
+        f32 = frames.astype(np.float32)
+        q = _continuous(q)
+        for axis in range(3):
+            compat.set_keys(compat.fcurve_ensure(bag, "location", axis), f32, loc[:, axis])
+        for axis in range(4):
+            compat.set_keys(compat.fcurve_ensure(bag, "rotation_quaternion", axis), f32,
+                            q[:, axis])
+        ob.rotation_mode = 'QUATERNION'
+
+
+def _baked_action(ob) -> bpy.types.Action:
+    """The action the bake keys: an earlier bake's, else a new one — then the object's own
+    animation and pose are set aside first, for Free Bake to give back."""
+    p = ob.physanim.rigid_body
+    if p.baked_action is None:
+        anim = ob.animation_data
+        p.previous_action = anim.action if anim is not None else None
+        slot = getattr(anim, "action_slot", None) if anim is not None else None
+        p.previous_slot = slot.identifier if slot is not None else ""
+        p.previous_rotation_mode = ob.rotation_mode
+        p.previous_basis = [v for row in ob.matrix_basis for v in row]
+        p.baked_action = bpy.data.actions.new(f"PhysAnim {ob.name}")
+    return p.baked_action
+
+
+def _own_animation(ob) -> None:
+    """Give the object its own animation, rotation mode and pose (as before its first bake)."""
+    p = ob.physanim.rigid_body
+    anim = ob.animation_data
+    if anim is not None:
+        anim.action = p.previous_action
+        if p.previous_action is not None and p.previous_slot and compat.HAS_SLOTS:
+            slot = next((s for s in p.previous_action.slots
+                         if s.identifier == p.previous_slot), None)
+            if slot is not None:
+                anim.action_slot = slot
+    ob.rotation_mode = p.previous_rotation_mode or ob.rotation_mode
+    basis = np.array(p.previous_basis).reshape(4, 4)
+    if p.previous_action is None and np.any(basis):
+        ob.matrix_basis = [list(row) for row in basis]  # rows, as Matrix stores them
+
+
+def suspend(ob):
+    """While baking, the object shows its own animation (the bake starts from it, not from an
+    earlier bake's keys). Returns what :func:`restore` needs (None: nothing was baked)."""
+    p = ob.physanim.rigid_body
+    if p.baked_action is None:
+        return None
+    _own_animation(ob)
+    return p.baked_action
+
+
+def restore(ob, baked) -> None:
+    """Put an earlier bake's keys back (the new bake failed or was cancelled)."""
+    if baked is not None:
+        compat.channelbag_for(ob, baked)
+        ob.rotation_mode = 'QUATERNION'
+
+
+def free_keys(ob) -> bool:
+    """Remove the bake's keys and give the object its own animation back. True if it had one."""
+    p = ob.physanim.rigid_body
+    baked = p.baked_action
+    if baked is None:
+        return False
+    _own_animation(ob)
+    p.previous_action = None
+    p.previous_slot = ""
+    p.previous_rotation_mode = ""
+    p.baked_action = None
+    p.bake_hash = ""
+    if baked.users == 0:
+        bpy.data.actions.remove(baked)
+    return True

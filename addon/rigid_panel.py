@@ -1,0 +1,104 @@
+"""The Rigid Body panel: the role's settings, the shape it collides as and the mass properties
+the bake will use (shown, and overridable)."""
+from __future__ import annotations
+
+import bpy
+import numpy as np
+
+from ..core.errors import PhysanimError
+from .panels import AUTO_SHAPE_PREVIEW_LIMIT, _PhysicsPanel
+
+SHAPE_NAMES = {"BOX": "Box", "SPHERE": "Sphere", "CAPSULE": "Capsule", "HULL": "Convex Hull"}
+
+
+def _preview(ob):
+    """(shape, mass properties) the bake would use, or (None, message)."""
+    from ..core.transforms import decompose
+    from . import convert, rigid
+
+    p = ob.physanim.rigid_body
+    if ob.type != 'MESH':
+        return None, "A rigid body must be a mesh"
+    if len(ob.data.vertices) > AUTO_SHAPE_PREVIEW_LIMIT:
+        return None, "Shape and mass: decided when baking"
+    if not len(ob.data.vertices):
+        return None, "The mesh has no vertices"
+    scale = decompose(convert.matrix(ob.matrix_world))[2]
+    co = np.empty(len(ob.data.vertices) * 3, np.float32)
+    ob.data.vertices.foreach_get("co", co)
+    ob.data.calc_loop_triangles()
+    tris = np.empty(len(ob.data.loop_triangles) * 3, np.int32)
+    ob.data.loop_triangles.foreach_get("vertices", tris)
+    shape, params = rigid.shape_of(co.reshape(-1, 3).astype(np.float64) * np.abs(scale),
+                                   tris.reshape(-1, 3), p.shape)
+    try:
+        return shape, rigid.mass_of(shape, params, p, ob.name)
+    except (PhysanimError, ValueError) as exc:
+        return None, str(exc)
+
+
+class PHYSANIM_PT_rigid_body(_PhysicsPanel, bpy.types.Panel):
+    bl_label = "Rigid Body"
+    bl_parent_id = "PHYSANIM_PT_object"
+
+    @classmethod
+    def poll(cls, context):
+        ob = context.object
+        return ob is not None and ob.physanim.rigid_body.enabled
+
+    def draw(self, context):
+        ob = context.object
+        p = ob.physanim.rigid_body
+        layout = self.layout
+        layout.use_property_split = True
+        layout.prop(p, "kinematic")
+        layout.prop(p, "shape")
+        shape, props = _preview(ob)
+        if shape is None:
+            layout.label(text=props, icon='ERROR' if "mesh" in props.lower() else 'INFO')
+        else:
+            layout.label(text=f"Collides as: {SHAPE_NAMES[shape]}, {props.mass:.4g} kg, "
+                              f"{props.volume:.4g} m³", icon='INFO')
+        col = layout.column(align=True)
+        col.prop(p, "use_density")
+        col.prop(p, "density" if p.use_density else "mass")
+        col = layout.column(align=True)
+        col.prop(p, "friction")
+        col.prop(p, "restitution")
+        col = layout.column(align=True)
+        col.prop(p, "linear_damping")
+        col.prop(p, "angular_damping")
+        col = layout.column(align=True)
+        col.active = not p.kinematic
+        col.prop(p, "initial_velocity")
+        col.prop(p, "initial_angular_velocity")
+        self._mass_overrides(layout, p, shape, props)
+
+    @staticmethod
+    def _mass_overrides(layout, p, shape, props) -> None:
+        col = layout.column(align=True)
+        col.prop(p, "use_custom_com")
+        if p.use_custom_com:
+            col.prop(p, "com", text="")
+        elif shape is not None:
+            col.label(text="Center of mass: " + ", ".join(f"{v:.4g}" for v in props.com) + " m")
+        col = layout.column(align=True)
+        col.prop(p, "use_custom_inertia")
+        if p.use_custom_inertia:
+            col.prop(p, "inertia", text="")
+        elif shape is not None:
+            moments = np.diag(props.inertia)
+            col.label(text="Inertia: " + ", ".join(f"{v:.4g}" for v in moments) + " kg m²")
+
+
+CLASSES = (PHYSANIM_PT_rigid_body,)
+
+
+def register() -> None:
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+
+
+def unregister() -> None:
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)

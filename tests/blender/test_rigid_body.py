@@ -1,0 +1,162 @@
+"""Rigid bodies seen from Blender: tagging a primitive with nothing else set bakes it onto the
+ground; results are location / rotation_quaternion keys, one per frame, whose evaluated world
+transform equals the simulated one (parents and scale too); free bake gives the object's own
+animation back; a failed or cancelled bake leaves the previous keys as they were."""
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+import bpy
+import numpy as np
+import pytest
+
+FRAME_START, FRAME_END = 1, 48
+
+
+def _addon(ext, name: str):
+    return sys.modules[f"{ext.__name__}.addon.{name}"]
+
+
+def _scene(tmp_path: Path):
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end = FRAME_START, FRAME_END
+    scene.physanim.frame_start, scene.physanim.frame_end = FRAME_START, FRAME_END
+    scene.render.fps, scene.render.fps_base = 24, 1.0
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "rigid.blend"))
+    return scene
+
+
+def _ground(size=20.0):
+    bpy.ops.mesh.primitive_plane_add(size=size, location=(0.0, 0.0, 0.0))
+    ob = bpy.context.object
+    ob.name = "Ground"
+    ob.physanim.collider.enabled = True
+    return ob
+
+
+def _body(kind="cube", location=(0.0, 0.0, 3.0), **props):
+    add = {"cube": bpy.ops.mesh.primitive_cube_add, "uv": bpy.ops.mesh.primitive_uv_sphere_add,
+           "ico": bpy.ops.mesh.primitive_ico_sphere_add, "monkey": bpy.ops.mesh.primitive_monkey_add}
+    add[kind](location=location)
+    ob = bpy.context.object
+    ob.physanim.rigid_body.enabled = True
+    for key, value in props.items():
+        setattr(ob.physanim.rigid_body, key, value)
+    return ob
+
+
+def _curves(ext, ob) -> dict:
+    compat = _addon(ext, "compat")
+    return {(fc.data_path, fc.array_index): fc for fc in compat.action_fcurves(ob.animation_data)}
+
+
+def _world(ob, frame: int) -> np.ndarray:
+    bpy.context.scene.frame_set(frame)
+    return np.array(ob.matrix_world)
+
+
+def test_default_cube_falls_and_rests_on_a_default_plane(physanim_ext, tmp_path):
+    scene = _scene(tmp_path)
+    _ground()
+    cube = _body()
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    curves = _curves(physanim_ext, cube)
+    assert {("location", i) for i in range(3)} <= set(curves)
+    assert {("rotation_quaternion", i) for i in range(4)} <= set(curves)
+    assert all(len(fc.keyframe_points) == FRAME_END - FRAME_START + 1 for fc in curves.values())
+    assert cube.rotation_mode == 'QUATERNION'
+    z = [_world(cube, f)[2, 3] for f in range(FRAME_START, FRAME_END + 1)]
+    assert z[0] == pytest.approx(3.0, abs=1e-6)
+    assert z[-1] == pytest.approx(1.0, abs=0.01)  # the 2 m cube rests on the plane
+    assert max(abs(z[-1] - v) for v in z[-12:]) < 1e-3  # at rest, no jitter
+    assert "rigid bod" in scene.physanim.bake_info
+
+
+@pytest.mark.parametrize("kind, shape", [("cube", "BOX"), ("uv", "SPHERE"), ("ico", "SPHERE"),
+                                         ("monkey", "HULL")])
+def test_automatic_shape_follows_what_the_user_sees(physanim_ext, tmp_path, kind, shape):
+    _scene(tmp_path)
+    ob = _body(kind)
+    rigid = _addon(physanim_ext, "rigid")
+    settings = rigid.body_settings(ob, bpy.context.evaluated_depsgraph_get(), FRAME_START)
+    assert settings.shape == shape
+
+
+def test_keys_reproduce_the_simulation_under_a_scaled_rotated_parent(physanim_ext, tmp_path):
+    _scene(tmp_path)
+    _ground()
+    parent = bpy.data.objects.new("Rig", None)
+    bpy.context.scene.collection.objects.link(parent)
+    parent.location = (1.0, -2.0, 0.5)
+    parent.rotation_euler = (0.0, 0.0, math.radians(30.0))
+    parent.scale = (2.0, 2.0, 2.0)
+    cube = _body(location=(0.0, 0.0, 0.0))
+    cube.parent = parent
+    cube.location = (0.0, 0.0, 2.0)
+    cube.scale = (0.25, 0.25, 0.25)
+    bpy.context.view_layer.update()
+    start = np.array(cube.matrix_world)
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    cache = _addon(physanim_ext, "cache_paths").rigid_cache_dir(bpy.context.scene)
+    read_frame = sys.modules[f"{physanim_ext.__name__}.core.cache"].read_frame
+    quat = sys.modules[f"{physanim_ext.__name__}.core.rigid.quaternion"]
+    for f in (FRAME_START, 20, FRAME_END):
+        m = _world(cube, f)
+        sim = read_frame(str(Path(cache) / "bodies"), f)
+        np.testing.assert_allclose(m[:3, 3], sim["position"][0], atol=1e-4)
+        r = quat.to_matrix(sim["rotation"][:1])[0]
+        np.testing.assert_allclose(m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0), r, atol=1e-4)
+        np.testing.assert_allclose(np.linalg.norm(m[:3, :3], axis=0), 0.5, atol=1e-5)  # scale
+    np.testing.assert_allclose(_world(cube, FRAME_START), start, atol=1e-5)
+
+
+def test_free_bake_gives_the_objects_own_animation_back(physanim_ext, tmp_path):
+    _scene(tmp_path)
+    _ground()
+    cube = _body(location=(0.0, 0.0, 4.0))
+    cube.keyframe_insert("location", frame=1)
+    cube.location = (3.0, 0.0, 4.0)
+    cube.keyframe_insert("location", frame=48)
+    own = cube.animation_data.action
+    mode = cube.rotation_mode
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    assert cube.animation_data.action is not own
+    assert bpy.ops.physanim.free_bake() == {'FINISHED'}
+    assert cube.animation_data.action is own
+    assert cube.rotation_mode == mode
+    assert _world(cube, 48)[0, 3] == pytest.approx(3.0)
+
+
+def test_failed_or_cancelled_bake_keeps_the_previous_keys(physanim_ext, tmp_path):
+    _scene(tmp_path)
+    ground = _ground()
+    cube = _body()
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    before = [_world(cube, f) for f in (1, 24, 48)]
+    job = _addon(physanim_ext, "bake").BakeJob(bpy.context)
+    for _ in range(5):
+        job.step(bpy.context)
+    job.abort()  # cancelled half-way
+    after = [_world(cube, f) for f in (1, 24, 48)]
+    for a, b in zip(before, after):
+        np.testing.assert_allclose(a, b, atol=1e-7)
+    ground.physanim.collider.shape = 'MESH'  # rigid bodies cannot meet Mesh colliders yet
+    with pytest.raises(RuntimeError, match='collider "Ground"'):
+        bpy.ops.physanim.bake()
+    for a, f in zip(before, (1, 24, 48)):
+        np.testing.assert_allclose(a, _world(cube, f), atol=1e-7)
+
+
+def test_bake_status_is_outdated_after_an_edit_and_current_after_rebake(physanim_ext, tmp_path):
+    scene = _scene(tmp_path)
+    _ground()
+    cube = _body()
+    panels = _addon(physanim_ext, "panels")
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    assert panels.bake_status(scene)[1] == 'CHECKMARK'
+    cube.physanim.rigid_body.mass = 3.0
+    assert "outdated" in panels.bake_status(scene)[0]
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    assert panels.bake_status(scene)[1] == 'CHECKMARK'
