@@ -330,12 +330,16 @@ class BakeJob:
     def _summary(self, emitters: int) -> str:
         took = time.perf_counter() - self.started
         stats = self.stats
-        what = f", {len(self.meshes)} spring mesh(es)" if self.meshes else ""
+        parts = [f"{emitters} emitter(s)"]
+        if self.meshes:
+            parts.append(f"{len(self.meshes)} spring mesh(es)")
         if self.rigid is not None:
-            what += f", {len(self.rigid.objects)} rigid bod{'y' if len(self.rigid.objects) == 1 else 'ies'}"
-        info = (f"baked {emitters} emitter(s){what}, frames {self.frame_start}-"
-                f"{self.frame_end}: {stats['births']:,} births, peak {stats['peak']:,} "
-                f"alive, {took:.2f} s")
+            count = len(self.rigid.objects)
+            parts.append(f"{count} rigid bod{'y' if count == 1 else 'ies'}")
+        births = (f": {stats['births']:,} births, peak {stats['peak']:,} alive" if emitters
+                  else "")
+        info = (f"baked {', '.join(parts)}, frames {self.frame_start}-{self.frame_end}"
+                f"{births}, {took:.2f} s")
         self.settings.bake_info = info
         return info
 

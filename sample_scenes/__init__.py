@@ -1,4 +1,5 @@
 """Sample scenes: each module has ``build(scene)``, a self-check ``check(scene)``, the frames that
 show its point (``SHOWCASE``, rendered by the demo) and the one pictured in the README
 (``README_FRAME``, one of them)."""
-SCENES = ("fountain", "fireworks", "robot_arm", "jelly_cube", "flag", "cloth_drape", "mesh_pour")
+SCENES = ("fountain", "fireworks", "robot_arm", "jelly_cube", "flag", "cloth_drape", "mesh_pour",
+          "rigid_bodies")

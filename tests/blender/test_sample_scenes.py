@@ -13,7 +13,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 SCENES = ("fountain", "fireworks", "robot_arm", "jelly_cube", "flag", "cloth_drape",
-          "mesh_pour")
+          "mesh_pour", "rigid_bodies")
 
 
 def test_every_sample_scene_is_tested():
@@ -29,13 +29,15 @@ def test_sample_scene_bakes_and_passes_its_self_check(physanim_ext, tmp_path, na
     module.build(scene)
     emitters = [o for o in scene.objects if o.physanim.emitter.enabled]
     meshes = [o for o in scene.objects if o.physanim.spring_mesh.enabled]
-    assert emitters or meshes
+    rigid = [o for o in scene.objects if o.physanim.rigid_body.enabled]
+    assert emitters or meshes or rigid
     bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / f"{name}.blend"))
 
     assert bpy.ops.physanim.bake() == {'FINISHED'}
 
     assert all(o.physanim.emitter.result is not None for o in emitters)
     assert all(o.modifiers.get("physanim") is not None for o in meshes)
+    assert all(o.physanim.rigid_body.baked_action is not None for o in rigid)
     assert module.check(scene) == []
 
 
