@@ -3,6 +3,7 @@
 # the core solver's cost per particle-step. Prints markdown tables; asserts no timings.
 # Usage: tools/bench.sh [particles] [--quick] [--count N] [--frames F] [--profile] [--help]
 #        tools/bench.sh cloth [--frames F] [--grid N]      tools/bench.sh broadphase [--quick]
+#        tools/bench.sh rigid [--cubes N] [--frames F] [--stack N]
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 venv="$("$here/tools/venv.sh" "${PHYSANIM_BLENDER:-4.5}")"
@@ -11,6 +12,7 @@ case "${1:-}" in
   cloth) shift; exec "$venv/bin/python" bench/cloth.py "$@" ;;
   broadphase) shift; exec "$venv/bin/python" bench/broadphase.py "$@" ;;
   collision) shift; exec "$venv/bin/python" bench/collision.py "$@" ;;
+  rigid) shift; exec "$venv/bin/python" bench/rigid.py "$@" ;;
   particles) shift; exec "$venv/bin/python" bench/particles.py "$@" ;;
   *) exec "$venv/bin/python" bench/particles.py "$@" ;;
 esac

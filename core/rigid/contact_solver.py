@@ -138,6 +138,14 @@ class ContactSet:
     def __len__(self) -> int:
         return len(self.a)
 
+    @property
+    def dirs(self) -> np.ndarray:
+        """(k, 3, 3) rows normal, t1, t2 of every contact."""
+        return self._dirs
+
+    def __post_init__(self):
+        self._dirs = np.stack([self.normal, self.t1, self.t2], axis=1)
+
 
 def manifolds(key: np.ndarray, a: np.ndarray, b: np.ndarray, dynamic: np.ndarray):
     """Points grouped by pair (``key`` sorted or not): (slots (m, S) point indices, -1 padded;
@@ -168,19 +176,21 @@ class Jacobians:
 
 
 def jacobians(cs: ContactSet, inv_mass: np.ndarray, inv_inertia: np.ndarray, ra: np.ndarray,
-              rb: np.ndarray) -> Jacobians:
+              rb: np.ndarray, block: np.ndarray | None = None) -> Jacobians:
     """Constraint rows of every contact for the bodies' current world inverse inertias and
     lever arms ra, rb (k, 3): from each body's centre of mass to one common world point, so an
     impulse and its reaction act at the same point (angular momentum is conserved)."""
-    dirs = np.stack([cs.normal, cs.t1, cs.t2], axis=1)  # (k, 3, 3)
+    dirs = cs.dirs
     ang_a = np.cross(ra[:, None, :], dirs)
     ang_b = np.cross(rb[:, None, :], dirs)
     wa = np.einsum("kij,kdj->kdi", inv_inertia[cs.a], ang_a)
     wb = np.einsum("kij,kdj->kdi", inv_inertia[cs.b], ang_b)
     k = (inv_mass[cs.a] + inv_mass[cs.b])[:, None] + np.einsum("kdi,kdi->kd", ang_a, wa) + \
         np.einsum("kdi,kdi->kd", ang_b, wb)
+    if block is None:
+        block = _blocks(cs, inv_mass, ang_a[:, 0], ang_b[:, 0], wa[:, 0], wb[:, 0])
     return Jacobians(ang_a, ang_b, wa, wb, np.where(k > 0.0, 1.0 / np.maximum(k, 1e-300), 0.0),
-                     _blocks(cs, inv_mass, ang_a[:, 0], ang_b[:, 0], wa[:, 0], wb[:, 0]))
+                     block)
 
 
 def _blocks(cs: ContactSet, inv_mass, ang_a, ang_b, wa, wb) -> np.ndarray:
@@ -205,7 +215,7 @@ def apply(v: np.ndarray, w: np.ndarray, cs: ContactSet, jac: Jacobians, idx: np.
     """Apply impulse changes (len(idx), 3) along normal/t1/t2 of contacts ``idx``: body b
     gains, body a loses. Within a colour each dynamic body appears once, so plain indexed
     writes are exact; static rows get zero changes."""
-    dirs = np.stack([cs.normal[idx], cs.t1[idx], cs.t2[idx]], axis=1)
+    dirs = cs.dirs[idx]
     p = np.einsum("kd,kdi->ki", d_impulse, dirs)
     a, b = cs.a[idx], cs.b[idx]
     v[a] -= inv_mass[a][:, None] * p
@@ -217,7 +227,7 @@ def apply(v: np.ndarray, w: np.ndarray, cs: ContactSet, jac: Jacobians, idx: np.
 def relative_velocity(v, w, cs: ContactSet, jac: Jacobians, idx: np.ndarray) -> np.ndarray:
     """(len(idx), 3) relative velocity of b's anchor against a's along normal, t1, t2."""
     a, b = cs.a[idx], cs.b[idx]
-    dirs = np.stack([cs.normal[idx], cs.t1[idx], cs.t2[idx]], axis=1)
+    dirs = cs.dirs[idx]
     return (np.einsum("kdi,ki->kd", dirs, v[b] - v[a])
             + np.einsum("kdi,ki->kd", jac.ang_b[idx], w[b])
             - np.einsum("kdi,ki->kd", jac.ang_a[idx], w[a]))
@@ -234,15 +244,13 @@ def solve(v, w, cs: ContactSet, jac: Jacobians, inv_mass, separation: np.ndarray
         scales = _scales(cs, separation, np.where(valid, slots, 0), h, soft, static_soft,
                          use_bias)
         pulling = _normal_block(v, w, cs, jac, group, slots, valid, scales, inv_mass)
-        for k in range(slots.shape[1]):
-            column = slots[:, k]
-            seq = pulling & valid[:, k]
-            if seq.any():
-                _normal_points(v, w, cs, jac, column[seq], [x[seq, k] for x in scales],
-                               inv_mass)
-            pts = column[valid[:, k]]
-            if len(pts):
-                _friction(v, w, cs, jac, pts, inv_mass)
+        if pulling.any():
+            for k in range(slots.shape[1]):
+                seq = pulling & valid[:, k]
+                if seq.any():
+                    _normal_points(v, w, cs, jac, slots[seq, k], [x[seq, k] for x in scales],
+                                   inv_mass)
+        _friction(v, w, cs, jac, slots, valid, inv_mass)
 
 
 def _scales(cs, separation, idx, h, soft, static_soft, use_bias):
@@ -302,19 +310,35 @@ def _normal_points(v, w, cs, jac, pts, scales, inv_mass) -> None:
     apply(v, w, cs, jac, pts, d, inv_mass)
 
 
-def _friction(v, w, cs, jac, pts, inv_mass) -> None:
-    """Coulomb friction of points ``pts`` (one per manifold): the two tangent impulses clamped
-    to the cone friction * normal impulse."""
-    rel_t = relative_velocity(v, w, cs, jac, pts)[:, 1:]
-    old = cs.impulse[pts, 1:]
-    new = old - jac.mass[pts, 1:] * rel_t
-    limit = cs.friction[pts] * cs.impulse[pts, 0]
-    norm = np.linalg.norm(new, axis=1)
-    new *= np.where(norm > limit, limit / np.maximum(norm, 1e-300), 1.0)[:, None]
-    d = np.zeros((len(pts), 3))
-    d[:, 1:] = new - old
-    cs.impulse[pts, 1:] = new
-    apply(v, w, cs, jac, pts, d, inv_mass)
+def _friction(v, w, cs, jac, slots, valid, inv_mass) -> None:
+    """Coulomb friction of every point of the manifolds ``slots`` (g, S): each point's two
+    tangent impulses from the same velocities, shared (divided by the manifold's point count,
+    so the points together do what one would alone: symmetric, as the normal block), then
+    clamped to its cone friction * normal impulse; applied per manifold."""
+    idx = np.where(valid, slots, 0)
+    flat = idx.ravel()
+    rel_t = relative_velocity(v, w, cs, jac, flat)[:, 1:].reshape(idx.shape + (2,))
+    count = valid.sum(axis=1)[:, None, None]
+    old = cs.impulse[idx, 1:]
+    new = old - jac.mass[idx, 1:] * rel_t / np.maximum(count, 1)
+    limit = cs.friction[idx] * cs.impulse[idx, 0]
+    norm = np.linalg.norm(new, axis=2)
+    new *= np.where(norm > limit, limit / np.maximum(norm, 1e-300), 1.0)[..., None]
+    d = np.where(valid[..., None], new - old, 0.0)
+    cs.impulse[idx[valid], 1:] = new[valid]
+    _apply_manifolds(v, w, cs, jac, idx, d, inv_mass, rows=slice(1, 3))
+
+
+def _apply_manifolds(v, w, cs, jac, idx, d, inv_mass, rows) -> None:
+    """Apply impulse changes d (g, S, r) along the contact directions ``rows`` of the points
+    idx (g, S) of g manifolds (no dynamic body in two of them): summed per manifold."""
+    p = np.einsum("gsr,gsri->gi", d, cs.dirs[idx][:, :, rows])
+    head = idx[:, 0]
+    a, b = cs.a[head], cs.b[head]
+    v[a] -= inv_mass[a][:, None] * p
+    v[b] += inv_mass[b][:, None] * p
+    w[a] -= np.einsum("gsr,gsri->gi", d, jac.wa[idx][:, :, rows])
+    w[b] += np.einsum("gsr,gsri->gi", d, jac.wb[idx][:, :, rows])
 
 
 def warm_start(v, w, cs: ContactSet, jac: Jacobians, inv_mass) -> None:

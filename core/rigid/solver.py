@@ -86,6 +86,7 @@ class _FrameStep:
     inv_mass: np.ndarray  # (N,)
     places: np.ndarray | None  # (k, 3) each contact's place in its lower body (warm starting)
     report: RigidReport
+    block: np.ndarray | None = None  # manifold blocks of the current contacts
 
 
 class RigidBodySolver:
@@ -155,6 +156,7 @@ class RigidBodySolver:
         step.contacts = self._prepare(b, found, memory)
         step.places = warm.places(found.a, found.b, found.point, b.x, b.q, len(b))[1]
         step.x0, step.q0 = b.x.copy(), b.q.copy()
+        step.block = None
         step.report.contacts = max(step.report.contacts, len(found.a))
 
     def _remembered(self, step: _FrameStep) -> warm.Remembered:
@@ -243,8 +245,10 @@ class RigidBodySolver:
         pa = b.x[cs.a] + quat.rotate(turn[cs.a], cs.ra)
         pb = b.x[cs.b] + quat.rotate(turn[cs.b], cs.rb)
         mid = 0.5 * (pa + pb)
-        return cs_.jacobians(cs, step.inv_mass, self._inverse_inertia(step, b.q),
-                             mid - b.x[cs.a], mid - b.x[cs.b])
+        jac = cs_.jacobians(cs, step.inv_mass, self._inverse_inertia(step, b.q),
+                            mid - b.x[cs.a], mid - b.x[cs.b], step.block)
+        step.block = jac.block  # manifold blocks: once per contact search (they barely change)
+        return jac
 
     def _separation(self, step: _FrameStep) -> np.ndarray:
         """Each contact's current separation from the bodies' motion since it was found."""
