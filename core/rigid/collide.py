@@ -60,6 +60,8 @@ class Bodies:
     name: tuple
     hulls: HullSet | None = None
     hull_index: np.ndarray | None = None
+    sleeping: np.ndarray | None = None  # (N,) resting bodies: found only to be woken
+    moving: np.ndarray | None = None  # (N,) bodies that move on their own this frame
 
     def __len__(self) -> int:
         return len(self.shape)
@@ -123,6 +125,9 @@ def _candidate_pairs(bodies: Bodies, reach: np.ndarray, ground: np.ndarray):
     pairs = UniformGrid().pairs(bodies.x[idx] - grow, bodies.x[idx] + grow)
     i, j = idx[pairs[:, 0]], idx[pairs[:, 1]]
     keep = bodies.dynamic[i] | bodies.dynamic[j]
+    if bodies.sleeping is not None:  # a moving kinematic body or collider wakes sleepers
+        wake = bodies.sleeping & ~bodies.dynamic
+        keep |= (wake[i] & bodies.moving[j]) | (bodies.moving[i] & wake[j])
     return i[keep], j[keep]
 
 

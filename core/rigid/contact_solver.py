@@ -344,9 +344,13 @@ def _apply_manifolds(v, w, cs, jac, idx, d, inv_mass, rows) -> None:
 def warm_start(v, w, cs: ContactSet, jac: Jacobians, inv_mass) -> None:
     """Apply the accumulated impulses (from the last sub-step, or the last frame's contacts
     at the same place) before solving: resting contacts start where they ended."""
-    for pts in _by_slot(cs):
-        cs.total[pts] += cs.impulse[pts, 0]
-        apply(v, w, cs, jac, pts, cs.impulse[pts], inv_mass)
+    for group in cs.groups:
+        slots = cs.slots[group]
+        valid = slots >= 0
+        idx = np.where(valid, slots, 0)
+        cs.total[idx[valid]] += cs.impulse[idx[valid], 0]
+        d = np.where(valid[..., None], cs.impulse[idx], 0.0)
+        _apply_manifolds(v, w, cs, jac, idx, d, inv_mass, rows=slice(0, 3))
 
 
 def _by_slot(cs: ContactSet):

@@ -153,13 +153,25 @@ class RigidBodyState:
     """Time-varying, (n, ...) each: body_x centre of mass [m], body_q unit quaternion,
     body_P linear momentum [kg m/s], body_L angular momentum about the centre of mass
     [kg m^2/s], all world. ``contacts``: the last frame's contact impulses by place, to
-    warm-start the next frame (:mod:`.warm`)."""
+    warm-start the next frame (:mod:`.warm`); the sleep bookkeeping (:mod:`.sleep`)."""
 
     body_x: np.ndarray
     body_q: np.ndarray
     body_P: np.ndarray
     body_L: np.ndarray
     contacts: Remembered = field(default_factory=Remembered.none)
+    body_asleep: np.ndarray | None = None  # (n,) bool: resting, not simulated (:mod:`.sleep`)
+    body_slow: np.ndarray | None = None  # (n,) int: consecutive slow frames
+    body_island: np.ndarray | None = None  # (n,) int: the island a sleeping body sleeps in
+
+    def __post_init__(self):
+        n = len(self.body_x)
+        if self.body_asleep is None:
+            self.body_asleep = np.zeros(n, bool)
+        if self.body_slow is None:
+            self.body_slow = np.zeros(n, np.int64)
+        if self.body_island is None:
+            self.body_island = np.full(n, -1, np.int64)
 
     def origins(self, model: RigidBodyModel) -> np.ndarray:
         """(n, 3) world positions of the objects' origins (x - R com)."""

@@ -20,7 +20,7 @@ from ..errors import SimulationError
 from ..transforms import TransformPath
 from ..world import SolverSystem, World, WorldFrame
 from . import contact_solver as cs_
-from . import dynamics, warm
+from . import dynamics, sleep, warm
 from . import quaternion as quat
 from .bodies import Posed, collider_bodies, frame_bodies
 from .collide import Bodies, Found, find_contacts
@@ -62,11 +62,13 @@ class RigidFrameInputs:
 
 @dataclass
 class RigidReport:
-    """A frame: contact points found, the deepest overlap [m] at its end, bodies moving."""
+    """A frame: contact points found, the deepest overlap [m] at its end, bodies moving,
+    bodies asleep."""
 
     contacts: int = 0
     overlap: float = 0.0
     moving: int = 0
+    sleeping: int = 0
 
 
 @dataclass
@@ -87,6 +89,7 @@ class _FrameStep:
     places: np.ndarray | None  # (k, 3) each contact's place in its lower body (warm starting)
     report: RigidReport
     block: np.ndarray | None = None  # manifold blocks of the current contacts
+    awake: np.ndarray | None = None  # indices of the dynamic bodies simulated this frame
 
 
 class RigidBodySolver:
@@ -144,8 +147,30 @@ class RigidBodySolver:
         step = _FrameStep(state, inputs, inputs.frame_dt / self.substeps, g, posed, rows, bodies,
                           None, None, None, bodies.v.copy(), bodies.w.copy(), inv_mass, None,
                           RigidReport())
+        fast = np.linalg.norm(bodies.v, axis=1) + np.linalg.norm(bodies.w, axis=1) * \
+            bodies.bound > sleep.WAKE_SPEED
+        self._wake_state(step, moving=fast)
         self._collide(step, inputs.frame_dt, state.contacts)
+        woken = sleep.wakers(state.body_asleep, state.body_island, step.contacts.a,
+                             step.contacts.b, (bodies.dynamic & fast) | bodies.moving)
+        if woken.any():  # touched: those islands take part in this frame after all
+            state.body_asleep[woken] = False
+            state.body_slow[woken] = 0
+            self._wake_state(step, bodies.moving)
+            self._collide(step, inputs.frame_dt, state.contacts)
         return step
+
+    def _wake_state(self, step: _FrameStep, moving: np.ndarray) -> None:
+        """The frame's awake dynamic bodies; sleeping ones weigh on others as if static."""
+        b, m, state = step.bodies, self.model, step.state
+        n = m.body_count
+        asleep = np.concatenate([state.body_asleep, np.zeros(len(b) - n, bool)])
+        b.dynamic = np.concatenate([~m.body_kinematic, np.zeros(len(b) - n, bool)]) & ~asleep
+        b.sleeping, b.moving = asleep, moving & ~b.dynamic
+        step.awake = np.nonzero(b.dynamic[:n])[0]
+        step.inv_mass = np.where(b.dynamic, np.concatenate(
+            [m.body_inv_mass, np.zeros(len(b) - n)]), 0.0)
+        step.v[asleep], step.w[asleep] = 0.0, 0.0
 
     def _collide(self, step: _FrameStep, duration: float, memory: warm.Remembered) -> None:
         """Find the contacts for the next ``duration`` [s] from the bodies' current poses and
@@ -225,7 +250,7 @@ class RigidBodySolver:
 
     def _forces(self, step: _FrameStep) -> None:
         """Gravity and damping on the dynamic bodies' velocities."""
-        d, m, h = self.dynamic, self.model, step.h
+        d, m, h = step.awake, self.model, step.h
         step.v[d] += h * step.g
         step.v[d] *= (1.0 / (1.0 + h * m.body_linear_damping[d]))[:, None]
         step.w[d] *= (1.0 / (1.0 + h * m.body_angular_damping[d]))[:, None]
@@ -233,7 +258,7 @@ class RigidBodySolver:
     def _inverse_inertia(self, step: _FrameStep, q: np.ndarray) -> np.ndarray:
         """(N, 3, 3) world inverse inertia (0 for bodies impulses do not move)."""
         out = np.zeros((len(step.bodies), 3, 3))
-        d = self.dynamic
+        d = step.awake
         out[d] = dynamics.world_tensor(q[d], self.model.body_inv_inertia[d])
         return out
 
@@ -262,7 +287,7 @@ class RigidBodySolver:
     def _integrate(self, step: _FrameStep) -> None:
         """Positions of the dynamic bodies; their orientation turns with L held, and w is
         re-derived at the new orientation (so torque-free motion keeps L exactly)."""
-        d, m, h, b = self.dynamic, self.model, step.h, step.bodies
+        d, m, h, b = step.awake, self.model, step.h, step.bodies
         b.x[d] += h * step.v[d]
         L = dynamics.angular_momentum(b.q[d], m.body_inertia[d], step.w[d])
         b.q[d] = dynamics.integrate_orientation(b.q[d], m.body_inv_inertia[d], L, h)
@@ -270,7 +295,7 @@ class RigidBodySolver:
 
     def _store(self, step: _FrameStep, last: bool) -> None:
         """Momenta and poses into the State; at the frame's end, the impulses by place."""
-        d, m, b, state = self.dynamic, self.model, step.bodies, step.state
+        d, m, b, state = step.awake, self.model, step.bodies, step.state
         n = m.body_count
         state.body_x[:] = b.x[:n]
         state.body_q[:] = b.q[:n]
@@ -279,10 +304,27 @@ class RigidBodySolver:
         self._check(step)
         if last:
             state.contacts = self._remembered(step)
+            self._sleep(step)
             sep = self._separation(step)
             step.report.overlap = float(max(0.0, -sep.min())) if len(sep) else 0.0
             step.report.moving = int(np.count_nonzero(
                 np.linalg.norm(step.v[d], axis=1) > 1e-3))
+
+    def _sleep(self, step: _FrameStep) -> None:
+        """Islands at rest for long enough fall asleep (their momenta become zero)."""
+        m, b, state, cs = self.model, step.bodies, step.state, step.contacts
+        n = m.body_count
+        speed = np.linalg.norm(step.v[:n], axis=1) + np.linalg.norm(step.w[:n], axis=1) * \
+            m.body_bound
+        pinned = np.zeros(n, bool)
+        for this, other in ((cs.a, cs.b), (cs.b, cs.a)):
+            touch = (this < n) & b.moving[other]
+            pinned[this[touch]] = True
+        now = sleep.update(state.body_asleep, state.body_slow, state.body_island, speed, cs.a,
+                           cs.b, b.dynamic[:n], pinned)
+        state.body_P[now] = 0.0
+        state.body_L[now] = 0.0
+        step.report.sleeping = int(state.body_asleep.sum())
 
     def _check(self, step: _FrameStep) -> None:
         state = step.state

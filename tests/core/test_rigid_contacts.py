@@ -177,3 +177,20 @@ def test_hull_rocks_fall_onto_a_box_and_the_ground_and_rest():
     rest = [0, *range(2, model.body_count)]  # the ball may still roll: nothing stops it
     assert speeds[rest].max() < 0.01, speeds
     assert abs(state.body_x[1, 2] - 0.3) < 0.01  # the ball is on the ground
+
+
+def test_resting_bodies_fall_asleep_and_wake_when_hit():
+    """A box at rest sleeps (no motion at all, no cost); a ball rolled into it wakes it."""
+    resting = box("Box", (0.5, 0.5, 0.5), (0.0, 0.0, 0.5))
+    ball = sphere("Ball", 0.3, (-8.0, 0.0, 0.3), velocity=(0.0, 0.0, 0.0))
+    model, solver, state = world(resting, ball)
+    reports = run(solver, state, 36, colliders=[ground()])
+    assert reports[-1].sleeping == 2  # both at rest for half a second
+    x0 = state.body_x[0].copy()
+    run(solver, state, 24, colliders=[ground()], start=36)
+    assert np.array_equal(state.body_x[0], x0)  # asleep: exactly still
+    state.body_asleep[1] = False  # the ball is thrown at the box
+    state.body_P[1] = (model.body_mass[1] * 12.0, 0.0, 0.0)
+    reports = run(solver, state, 36, colliders=[ground()], start=60)
+    assert np.linalg.norm(state.body_x[0] - x0) > 0.05  # woken and pushed
+    assert not state.body_asleep[0] or reports[-1].sleeping >= 1
