@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import importlib
 
-_MODULES = ("props", "ops", "panels", "rigid_panel", "results", "cli")
+_MODULES = ("props", "ops", "panels", "results", "cli")
 
 
 def _modules():

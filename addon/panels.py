@@ -332,11 +332,17 @@ CLASSES = (PHYSANIM_PT_object, PHYSANIM_PT_emitter, PHYSANIM_PT_emitter_look,
            PHYSANIM_PT_spring_mesh, PHYSANIM_PT_spring_virtual, PHYSANIM_PT_scene)
 
 
+def _classes() -> tuple:
+    from . import rigid_panel  # it builds on this module's classes
+
+    return CLASSES + rigid_panel.CLASSES
+
+
 def register() -> None:
-    for cls in CLASSES:
+    for cls in _classes():
         bpy.utils.register_class(cls)
 
 
 def unregister() -> None:
-    for cls in reversed(CLASSES):
+    for cls in reversed(_classes()):
         bpy.utils.unregister_class(cls)

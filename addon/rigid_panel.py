@@ -91,14 +91,5 @@ class PHYSANIM_PT_rigid_body(_PhysicsPanel, bpy.types.Panel):
             col.label(text="Inertia: " + ", ".join(f"{v:.4g}" for v in moments) + " kg m²")
 
 
-CLASSES = (PHYSANIM_PT_rigid_body,)
+CLASSES = (PHYSANIM_PT_rigid_body,)  # registered by panels.py, after its parent panel
 
-
-def register() -> None:
-    for cls in CLASSES:
-        bpy.utils.register_class(cls)
-
-
-def unregister() -> None:
-    for cls in reversed(CLASSES):
-        bpy.utils.unregister_class(cls)

@@ -57,7 +57,7 @@ def _ground(scene):
     bm.free()
     ob = bpy.data.objects.new("Ground", me)
     scene.collection.objects.link(ob)
-    ob.scale, ob.location = (40.0, 40.0, 1.0), (0.0, 0.0, -0.5)
+    ob.scale, ob.location = (400.0, 400.0, 1.0), (0.0, 0.0, -0.5)  # nothing falls off
     return ob
 
 

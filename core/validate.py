@@ -27,3 +27,10 @@ def matrix(owner: str, key: str, m) -> np.ndarray:
     if not np.all(np.isfinite(m)):
         raise ValueError(f"{owner}: {key} has non-finite entries")
     return m
+
+
+def frozen(a, dtype=np.float64) -> np.ndarray:
+    """A read-only copy of ``a``: what a frozen model holds."""
+    a = np.array(a, dtype=dtype)
+    a.flags.writeable = False
+    return a

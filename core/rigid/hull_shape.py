@@ -20,15 +20,10 @@ import numpy as np
 
 from ..collision.hull import convex_hull
 from ..errors import PhysanimError
+from ..validate import frozen
 
 MERGE_REL = 1e-6  # coplanarity tolerance for merging hull triangles, relative to the hull size
 FLAT_REL = 1e-5  # a hull thinner than this (relative to its size) counts as flat
-
-
-def _frozen(a, dtype=np.float64) -> np.ndarray:
-    a = np.array(a, dtype=dtype)
-    a.flags.writeable = False
-    return a
 
 
 @dataclass(frozen=True)
@@ -92,10 +87,10 @@ class HullShape:
         edge, edge_face = _edges(loop, start, count, len(vertex), name)
         d = vertex[edge[:, 1]] - vertex[edge[:, 0]]
         centre = vertex.mean(axis=0)
-        return cls(name, _frozen(vertex), _frozen(normal), _frozen(offset),
-                   _frozen(loop, np.int64), _frozen(start, np.int64), _frozen(count, np.int64),
-                   _frozen(edge, np.int64), _frozen(d / np.linalg.norm(d, axis=1)[:, None]),
-                   _frozen(edge_face, np.int64), _frozen(centre),
+        return cls(name, frozen(vertex), frozen(normal), frozen(offset),
+                   frozen(loop, np.int64), frozen(start, np.int64), frozen(count, np.int64),
+                   frozen(edge, np.int64), frozen(d / np.linalg.norm(d, axis=1)[:, None]),
+                   frozen(edge_face, np.int64), frozen(centre),
                    float(np.linalg.norm(vertex - centre, axis=1).max()))
 
 
@@ -325,12 +320,12 @@ class HullSet:
 
         def pad(rows, dtype=np.float64):  # one padded array of every shape's rows
             size = max(len(a) for a in rows)
-            return _frozen(np.stack([_pad(a, size) for a in rows]), dtype)
+            return frozen(np.stack([_pad(a, size) for a in rows]), dtype)
 
         lmax = max(int(s.face_loop_count.max()) for s in shapes)
         loops = [np.stack([_pad(s.face_loop[a:a + c], lmax) for a, c in
                            zip(s.face_loop_start, s.face_loop_count)]) for s in shapes]
-        count = {k: _frozen([len(getattr(s, k)) for s in shapes], np.int64)
+        count = {k: frozen([len(getattr(s, k)) for s in shapes], np.int64)
                  for k in ("vertex", "face_normal", "edge")}
         return cls(tuple(s.name for s in shapes), pad([s.vertex for s in shapes]),
                    count["vertex"], pad([s.face_normal for s in shapes]),
@@ -338,7 +333,7 @@ class HullSet:
                    pad(loops, np.int64), pad([s.face_loop_count for s in shapes], np.int64),
                    pad([s.edge for s in shapes], np.int64),
                    pad([s.edge_face for s in shapes], np.int64), count["edge"],
-                   _frozen([s.centre for s in shapes]), _frozen([s.radius for s in shapes]))
+                   frozen([s.centre for s in shapes]), frozen([s.radius for s in shapes]))
 
     @classmethod
     def from_ranges(cls, points, start, count, names) -> HullSet:

@@ -27,6 +27,7 @@ import numpy as np
 
 from ..collision.mesh import check_points
 from ..errors import PhysanimError
+from ..validate import frozen
 
 KIND = "rigid body"
 MESH_ADVICE = "use a Convex Hull, Box, Sphere or Capsule shape, or close the mesh"
@@ -34,12 +35,6 @@ FLAT_VOLUME_REL = 1e-9  # |volume| below this share of the unsigned tetrahedra v
 # Overrides may come from single-precision UI fields: a tensor off by a few float32 ulps passes.
 SYMMETRY_TOL = 1e-6  # |I - I^T| relative to the largest entry
 TRIANGLE_TOL = 1e-6  # I1 + I2 >= I3 relative to the largest principal moment
-
-
-def _frozen(a) -> np.ndarray:
-    a = np.array(a, dtype=np.float64)
-    a.flags.writeable = False
-    return a
 
 
 @dataclass(frozen=True, eq=False)
@@ -91,7 +86,7 @@ def _validated(mass, com, inertia, volume, name: str | None = None) -> tuple:
     c = np.asarray(com, dtype=np.float64)
     if c.shape != (3,) or not np.isfinite(c).all():
         fail(f"centre of mass must be 3 finite numbers (got {np.asarray(com).tolist()})")
-    return mass, _frozen(c), _frozen(_checked_inertia(inertia, fail)), volume
+    return mass, frozen(c), frozen(_checked_inertia(inertia, fail)), volume
 
 
 def _checked_inertia(inertia, fail) -> np.ndarray:

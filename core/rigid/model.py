@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import PhysanimError
+from ..validate import frozen
 from . import quaternion as quat
 from .mass import MassProperties
 from .warm import Remembered
@@ -23,12 +24,6 @@ from .warm import Remembered
 SHAPES = ("SPHERE", "BOX", "CAPSULE", "HULL")
 SPHERE, BOX, CAPSULE, HULL = range(4)
 MAX_SPEED = 1.0e5  # [m/s], [rad/s]: initial velocities beyond this are input errors
-
-
-def _frozen(a, dtype=np.float64) -> np.ndarray:
-    a = np.array(a, dtype=dtype)
-    a.flags.writeable = False
-    return a
 
 
 @dataclass(frozen=True)
@@ -206,14 +201,14 @@ class RigidBodyBuilder:
         inv_inertia[kinematic] = 0.0
         bound = np.array([_bound(s, o, h) for s, o, h in zip(b, offset, hulls)])
         return RigidBodyModel(
-            tuple(s.name for s in b), _frozen([SHAPES.index(s.shape) for s in b], np.int8),
-            _frozen(half), _frozen(radius), _frozen(offset), _frozen(com), _frozen(bound),
-            _frozen(mass), _frozen(np.where(kinematic, 0.0, 1.0 / mass)), _frozen(inertia),
-            _frozen(inv_inertia),
-            *(_frozen([getattr(s, k) for s in b]) for k in (
+            tuple(s.name for s in b), frozen([SHAPES.index(s.shape) for s in b], np.int8),
+            frozen(half), frozen(radius), frozen(offset), frozen(com), frozen(bound),
+            frozen(mass), frozen(np.where(kinematic, 0.0, 1.0 / mass)), frozen(inertia),
+            frozen(inv_inertia),
+            *(frozen([getattr(s, k) for s in b]) for k in (
                 "restitution", "friction", "linear_damping", "angular_damping")),
-            _frozen(kinematic, bool), _frozen(np.concatenate(hulls) if n else np.zeros((0, 3))),
-            _frozen(starts, np.int64), _frozen(counts, np.int64), self._initial(com, mass, inertia))
+            frozen(kinematic, bool), frozen(np.concatenate(hulls) if n else np.zeros((0, 3))),
+            frozen(starts, np.int64), frozen(counts, np.int64), self._initial(com, mass, inertia))
 
     def _initial(self, com, mass, inertia) -> tuple:
         b = self._bodies
