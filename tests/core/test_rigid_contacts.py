@@ -194,3 +194,27 @@ def test_resting_bodies_fall_asleep_and_wake_when_hit():
     reports = run(solver, state, 36, colliders=[ground()], start=60)
     assert np.linalg.norm(state.body_x[0] - x0) > 0.05  # woken and pushed
     assert not state.body_asleep[0] or reports[-1].sleeping >= 1
+
+
+def test_kinematic_body_follows_its_path_and_pushes_a_dynamic_one():
+    """An animated (kinematic) paddle sweeps along x at 2 m/s and pushes a resting box ahead of
+    it; the paddle itself is not pushed back."""
+    from physanim.core.rigid.solver import RigidFrameInputs
+
+    paddle = box("Paddle", (0.1, 1.0, 0.5), (-1.0, 0.0, 0.5), kinematic=True)
+    target = box("Box", (0.25, 0.25, 0.25), (0.0, 0.0, 0.25))
+    model, solver, state = world(paddle, target)
+
+    def at(t):
+        m = np.eye(4)
+        m[:3, 3] = (-1.0 + 2.0 * t, 0.0, 0.5)
+        return m
+
+    for f in range(36):
+        t0, t1 = f * DT, (f + 1) * DT
+        solver.advance(state, RigidFrameInputs(f, t0, DT, (0.0, 0.0, -9.81), [ground()],
+                                               {0: np.stack([at(t0), at(t1)])}))
+    paddle_x = state.origins(model)[0, 0]
+    assert paddle_x == pytest.approx(-1.0 + 2.0 * 36 * DT, abs=1e-9)  # on its path exactly
+    assert state.body_x[1, 0] > paddle_x + 0.1 + 0.25 - 0.01  # pushed ahead, not overlapped
+    assert state.body_x[1, 0] > 0.5  # it moved with the paddle
