@@ -2,7 +2,9 @@
 
 One frame interval, as a table of contents (:meth:`World.advance`):
 
-    kinematic colliders  the colliders' motion over the interval, made once for every system
+    leading systems      systems that lead (rigid bodies) step their whole frame first; the
+                         others then meet their bodies as moving colliders
+    kinematic colliders  the colliders' motion over the interval, made once per stage
                          (each sub-step samples it at its own times)
     begin frame          each system takes the interval's inputs: the shared :class:`WorldFrame`
                          and its own (emitter values, animated pin targets, ...)
@@ -20,7 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
 from .bounds import DEFAULT_BOUNDS, StateBounds
@@ -90,6 +92,11 @@ class WorldSystem(Protocol):
 
     name: str
     substeps: int
+    leads: bool  # steps its whole frame before the others, who meet it as moving colliders
+
+    def frame_colliders(self) -> list[ColliderFrame]:
+        """A leading system's bodies as colliders over the frame it just finished ([] if it
+        does not lead)."""
 
     def begin_frame(self, frame: WorldFrame, paths: Sequence[ColliderPath], own: Any) -> None:
         """Take the interval's inputs: ``paths`` are the colliders' motion over it, ``own`` what
@@ -108,10 +115,15 @@ class SolverSystem:
     subclasses say what the solver's inputs are (:meth:`inputs`) and what the frame reports
     (:meth:`report`)."""
 
+    leads = False
+
     def __init__(self, solver, state, name: str):
         self.solver, self.state, self.name = solver, state, name
         self.substeps = solver.substeps
         self._step = None  # the frame interval in progress
+
+    def frame_colliders(self) -> list[ColliderFrame]:
+        return []
 
     def inputs(self, frame: WorldFrame, own: Any):
         raise NotImplementedError
@@ -160,29 +172,41 @@ class World:
             PhysanimError, ValueError: the failure that left no system running.
         """
         report = WorldReport()
+        moving: list[ColliderFrame] = []
+        for stage in ([s for s in self.systems if s.leads],
+                      [s for s in self.systems if not s.leads]):
+            if stage:
+                staged = replace(frame, colliders=(*frame.colliders, *moving)) if moving else frame
+                self._stage(report, stage, staged, own or {})
+                moving += [c for s in stage if s in self.systems for c in s.frame_colliders()]
+        return report
+
+    def _stage(self, report: WorldReport, systems: list, frame: WorldFrame, own) -> None:
+        """One stage of the frame for ``systems``: begin, sub-steps in time order, end."""
         paths = self.kinematic_colliders(frame)
-        for system in list(self.systems):
-            self._guarded(report, system, system.begin_frame, frame, paths,
-                          (own or {}).get(system))
-        for system, k in self.substep_order():
+        for system in systems:
+            self._guarded(report, system, system.begin_frame, frame, paths, own.get(system))
+        for system, k in self.substep_order(systems):
             if system in self.systems:
                 self._guarded(report, system, system.substep, k)
-        for system in list(self.systems):
-            done = self._guarded(report, system, system.end_frame)
+        for system in systems:
             if system in self.systems:
-                report.reports[system] = done
-        return report
+                done = self._guarded(report, system, system.end_frame)
+                if system in self.systems:
+                    report.reports[system] = done
 
     # -- passes ---------------------------------------------------------------------------------
     def kinematic_colliders(self, frame: WorldFrame) -> list[ColliderPath]:
         """The colliders' motion over the interval, shared by every system."""
         return self.colliders.of(frame.colliders, frame.frame_dt)
 
-    def substep_order(self) -> list[tuple[WorldSystem, int]]:
+    def substep_order(self, systems: Sequence[WorldSystem] | None = None
+                      ) -> list[tuple[WorldSystem, int]]:
         """Every system's sub-steps, by end time (k + 1) / substeps, then system order."""
-        steps = [((k + 1) / s.substeps, i, k) for i, s in enumerate(self.systems)
+        systems = list(self.systems if systems is None else systems)
+        steps = [((k + 1) / s.substeps, i, k) for i, s in enumerate(systems)
                  for k in range(s.substeps)]
-        return [(self.systems[i], k) for _, i, k in sorted(steps)]
+        return [(systems[i], k) for _, i, k in sorted(steps)]
 
     def drop(self, system: WorldSystem) -> None:
         """Take a system out of the run (its owner found it failed)."""

@@ -20,7 +20,7 @@ from ..errors import SimulationError
 from ..transforms import TransformPath
 from ..world import SolverSystem, World, WorldFrame
 from . import contact_solver as cs_
-from . import dynamics, sleep, warm
+from . import as_colliders, dynamics, sleep, warm
 from . import quaternion as quat
 from .bodies import Posed, collider_bodies, frame_bodies
 from .collide import Bodies, Found, find_contacts
@@ -350,10 +350,25 @@ def _hulls(model: RigidBodyModel):
 
 class RigidBodySystem(SolverSystem):
     """The rigid bodies as one system of a :class:`~physanim.core.world.World`; its own
-    per-frame input is the kinematic bodies' paths (body index -> matrices)."""
+    per-frame input is the kinematic bodies' paths (body index -> matrices). It leads: its
+    dynamic bodies are moving colliders for the other systems of the frame."""
+
+    leads = True
 
     def __init__(self, solver: RigidBodySolver, state: RigidBodyState, name: str = "rigid bodies"):
         super().__init__(solver, state, name)
+        self._shapes = as_colliders.shapes(solver.model)
+        self._start = None
+
+    def begin_frame(self, frame: WorldFrame, paths, own) -> None:
+        self._start = (self.state.body_x.copy(), self.state.body_q.copy())
+        super().begin_frame(frame, paths, own)
+
+    def frame_colliders(self) -> list:
+        """Each dynamic body as a collider moving from its pose at the frame's start to its
+        pose now."""
+        return as_colliders.frames(self.solver.model, self._shapes, self._start,
+                                   (self.state.body_x, self.state.body_q))
 
     def inputs(self, frame: WorldFrame, kinematic: dict | None) -> RigidFrameInputs:
         return RigidFrameInputs.of(frame, kinematic)

@@ -160,3 +160,28 @@ def test_bake_status_is_outdated_after_an_edit_and_current_after_rebake(physanim
     assert "outdated" in panels.bake_status(scene)[0]
     assert bpy.ops.physanim.bake() == {'FINISHED'}
     assert panels.bake_status(scene)[1] == 'CHECKMARK'
+
+
+def test_particles_land_on_a_falling_rigid_cube(physanim_ext, tmp_path):
+    """Rigid bodies step first: the particles meet the cube where it is in each frame."""
+    scene = _scene(tmp_path)
+    _ground()
+    cube = _body(location=(0.0, 0.0, 2.0))
+    bpy.ops.mesh.primitive_plane_add(size=1.0, location=(0.0, 0.0, 6.0))
+    emitter = bpy.context.object
+    p = emitter.physanim.emitter
+    p.enabled, p.source, p.rate, p.speed, p.lifetime = True, 'FACES', 30.0, 0.0, 200.0
+    p.frame_start, p.frame_end = 1, 10
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    scene.frame_set(FRAME_END)
+    res = emitter.physanim.emitter.result
+    me = res.data  # the points mesh holds the frame's particles (world positions)
+    co = np.empty(len(me.vertices) * 3, np.float32)
+    me.vertices.foreach_get("co", co)
+    m = np.array(res.matrix_world)
+    x = co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]
+    top = cube.matrix_world.translation.z + 1.0
+    assert abs(cube.matrix_world.translation.z - 1.0) < 0.01  # the cube rests on the plane
+    over = (np.abs(x[:, 0]) < 0.95) & (np.abs(x[:, 1]) < 0.95)
+    assert over.sum() > 50
+    assert (x[over, 2] > top - 0.01).all()  # on the cube, none inside
