@@ -185,3 +185,28 @@ def test_frames_says_it_sets_the_scene_range(cli, tmp_path, capsys):
     assert "physanim: frame range 3-8 (the scene's PhysAnim range was 1-20)" in out
     assert cli.main(["bake", str(path), "--frames", "1-4", "--save"]) == 0
     assert "--save stores the new one" in capsys.readouterr().out
+
+
+def test_bake_rigid_bodies_from_the_command_line(cli, tmp_path):
+    """`--objects` naming one rigid body bakes them all (they push each other) and --save keeps
+    the keys in the file."""
+    scene = bpy.context.scene
+    scene.physanim.frame_start, scene.physanim.frame_end = 1, 24
+    for i, name in enumerate(("CrateA", "CrateB")):
+        bpy.ops.mesh.primitive_cube_add(size=0.5, location=(0.0, 0.0, 1.0 + i))
+        ob = bpy.context.object
+        ob.name = name
+        ob.physanim.rigid_body.enabled = True
+    bpy.ops.mesh.primitive_plane_add(size=10.0)
+    bpy.context.object.physanim.collider.enabled = True
+    path = tmp_path / "crates.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+
+    assert cli.main(["bake", str(path), "--objects", "CrateA", "--save"]) == 0
+    scene = _open(path)
+    for name in ("CrateA", "CrateB"):
+        ob = bpy.data.objects[name]
+        assert ob.physanim.rigid_body.baked_action is not None
+        scene.frame_set(24)
+        assert ob.matrix_world.translation.z < 1.0 + 1.0 * (name == "CrateB")  # they fell
