@@ -9,7 +9,7 @@ from ..contact import ColliderFrame
 from ..errors import PhysanimError
 from ..transforms import TransformPath
 from . import quaternion as quat
-from .collide import HALF_SPACE, Bodies
+from .collide import HALF_SPACE, MESH, Bodies
 from .model import BOX, RigidBodyModel, RigidBodyState
 
 FLAT = 1e-3  # [m] half thickness given to a two-sided Plane collider
@@ -65,17 +65,28 @@ def collider_bodies(colliders: list[ColliderFrame], frame: int):
                     "stop rigid bodies — scale it evenly, or use a Box collider",
                     obj=c.name, frame=frame, kind="collider")
             codes.append(0), half.append((0.0, 0.0, 0.0)), radius.append(scale.mean() + t)
-        else:
-            raise PhysanimError(
-                "rigid bodies do not collide with Mesh colliders yet — give this collider the "
-                "Ground, Box, Sphere or Plane shape, or make it a kinematic rigid body",
-                obj=c.name, frame=frame, kind="collider")
+        else:  # MESH: its local vertices, scaled, are in the collider's own cache entry
+            codes.append(MESH), half.append((0.0, 0.0, 0.0)), radius.append(c.thickness)
     paths = [TransformPath(c.matrix0, c.matrix1, c.matrices) for c in colliders]
     return (np.array(codes, np.int64), np.array(half, np.float64).reshape(-1, 3),
             np.array(radius, np.float64), paths,
             np.array([c.friction for c in colliders], np.float64),
             np.array([c.restitution for c in colliders], np.float64),
             tuple(c.name for c in colliders))
+
+
+def mesh_colliders(colliders: list[ColliderFrame], first_row: int, cache) -> dict:
+    """Row -> (hierarchy, local lo (3,), local hi (3,)) of each Mesh collider, its vertices
+    scaled by its object's scale (the solver poses it with rotation and translation only)."""
+    out = {}
+    for k, c in enumerate(colliders):
+        if c.shape != "MESH":
+            continue
+        scale = np.linalg.norm(np.asarray(c.matrix0)[:3, :3], axis=0)
+        verts = np.asarray(c.vertices0, dtype=np.float64) * scale
+        out[first_row + k] = (cache.bvh(c.name, verts, np.asarray(c.triangles, np.int64)),
+                              verts.min(axis=0) - c.thickness, verts.max(axis=0) + c.thickness)
+    return out
 
 
 def frame_bodies(model: RigidBodyModel, state: RigidBodyState, colliders, posed: Posed,

@@ -20,6 +20,7 @@ from .hull_shape import HullSet
 from .model import BOX, CAPSULE, HULL, SPHERE
 
 HALF_SPACE = 4  # a collider's code: the solid below a plane (normal = local +Z)
+MESH = 5  # a collider's code: a triangle mesh (see :mod:`.mesh_contacts`)
 SPECULATIVE = 0.02  # [m] contacts this far apart are always reported
 FEATURES = 4096  # feature ids per pair in a contact key
 BOX_CORNERS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)],
@@ -60,6 +61,7 @@ class Bodies:
     name: tuple
     hulls: HullSet | None = None
     hull_index: np.ndarray | None = None
+    meshes: dict | None = None  # row of a Mesh collider -> (hierarchy, local lo, local hi)
     sleeping: np.ndarray | None = None  # (N,) resting bodies: found only to be woken
     moving: np.ndarray | None = None  # (N,) bodies that move on their own this frame
 
@@ -98,7 +100,11 @@ def find_contacts(bodies: Bodies, frame_dt: float, gravity: np.ndarray) -> Found
     reach = _reach(bodies, frame_dt, gravity)
     ground = bodies.shape == HALF_SPACE
     parts = [_half_spaces(bodies, rot, reach, ground)]
-    i, j = _candidate_pairs(bodies, reach, ground)
+    if bodies.meshes:
+        from .mesh_contacts import mesh_contacts  # it builds on this module
+
+        parts.append(mesh_contacts(bodies, rot, reach))
+    i, j = _candidate_pairs(bodies, reach, ground | (bodies.shape == MESH))
     margin = SPECULATIVE + reach[i] + reach[j]
     centre = bodies.centres(rot)
     for kinds, run in _KINDS:

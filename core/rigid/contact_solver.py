@@ -202,7 +202,9 @@ def _blocks(cs: ContactSet, inv_mass, ang_a, ang_b, wa, wb) -> np.ndarray:
     valid = slots >= 0
     idx = np.where(valid, slots, 0)
     head = idx[:, 0]
-    k = (inv_mass[cs.a[head]] + inv_mass[cs.b[head]])[:, None, None] + \
+    normal = cs.normal[idx]  # (a manifold on a curved surface has several normals)
+    k = (inv_mass[cs.a[head]] + inv_mass[cs.b[head]])[:, None, None] * \
+        np.einsum("mic,mjc->mij", normal, normal) + \
         np.einsum("mic,mjc->mij", ang_a[idx], wa[idx]) + np.einsum("mic,mjc->mij", ang_b[idx], wb[idx])
     pair = valid[:, :, None] & valid[:, None, :]
     eye = np.broadcast_to(np.eye(slots.shape[1], dtype=bool), k.shape)
@@ -283,10 +285,10 @@ def _normal_block(v, w, cs, jac, group, slots, valid, scales, inv_mass) -> np.nd
     pulling = ((old + d < 0.0) & valid).any(axis=1)
     d = np.where(pulling[:, None], 0.0, d)
     head = idx[:, 0]
-    a, b, n = cs.a[head], cs.b[head], cs.normal[head]
-    total = d.sum(axis=1)
-    v[a] -= (inv_mass[a] * total)[:, None] * n
-    v[b] += (inv_mass[b] * total)[:, None] * n
+    a, b = cs.a[head], cs.b[head]
+    p = np.einsum("gs,gsi->gi", d, cs.normal[idx])
+    v[a] -= inv_mass[a][:, None] * p
+    v[b] += inv_mass[b][:, None] * p
     w[a] -= np.einsum("gs,gsi->gi", d, jac.wa[idx, 0])
     w[b] += np.einsum("gs,gsi->gi", d, jac.wb[idx, 0])
     done = valid & ~pulling[:, None]

@@ -57,6 +57,21 @@ def _world(ob, frame: int) -> np.ndarray:
     return np.array(ob.matrix_world)
 
 
+def test_cube_falls_into_a_default_mesh_collider_and_rests_on_it(physanim_ext, tmp_path):
+    """Suzanne as an Automatic collider is a Mesh collider: a cube dropped on her rests on her
+    head, not in it."""
+    _scene(tmp_path)
+    bpy.ops.mesh.primitive_monkey_add(location=(0.0, 0.0, 1.0))
+    monkey = bpy.context.object
+    monkey.physanim.collider.enabled = True
+    cube = _body(location=(0.0, 0.2, 3.5))
+    cube.scale = (0.2, 0.2, 0.2)
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    z = _world(cube, FRAME_END)[2, 3]
+    assert 1.0 < z < 3.0  # stopped by the head (its top is near z = 2)
+    assert abs(_world(cube, FRAME_END - 1)[2, 3] - z) < 0.01  # resting or nearly
+
+
 def test_default_cube_falls_and_rests_on_a_default_plane(physanim_ext, tmp_path):
     scene = _scene(tmp_path)
     _ground()
@@ -142,8 +157,9 @@ def test_failed_or_cancelled_bake_keeps_the_previous_keys(physanim_ext, tmp_path
     after = [_world(cube, f) for f in (1, 24, 48)]
     for a, b in zip(before, after):
         np.testing.assert_allclose(a, b, atol=1e-7)
-    ground.physanim.collider.shape = 'MESH'  # rigid bodies cannot meet Mesh colliders yet
-    with pytest.raises(RuntimeError, match='collider "Ground"'):
+    ground.physanim.collider.shape = 'SPHERE'  # a flat-scaled sphere cannot stop rigid bodies
+    ground.scale = (1.0, 1.0, 0.1)
+    with pytest.raises(RuntimeError, match='collider "Ground".*scaled unevenly'):
         bpy.ops.physanim.bake()
     for a, f in zip(before, (1, 24, 48)):
         np.testing.assert_allclose(a, _world(cube, f), atol=1e-7)
