@@ -172,13 +172,14 @@ class World:
             PhysanimError, ValueError: the failure that left no system running.
         """
         report = WorldReport()
-        moving: list[ColliderFrame] = []
-        for stage in ([s for s in self.systems if s.leads],
-                      [s for s in self.systems if not s.leads]):
-            if stage:
-                staged = replace(frame, colliders=(*frame.colliders, *moving)) if moving else frame
-                self._stage(report, stage, staged, own or {})
-                moving += [c for s in stage if s in self.systems for c in s.frame_colliders()]
+        leaders = [s for s in self.systems if s.leads]
+        others = [s for s in self.systems if not s.leads]
+        if leaders:
+            self._stage(report, leaders, frame, own or {})
+        if others:  # they meet the leaders' bodies where those went this frame
+            moving = [c for s in leaders if s in self.systems for c in s.frame_colliders()]
+            staged = replace(frame, colliders=(*frame.colliders, *moving)) if moving else frame
+            self._stage(report, others, staged, own or {})
         return report
 
     def _stage(self, report: WorldReport, systems: list, frame: WorldFrame, own) -> None:
