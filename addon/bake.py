@@ -240,7 +240,8 @@ class BakeJob:
             between[-1][0].extend(self._emitter_read(self.extractor.emitter_motion))
             if self.rigid is not None:
                 with self._system(self.rigid):
-                    self._rigid_between.append(rigid.kinematic_now(self.rigid))
+                    self._rigid_between.append(
+                        self.rigid.kinematic_matrices(self.scene.frame_current_final))
         self.scene.frame_set(frame + 1)
         end = self.extractor.sample(depsgraph, frame + 1, emitters=False)
         end.emitters = self._emitter_read(lambda: self.extractor.sample_emitters(depsgraph,

@@ -123,7 +123,6 @@ class RigidBake:
         self.scene, self.objects, self.inputs_hash = scene, objects, inputs_hash
         self.writer = CacheWriter(rigid_cache_dir(scene))
         self.system: RigidBodySystem | None = None
-        self.scale = {}
 
     @property
     def label(self) -> str:
@@ -134,23 +133,23 @@ class RigidBake:
         builder = RigidBodyBuilder()
         for ob in self.objects:
             builder.add_body(body_settings(ob, depsgraph, frame))
-            self.scale[ob.name] = decompose(world_matrix(ob, frame, "rigid body"))[2]
         self.model = builder.finalize()
         self.kinematic = [i for i, ob in enumerate(self.objects)
                           if ob.physanim.rigid_body.kinematic]
         self.solver = RigidBodySolver(self.model, self.scene.physanim.rigid_substeps,
                                       limits.bounds(self.scene), colliders)
         self.system = RigidBodySystem(self.solver, self.model.state())
-        self._last = self._kinematic_matrices(frame)
+        self._last = self.kinematic_matrices(frame)
         self.write_frame(frame)
 
-    def _kinematic_matrices(self, frame: int) -> dict:
+    def kinematic_matrices(self, frame: float) -> dict:
+        """The kinematic bodies' world matrices at ``frame`` (the scene is there)."""
         return {i: world_matrix(self.objects[i], frame, "rigid body") for i in self.kinematic}
 
     def begin(self, frame: int, between: list[dict]) -> dict:
         """The kinematic bodies' paths over the interval to ``frame`` (the scene is there;
         ``between``: their matrices at the sub-frames, read by the bake)."""
-        now = self._kinematic_matrices(frame)
+        now = self.kinematic_matrices(frame)
         paths = {i: np.stack([self._last[i], *(b[i] for b in between), now[i]])
                  for i in self.kinematic}
         self._last = now
@@ -170,14 +169,3 @@ class RigidBake:
 
     def abort(self) -> None:
         self.writer.abort()
-
-
-def rigid_objects(scene) -> list:
-    return sorted((ob for ob in scene.objects if ob.physanim.rigid_body.enabled),
-                  key=lambda o: o.name)
-
-
-def kinematic_now(bake: RigidBake) -> dict:
-    """Matrices of the kinematic bodies at the scene's current (sub-)frame."""
-    frame = bake.scene.frame_current_final
-    return {i: world_matrix(bake.objects[i], frame, "rigid body") for i in bake.kinematic}

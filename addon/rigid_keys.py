@@ -37,38 +37,48 @@ def _continuous(q: np.ndarray) -> np.ndarray:
     return q
 
 
-def _local(ob, scene, frames, position, rotation):
-    """The object's local location and rotation per frame from its world pose: the parent's
-    world matrix (at each frame) and the parent inverse removed."""
-    if ob.parent is None:
-        return position, rotation
+def _parent_spaces(scene, objects: list, frames: np.ndarray) -> dict:
+    """Per parented object, (f, 4, 4) its parent's world matrix times its parent inverse at
+    each frame: one pass over the frames for all of them."""
+    parented = [ob for ob in objects if ob.parent is not None]
+    if not parented:
+        return {}
     keep = scene.frame_current
-    loc, rot = np.empty_like(position), np.empty_like(rotation)
-    scale = np.array(ob.matrix_world.to_scale())
+    spaces = {ob.name: np.empty((len(frames), 4, 4)) for ob in parented}
     for k, f in enumerate(frames):
         scene.frame_set(int(f))
-        parent = convert.matrix(ob.parent.matrix_world) @ convert.matrix(ob.matrix_parent_inverse)
-        world = np.eye(4)
-        world[:3, :3] = quat.to_matrix(rotation[k]) * scale
-        world[:3, 3] = position[k]
-        basis = np.linalg.inv(parent) @ world
-        lin = basis[:3, :3]
-        loc[k] = basis[:3, 3]
-        rot[k] = quat.from_matrix(lin / np.linalg.norm(lin, axis=0))[0]
+        for ob in parented:
+            spaces[ob.name][k] = (convert.matrix(ob.parent.matrix_world)
+                                  @ convert.matrix(ob.matrix_parent_inverse))
     scene.frame_set(keep)
-    return loc, rot
+    return spaces
+
+
+def _local(ob, space, position, rotation):
+    """The object's local location and rotation per frame from its world pose (``space``: its
+    parent space per frame, or None without a parent)."""
+    if space is None:
+        return position, rotation
+    world = np.zeros((len(position), 4, 4))
+    world[:, :3, :3] = quat.to_matrix(rotation) * np.array(ob.matrix_world.to_scale())
+    world[:, :3, 3] = position
+    world[:, 3, 3] = 1.0
+    basis = np.linalg.inv(space) @ world
+    lin = basis[:, :3, :3]
+    return basis[:, :3, 3], quat.from_matrix(lin / np.linalg.norm(lin, axis=1)[:, None, :])
 
 
 def write_keys(scene, objects: list, folder: str, frame_start: int, frame_end: int) -> None:
     """Key every dynamic body's location and rotation_quaternion once per frame."""
     frames, pos, rot = _tracks(folder, frame_start, frame_end)
-    for i, ob in enumerate(objects):
-        if ob.physanim.rigid_body.kinematic or not len(frames):
-            continue
-        loc, q = _local(ob, scene, frames, pos[:, i], rot[:, i])
-        action = _baked_action(ob)
-        bag = compat.channelbag_for(ob, action)
-        f32 = frames.astype(np.float32)
+    if not len(frames):
+        return
+    dynamic = [(i, ob) for i, ob in enumerate(objects) if not ob.physanim.rigid_body.kinematic]
+    spaces = _parent_spaces(scene, [ob for _, ob in dynamic], frames)
+    f32 = frames.astype(np.float32)
+    for i, ob in dynamic:
+        loc, q = _local(ob, spaces.get(ob.name), pos[:, i], rot[:, i])
+        bag = compat.channelbag_for(ob, _baked_action(ob))
         q = _continuous(q)
         for axis in range(3):
             compat.set_keys(compat.fcurve_ensure(bag, "location", axis), f32, loc[:, axis])
