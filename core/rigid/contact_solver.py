@@ -1,23 +1,28 @@
 """Soft-step contact solver (Box2D v3's "soft step", taken to 3D), vectorised over contacts.
 
-Contacts are found once per frame (with a speculative margin); each sub-step then runs
-warm start -> solve (soft, with position bias) -> integrate positions -> relax (no bias), and
-restitution comes last, once per frame. Every contact point is a constraint on the relative
-velocity of its two bodies along its normal (non-penetration, accumulated impulse >= 0) and two
-tangents (Coulomb friction, the tangent impulse clamped to the cone mu * normal impulse).
+Contacts are found with a speculative margin (:mod:`.collide`); each sub-step then runs
+warm start -> solve (soft, with position bias) -> integrate positions -> relax (no bias) ->
+restitution. Every contact point is a constraint on the relative velocity of its two bodies
+along its normal (non-penetration, accumulated impulse >= 0) and two tangents (Coulomb
+friction, the tangent impulse clamped to the cone mu * normal impulse).
 
-Gauss-Seidel needs each constraint to see the velocities its predecessors left, which a numpy
-pass over all contacts would not give; contacts are therefore coloured so that no two in a
-colour share a dynamic body, and each colour is one vectorised pass (Jacobi within a colour is
-then exactly Gauss-Seidel). Bodies that do not move under impulses (kinematic bodies, colliders)
-have zero inverse mass: their rows take impulses of size zero, so they never limit colouring.
+Layout: the points of one pair of bodies form a manifold; manifolds are padded to S slots
+(empty slots have zero rows and take no impulse) and ordered by colour, so that no dynamic
+body is in two manifolds of one colour. Gauss-Seidel needs each constraint to see the
+velocities its predecessors left, which one numpy pass over all contacts would not give; each
+colour is therefore one vectorised pass over a contiguous slice (Jacobi within a colour is then
+exactly Gauss-Seidel). Velocities are one (N, 6) array [v, w]; a constraint row is 12 numbers
+over [v_a, w_a, v_b, w_b], and the row times the inverse masses (what a unit impulse along it
+does to those velocities) is precomputed once per sub-step, so a colour's pass is a gather,
+a few small products and a scatter. Bodies that impulses do not move (kinematic bodies,
+colliders, sleepers) have zero inverse mass: they take no velocity change, so they never limit
+colouring.
 
-The separation of a point is tracked through the sub-steps from the bodies' motion since the
-contact was found (anchors rotate with their bodies, the normal is held):
-s = s_base + n . (dx_B + R_B r_B - dx_A - R_A r_A), s_base = s0 - n . (r_B - r_A).
-A separated (speculative) point lets the bodies close the gap within one sub-step but no
-further; an overlapping one is pushed apart softly (a spring of CONTACT_HERTZ, heavily damped,
-at most MAX_PUSH m/s).
+The separation of a point follows the bodies from where the contact was found (its anchors
+move with their bodies, the normal is held): s = s0 + n . (p_B - p_A), p the anchors' world
+positions. A separated (speculative) point lets the bodies close the gap within one sub-step
+but no further; an overlapping one is pushed apart softly (a spring of CONTACT_HERTZ, heavily
+damped, at most MAX_PUSH m/s).
 """
 from __future__ import annotations
 
@@ -31,6 +36,7 @@ STATIC_HERTZ = 60.0  # against bodies that do not move under impulses: stiffer
 DAMPING_RATIO = 10.0  # heavily over-damped: overlaps resolve without bounce
 MAX_PUSH = 1.0  # [m/s] fastest overlap recovery (gentle: overlaps in a pile add up)
 RESTITUTION_THRESHOLD = 1.0  # [m/s] slower impacts do not bounce (a resting stack stays put)
+PIVOTS = 4  # principal pivoting steps of a manifold whose block solution pulls
 
 
 @dataclass(frozen=True)
@@ -98,58 +104,87 @@ def _first_of_their_bodies(a: np.ndarray, b: np.ndarray, dynamic: np.ndarray) ->
 
 @dataclass
 class ContactSet:
-    """A frame's contact points (k) between solver bodies a and b (rows of the velocity array).
+    """A frame's contact points by manifold: M manifolds (the points of one pair of bodies)
+    of S slots, ordered by colour.
 
     Attributes:
-        a, b: (k,) body rows. normal: (k, 3) unit, from a to b. t1, t2: (k, 3) tangents.
-        ra, rb: (k, 3) anchors: the contact point from each body's centre of mass when found.
-        base: (k,) base separation (see the module docstring) [m].
-        friction, restitution: (k,) combined coefficients (friction: the geometric mean of the
-            two sides'; restitution: their product, so a body bounces only where both are
+        ab: (M, 2) the manifold's body rows a, b. valid: (M, S) the slot holds a point.
+        point: (M, S) the point's index among the points it was built from (-1: empty).
+        normal, t1, t2: (M, S, 3) unit normal from a to b and tangents (0 in empty slots).
+        ra, rb: (M, S, 3) anchors: the contact point from each body's centre of mass when
+            found (the same world point for both).
+        separation: (M, S) when found [m] (< 0: overlap).
+        friction, restitution: (M, S) combined coefficients (friction: the geometric mean of
+            the two sides'; restitution: their product, so a body bounces only where both are
             bouncy — a default, unbouncy box stays down on any collider).
-        relative: (k,) normal relative velocity when found [m/s] (for restitution).
-        impulse: (k, 3) accumulated impulse along normal, t1, t2 [N s].
-        total: (k,) sum of the normal impulses applied this frame (0: never touched).
-        key: (k,) the pair of bodies (lower row * N + higher row).
-        static: (k,) True when one side does not move under impulses.
-        slots: (m, S) the points of each manifold (the contacts of one pair), -1 padded.
-        groups: colour groups of manifolds (index arrays into ``slots``): no dynamic body is in
-            two manifolds of a group.
+        relative: (M, S) normal relative velocity [m/s] before the point's first impulse this
+            frame (restitution bounces it back).
+        impulse: (M, S, 3) accumulated impulse along normal, t1, t2 [N s].
+        touched: (M, S) took a normal impulse this frame.
+        static: (M,) one side does not move under impulses.
+        colours: [(start, stop)] manifold slices in which no dynamic body appears twice.
+        coupling: (M, S, S) each manifold's normal coupling K_ij = J_i M^-1 J_j^T and block its
+            pseudo-inverse (set by :func:`rows` from the poses when the contacts were found).
     """
 
-    a: np.ndarray
-    b: np.ndarray
+    ab: np.ndarray
+    valid: np.ndarray
+    point: np.ndarray
     normal: np.ndarray
     t1: np.ndarray
     t2: np.ndarray
     ra: np.ndarray
     rb: np.ndarray
-    base: np.ndarray
+    separation: np.ndarray
     friction: np.ndarray
     restitution: np.ndarray
     relative: np.ndarray
     impulse: np.ndarray
-    total: np.ndarray
-    key: np.ndarray
+    touched: np.ndarray
     static: np.ndarray
-    slots: np.ndarray
-    groups: list
+    colours: list
+    coupling: np.ndarray | None = None
+    block: np.ndarray | None = None
 
     def __len__(self) -> int:
-        return len(self.a)
+        return len(self.ab)
 
-    @property
-    def dirs(self) -> np.ndarray:
-        """(k, 3, 3) rows normal, t1, t2 of every contact."""
-        return self._dirs
+    @classmethod
+    def of_points(cls, a, b, pair, dynamic, *, normal, point, xa, xb, separation, friction,
+                  restitution, relative, impulse) -> ContactSet:
+        """Group k points (bodies a, b (k,); ``pair`` (k,) a key per pair of bodies) into
+        coloured manifolds. ``point`` (k, 3) world points, ``xa``, ``xb`` (k, 3) the bodies'
+        centres of mass; the other arrays are per point."""
+        slots, groups = _manifolds(pair, a, b, dynamic)
+        order = np.concatenate(groups) if groups else np.zeros(0, np.int64)
+        slots = slots[order]
+        ends = np.cumsum([len(g) for g in groups]).tolist()
+        valid = slots >= 0
+        idx = np.where(valid, slots, 0)
 
-    def __post_init__(self):
-        self._dirs = np.stack([self.normal, self.t1, self.t2], axis=1)
+        def pad(x):
+            out = np.asarray(x)[idx]
+            out[~valid] = 0
+            return out
+
+        t1, t2 = tangents(normal) if len(normal) else (normal, normal)
+        head = idx[:, 0]
+        ab = np.stack([a[head], b[head]], axis=1)
+        return cls(ab, valid, np.where(valid, slots, -1), pad(normal), pad(t1), pad(t2),
+                   pad(point - xa), pad(point - xb), pad(separation), pad(friction),
+                   pad(restitution), pad(relative), pad(impulse), pad(impulse[:, 0] > 0.0),
+                   ~(dynamic[ab[:, 0]] & dynamic[ab[:, 1]]),
+                   list(zip([0] + ends[:-1], ends)))
+
+    def world_impulses(self) -> np.ndarray:
+        """(M, S, 3) each point's accumulated impulse as a world vector [N s] (on body b)."""
+        i = self.impulse
+        return i[..., :1] * self.normal + i[..., 1:2] * self.t1 + i[..., 2:] * self.t2
 
 
-def manifolds(key: np.ndarray, a: np.ndarray, b: np.ndarray, dynamic: np.ndarray):
-    """Points grouped by pair (``key`` sorted or not): (slots (m, S) point indices, -1 padded;
-    colour groups of manifolds)."""
+def _manifolds(key: np.ndarray, a: np.ndarray, b: np.ndarray, dynamic: np.ndarray):
+    """Points grouped by pair: (slots (m, S) point indices, -1 padded; colour groups of
+    manifolds)."""
     if not len(key):
         return np.zeros((0, 1), np.int64), []
     order = np.argsort(key, kind="stable")
@@ -162,224 +197,245 @@ def manifolds(key: np.ndarray, a: np.ndarray, b: np.ndarray, dynamic: np.ndarray
 
 
 @dataclass
-class Jacobians:
-    """Per sub-step, for every contact: the angular parts of the three constraint rows
-    (r x n etc., (k, 3, 3) rows n/t1/t2 for body a and b), those rows times each body's world
-    inverse inertia, and the effective masses (k, 3)."""
+class Rows:
+    """The constraint rows of every slot at the bodies' current poses, over the velocities
+    [v_a, w_a, v_b, w_b] of the manifold's bodies.
 
-    ang_a: np.ndarray
-    ang_b: np.ndarray
-    wa: np.ndarray  # (k, 3, 3): I_a^-1 (r_a x d) for the three directions d
-    wb: np.ndarray
-    mass: np.ndarray  # (k, 3): 1 / (m_a^-1 + m_b^-1 + (r_a x d) I_a^-1 (r_a x d) + ...)
-    block: np.ndarray  # (m, S, S): pseudo-inverse of each manifold's normal coupling matrix
+    Attributes:
+        jn: (M, S, 12) normal rows. mn: (M, S, 12) the same times the inverse masses (the
+            velocity change of a unit normal impulse). mass_n: (M, S) effective masses.
+        jt, mt: (M, 2 S, 12) tangent rows (t1, t2 of slot 0, then of slot 1, ...) and the
+            velocity changes. mass_t: (M, 2 S) effective masses shared over the manifold's
+            points (divided by their count: together they do what one point would alone).
+    """
 
-
-def jacobians(cs: ContactSet, inv_mass: np.ndarray, inv_inertia: np.ndarray, ra: np.ndarray,
-              rb: np.ndarray, block: np.ndarray | None = None) -> Jacobians:
-    """Constraint rows of every contact for the bodies' current world inverse inertias and
-    lever arms ra, rb (k, 3): from each body's centre of mass to one common world point, so an
-    impulse and its reaction act at the same point (angular momentum is conserved)."""
-    dirs = cs.dirs
-    ang_a = np.cross(ra[:, None, :], dirs)
-    ang_b = np.cross(rb[:, None, :], dirs)
-    wa = np.einsum("kij,kdj->kdi", inv_inertia[cs.a], ang_a)
-    wb = np.einsum("kij,kdj->kdi", inv_inertia[cs.b], ang_b)
-    k = (inv_mass[cs.a] + inv_mass[cs.b])[:, None] + np.einsum("kdi,kdi->kd", ang_a, wa) + \
-        np.einsum("kdi,kdi->kd", ang_b, wb)
-    if block is None:
-        block = _blocks(cs, inv_mass, ang_a[:, 0], ang_b[:, 0], wa[:, 0], wb[:, 0])
-    return Jacobians(ang_a, ang_b, wa, wb, np.where(k > 0.0, 1.0 / np.maximum(k, 1e-300), 0.0),
-                     block)
+    jn: np.ndarray
+    mn: np.ndarray
+    mass_n: np.ndarray
+    jt: np.ndarray
+    mt: np.ndarray
+    mass_t: np.ndarray
 
 
-def _blocks(cs: ContactSet, inv_mass, ang_a, ang_b, wa, wb) -> np.ndarray:
-    """Per manifold, the pseudo-inverse of K_ij = J_i M^-1 J_j^T over its points' normal rows
-    (one normal per manifold). Four coplanar points of a face leave K rank 3; the minimum-norm
-    solution then shares the load symmetrically, where point-by-point Gauss-Seidel would
-    favour whichever point comes first (and set a stack swaying)."""
-    slots = cs.slots
-    valid = slots >= 0
-    idx = np.where(valid, slots, 0)
-    head = idx[:, 0]
-    normal = cs.normal[idx]  # (a manifold on a curved surface has several normals)
-    k = (inv_mass[cs.a[head]] + inv_mass[cs.b[head]])[:, None, None] * \
-        np.einsum("mic,mjc->mij", normal, normal) + \
-        np.einsum("mic,mjc->mij", ang_a[idx], wa[idx]) + np.einsum("mic,mjc->mij", ang_b[idx], wb[idx])
-    pair = valid[:, :, None] & valid[:, None, :]
-    eye = np.broadcast_to(np.eye(slots.shape[1], dtype=bool), k.shape)
-    k = np.where(pair, k, np.where(eye, 1.0, 0.0))  # empty slots: decoupled unit rows
-    return np.linalg.pinv(k, rcond=1e-10, hermitian=True)
+def rows(cs: ContactSet, inv_mass: np.ndarray, inv_inertia: np.ndarray, ra: np.ndarray,
+         rb: np.ndarray) -> Rows:
+    """Rows for world inverse inertias (N, 3, 3) and lever arms ra, rb (M, S, 3) from each
+    body's centre of mass to one common world point (an impulse and its reaction act at the
+    same point, so angular momentum is conserved). Sets ``cs.block`` the first time."""
+    m, s = cs.valid.shape
+    a, b = cs.ab[:, 0], cs.ab[:, 1]
+    dirs = np.stack([cs.normal, cs.t1, cs.t2], axis=2)  # (M, S, 3, 3)
+    ang_a = np.cross(ra[:, :, None, :], dirs)
+    ang_b = np.cross(rb[:, :, None, :], dirs)
+    j = np.concatenate([-dirs, -ang_a, dirs, ang_b], axis=3)
+    mj = np.concatenate([-inv_mass[a, None, None, None] * dirs,
+                         -np.einsum("mij,msdj->msdi", inv_inertia[a], ang_a),
+                         inv_mass[b, None, None, None] * dirs,
+                         np.einsum("mij,msdj->msdi", inv_inertia[b], ang_b)], axis=3)
+    k = np.einsum("msdj,msdj->msd", j, mj)
+    mass = np.where(k > 0.0, 1.0 / np.maximum(k, 1e-300), 0.0)
+    jn, mn = np.ascontiguousarray(j[:, :, 0]), np.ascontiguousarray(mj[:, :, 0])
+    if cs.block is None:
+        cs.coupling = _coupling(cs.valid, jn, mn)
+        cs.block = _pinv(cs.coupling)
+    count = np.maximum(cs.valid.sum(axis=1), 1)[:, None]
+    return Rows(jn, mn, mass[:, :, 0], j[:, :, 1:].reshape(m, 2 * s, 12),
+                mj[:, :, 1:].reshape(m, 2 * s, 12), mass[:, :, 1:].reshape(m, 2 * s) / count)
 
 
-def apply(v: np.ndarray, w: np.ndarray, cs: ContactSet, jac: Jacobians, idx: np.ndarray,
-          d_impulse: np.ndarray, inv_mass: np.ndarray) -> None:
-    """Apply impulse changes (len(idx), 3) along normal/t1/t2 of contacts ``idx``: body b
-    gains, body a loses. Within a colour each dynamic body appears once, so plain indexed
-    writes are exact; static rows get zero changes."""
-    dirs = cs.dirs[idx]
-    p = np.einsum("kd,kdi->ki", d_impulse, dirs)
-    a, b = cs.a[idx], cs.b[idx]
-    v[a] -= inv_mass[a][:, None] * p
-    w[a] -= np.einsum("kd,kdi->ki", d_impulse, jac.wa[idx])
-    v[b] += inv_mass[b][:, None] * p
-    w[b] += np.einsum("kd,kdi->ki", d_impulse, jac.wb[idx])
+def _coupling(valid: np.ndarray, jn: np.ndarray, mn: np.ndarray) -> np.ndarray:
+    """Per manifold, K_ij = J_i M^-1 J_j^T over its points' normal rows, empty slots as
+    decoupled unit rows. Four coplanar points of a face leave K rank 3; the minimum-norm
+    solution (its pseudo-inverse) then shares the load symmetrically, where point-by-point
+    Gauss-Seidel would favour whichever point comes first (and set a stack swaying)."""
+    return _restricted(np.einsum("mij,mkj->mik", jn, mn), valid)
 
 
-def relative_velocity(v, w, cs: ContactSet, jac: Jacobians, idx: np.ndarray) -> np.ndarray:
-    """(len(idx), 3) relative velocity of b's anchor against a's along normal, t1, t2."""
-    a, b = cs.a[idx], cs.b[idx]
-    dirs = cs.dirs[idx]
-    return (np.einsum("kdi,ki->kd", dirs, v[b] - v[a])
-            + np.einsum("kdi,ki->kd", jac.ang_b[idx], w[b])
-            - np.einsum("kdi,ki->kd", jac.ang_a[idx], w[a]))
+def _pinv(k: np.ndarray) -> np.ndarray:
+    """Pseudo-inverses of symmetric positive semi-definite matrices (g, S, S), eigenvalues
+    below 1e-10 of the largest taken as zero (numpy's pinv, without its per-call overhead)."""
+    value, vector = np.linalg.eigh(k)
+    keep = value > 1e-10 * value[:, -1:]
+    inverse = np.where(keep, 1.0 / np.where(keep, value, 1.0), 0.0)
+    return np.einsum("gik,gk,gjk->gij", vector, inverse, vector)
 
 
-def solve(v, w, cs: ContactSet, jac: Jacobians, inv_mass, separation: np.ndarray, h: float,
-          soft: Softness, static_soft: Softness, use_bias: bool) -> None:
+def _restricted(k: np.ndarray, rows_: np.ndarray) -> np.ndarray:
+    """K (g, S, S) with the rows and columns outside ``rows_`` (g, S) made unit rows."""
+    pair = rows_[:, :, None] & rows_[:, None, :]
+    eye = np.broadcast_to(np.eye(rows_.shape[1], dtype=bool), k.shape)
+    return np.where(pair, k, np.where(eye, 1.0, 0.0))
+
+
+@dataclass
+class Scales:
+    """Per slot (M, S): the velocity bias [m/s], the mass and impulse scales of a solve."""
+
+    bias: np.ndarray
+    mass: np.ndarray
+    impulse: np.ndarray
+
+    @classmethod
+    def of(cls, cs: ContactSet, separation: np.ndarray, h: float, soft: Softness,
+           static_soft: Softness, use_bias: bool) -> Scales:
+        """A separated (speculative) point may close its gap within the sub-step but no
+        further; an overlap is pushed out softly (with bias) or not at all (relax)."""
+        speculative = separation > 0.0
+        if not use_bias:
+            return cls(np.where(speculative, separation / h, 0.0), np.ones_like(separation),
+                       np.zeros_like(separation))
+        stat = cs.static[:, None]
+        rate = np.where(stat, static_soft.bias_rate, soft.bias_rate)
+        m_scale = np.where(stat, static_soft.mass_scale, soft.mass_scale)
+        i_scale = np.where(stat, static_soft.impulse_scale, soft.impulse_scale)
+        bias = np.where(speculative, separation / h,
+                        np.maximum(m_scale * rate * separation, -MAX_PUSH))
+        return cls(bias, np.where(speculative, 1.0, m_scale), np.where(speculative, 0.0, i_scale))
+
+
+def _gather(vel: np.ndarray, ab: np.ndarray) -> np.ndarray:
+    """(m, 12) [v_a, w_a, v_b, w_b] of manifolds with body rows ab (m, 2)."""
+    return vel[ab].reshape(len(ab), 12)
+
+
+def _scatter(vel: np.ndarray, ab: np.ndarray, local: np.ndarray) -> None:
+    """Write the manifolds' velocities back. Within a colour each dynamic body is in one
+    manifold; a body impulses do not move may be in several, always with its own velocity."""
+    vel[ab[:, 0]] = local[:, :6]
+    vel[ab[:, 1]] = local[:, 6:]
+
+
+def record_approach(vel: np.ndarray, cs: ContactSet, r: Rows) -> None:
+    """The normal relative velocity of the points not touched yet this frame (what
+    restitution bounces back once they take an impulse)."""
+    rel = np.einsum("msj,mj->ms", r.jn, _gather(vel, cs.ab))
+    cs.relative = np.where(cs.touched, cs.relative, rel)
+
+
+def warm_start(vel: np.ndarray, cs: ContactSet, r: Rows) -> None:
+    """Apply the accumulated impulses (from the last sub-step, or the last frame's contacts at
+    the same place) before solving: resting contacts start where they ended. A sum, so one
+    pass over every manifold at once."""
+    if not len(cs):
+        return
+    m = len(cs)
+    d = np.einsum("ms,msj->mj", cs.impulse[..., 0], r.mn) + \
+        np.einsum("mt,mtj->mj", cs.impulse[..., 1:].reshape(m, -1), r.mt)
+    np.add.at(vel, cs.ab[:, 0], d[:, :6])
+    np.add.at(vel, cs.ab[:, 1], d[:, 6:])
+
+
+def solve(vel: np.ndarray, cs: ContactSet, r: Rows, sc: Scales) -> None:
     """One Gauss-Seidel sweep, colour by colour: each manifold's normal impulses solved
-    together (a block, falling back to point by point when one would pull), then friction
-    point by point."""
-    for group in cs.groups:
-        slots = cs.slots[group]
-        valid = slots >= 0
-        scales = _scales(cs, separation, np.where(valid, slots, 0), h, soft, static_soft,
-                         use_bias)
-        pulling = _normal_block(v, w, cs, jac, group, slots, valid, scales, inv_mass)
-        if pulling.any():
-            for k in range(slots.shape[1]):
-                seq = pulling & valid[:, k]
-                if seq.any():
-                    _normal_points(v, w, cs, jac, slots[seq, k], [x[seq, k] for x in scales],
-                                   inv_mass)
-        _friction(v, w, cs, jac, slots, valid, inv_mass)
+    together (a block, falling back to point by point where one would pull), then friction."""
+    for s, e in cs.colours:
+        ab = cs.ab[s:e]
+        local = _gather(vel, ab)
+        _normal(local, cs, r, sc, s, e)
+        _friction(local, cs, r, s, e)
+        _scatter(vel, ab, local)
+    cs.touched |= cs.impulse[..., 0] > 0.0
 
 
-def _scales(cs, separation, idx, h, soft, static_soft, use_bias):
-    """(bias, mass scale, impulse scale), each shaped like ``idx``: a separated (speculative)
-    point may close its gap within the sub-step but no further; an overlap is pushed out
-    softly (with bias) or not at all (relax)."""
-    s = separation[idx]
-    stat = cs.static[idx]
-    speculative = s > 0.0
-    if not use_bias:
-        return np.where(speculative, s / h, 0.0), np.ones_like(s), np.zeros_like(s)
-    rate = np.where(stat, static_soft.bias_rate, soft.bias_rate)
-    m_scale = np.where(stat, static_soft.mass_scale, soft.mass_scale)
-    i_scale = np.where(stat, static_soft.impulse_scale, soft.impulse_scale)
-    bias = np.where(speculative, s / h, np.maximum(m_scale * rate * s, -MAX_PUSH))
-    return bias, np.where(speculative, 1.0, m_scale), np.where(speculative, 0.0, i_scale)
+def _normal(local, cs, r, sc, s, e) -> None:
+    """The normal impulses of manifolds s:e against their velocities ``local`` (updated)."""
+    rel = np.einsum("msj,mj->ms", r.jn[s:e], local)
+    old = cs.impulse[s:e, :, 0].copy()
+    new = old - np.einsum("mij,mj->mi", cs.block[s:e], sc.mass[s:e] * rel + sc.bias[s:e]) \
+        - sc.impulse[s:e] * old
+    pulling = np.nonzero((new < 0.0).any(axis=1))[0]
+    if len(pulling):
+        new[pulling] = _active_set(cs, sc, pulling + s, rel[pulling], old[pulling],
+                                   new[pulling] >= 0.0)
+    local += np.einsum("ms,msj->mj", new - old, r.mn[s:e])
+    cs.impulse[s:e, :, 0] = new
 
 
-def _normal_block(v, w, cs, jac, group, slots, valid, scales, inv_mass) -> np.ndarray:
-    """Solve each manifold's normal impulses at once; returns which manifolds would pull
-    (a negative impulse) and are left to the point-by-point pass."""
-    bias, m_scale, i_scale = scales
-    idx = np.where(valid, slots, 0)
-    rel = relative_velocity(v, w, cs, jac, idx.ravel())[:, 0].reshape(idx.shape)
-    fresh = valid & (cs.total[idx] == 0.0)  # not touched yet this frame: its approach speed
-    cs.relative[idx[fresh]] = rel[fresh]
-    old = np.where(valid, cs.impulse[idx, 0], 0.0)
-    rhs = np.where(valid, m_scale * rel + bias, 0.0)
-    d = np.where(valid, -np.einsum("gij,gj->gi", jac.block[group], rhs) - i_scale * old, 0.0)
-    pulling = ((old + d < 0.0) & valid).any(axis=1)
-    d = np.where(pulling[:, None], 0.0, d)
-    head = idx[:, 0]
-    a, b = cs.a[head], cs.b[head]
-    p = np.einsum("gs,gsi->gi", d, cs.normal[idx])
-    v[a] -= inv_mass[a][:, None] * p
-    v[b] += inv_mass[b][:, None] * p
-    w[a] -= np.einsum("gs,gsi->gi", d, jac.wa[idx, 0])
-    w[b] += np.einsum("gs,gsi->gi", d, jac.wb[idx, 0])
-    done = valid & ~pulling[:, None]
-    cs.impulse[idx[done], 0] = (old + d)[done]
-    cs.total[idx[done]] += d[done]
-    return pulling
+def _active_set(cs, sc, m, rel, old, active) -> np.ndarray:
+    """Normal impulses (g, S) of manifolds m whose block solution would pull at some points:
+    a small linear complementarity problem per manifold, solved by principal pivoting. Points
+    that would pull let go (impulse 0) and the others are solved together again; then, one
+    point at a time (the first by index: Murty's rule), a point that pulls lets go or a
+    let-go point that is left approaching takes part again. Symmetric loads stay symmetric
+    (points let go together), which a point-by-point pass would not keep — a small body
+    would spin up from the difference. Degenerate manifolds that do not settle within
+    PIVOTS steps are finished point by point (:func:`_projected`)."""
+    valid = cs.valid[m]
+    active = active & valid
+    out = np.zeros_like(old)
+    todo = np.arange(len(m))  # manifolds not solved yet (rows of m)
+    for _ in range(PIVOTS):
+        mt, k, o = m[todo], cs.coupling[m[todo]], old[todo]
+        act = active[todo]
+        let_go = np.where(act, 0.0, -o)
+        rhs = sc.mass[mt] * (rel[todo] + np.einsum("gij,gj->gi", k, let_go)) + sc.bias[mt]
+        inv = _pinv(_restricted(k, act))
+        new = np.where(act, o - np.einsum("gij,gj->gi", inv, np.where(act, rhs, 0.0))
+                       - sc.impulse[mt] * o, 0.0)
+        after = sc.mass[mt] * (rel[todo] + np.einsum("gij,gj->gi", k, new - o)) + sc.bias[mt]
+        scale = 1e-6 * (np.abs(rel[todo]) + np.abs(sc.bias[mt]) + 1e-3)
+        wrong = (act & (new < 0.0)) | (valid[todo] & ~act & (after < -scale))
+        done = ~wrong.any(axis=1)
+        out[todo] = new
+        if done.all():
+            return np.maximum(out, 0.0)
+        left = np.nonzero(~done)[0]
+        first = np.argmax(wrong[left], axis=1)
+        active[todo[left], first] = ~active[todo[left], first]
+        todo = todo[left]
+    out[todo] = _projected(cs, sc, m[todo], rel[todo], old[todo])
+    return np.maximum(out, 0.0)
 
 
-def _normal_points(v, w, cs, jac, pts, scales, inv_mass) -> None:
-    """Normal impulses of points ``pts`` (one per manifold), each alone, clamped >= 0."""
-    bias, m_scale, i_scale = scales
-    rel = relative_velocity(v, w, cs, jac, pts)[:, 0]
-    fresh = cs.total[pts] == 0.0
-    cs.relative[pts[fresh]] = rel[fresh]
-    old = cs.impulse[pts, 0]
-    new = np.maximum(old - jac.mass[pts, 0] * (m_scale * rel + bias) - i_scale * old, 0.0)
-    d = np.zeros((len(pts), 3))
-    d[:, 0] = new - old
-    cs.impulse[pts, 0] = new
-    cs.total[pts] += d[:, 0]
-    apply(v, w, cs, jac, pts, d, inv_mass)
+def _projected(cs, sc, m, rel, old, sweeps: int = 4) -> np.ndarray:
+    """Normal impulses (g, S) of manifolds m by projected Gauss-Seidel on their coupling:
+    point by point, each clamped >= 0, ``sweeps`` times."""
+    k, valid = cs.coupling[m], cs.valid[m]
+    x = old.copy()
+    for _ in range(sweeps):
+        for i in range(valid.shape[1]):
+            now = sc.mass[m, i] * (rel[:, i] + np.einsum("gj,gj->g", k[:, i], x - old)) + \
+                sc.bias[m, i]
+            step = x[:, i] - now / k[:, i, i] - sc.impulse[m, i] * x[:, i]
+            x[:, i] = np.where(valid[:, i], np.maximum(step, 0.0), 0.0)
+    return x
 
 
-def _friction(v, w, cs, jac, slots, valid, inv_mass) -> None:
-    """Coulomb friction of every point of the manifolds ``slots`` (g, S): each point's two
-    tangent impulses from the same velocities, shared (divided by the manifold's point count,
-    so the points together do what one would alone: symmetric, as the normal block), then
-    clamped to its cone friction * normal impulse; applied per manifold."""
-    idx = np.where(valid, slots, 0)
-    flat = idx.ravel()
-    rel_t = relative_velocity(v, w, cs, jac, flat)[:, 1:].reshape(idx.shape + (2,))
-    count = valid.sum(axis=1)[:, None, None]
-    old = cs.impulse[idx, 1:]
-    new = old - jac.mass[idx, 1:] * rel_t / np.maximum(count, 1)
-    limit = cs.friction[idx] * cs.impulse[idx, 0]
-    norm = np.linalg.norm(new, axis=2)
-    new *= np.where(norm > limit, limit / np.maximum(norm, 1e-300), 1.0)[..., None]
-    d = np.where(valid[..., None], new - old, 0.0)
-    cs.impulse[idx[valid], 1:] = new[valid]
-    _apply_manifolds(v, w, cs, jac, idx, d, inv_mass, rows=slice(1, 3))
+def _friction(local, cs, r, s, e) -> None:
+    """Coulomb friction of every point of manifolds s:e: each point's two tangent impulses
+    from the same velocities, shared over the manifold's points (symmetric, as the normal
+    block), then clamped to its cone friction * normal impulse."""
+    n = e - s
+    rel = np.einsum("mtj,mj->mt", r.jt[s:e], local)
+    old = cs.impulse[s:e, :, 1:].reshape(n, -1)
+    new = (old - r.mass_t[s:e] * rel).reshape(n, -1, 2)
+    limit = cs.friction[s:e] * cs.impulse[s:e, :, 0]
+    norm = np.sqrt(np.einsum("msi,msi->ms", new, new))
+    new *= np.minimum(1.0, limit / np.maximum(norm, 1e-300))[..., None]
+    local += np.einsum("mt,mtj->mj", new.reshape(n, -1) - old, r.mt[s:e])
+    cs.impulse[s:e, :, 1:] = new
 
 
-def _apply_manifolds(v, w, cs, jac, idx, d, inv_mass, rows) -> None:
-    """Apply impulse changes d (g, S, r) along the contact directions ``rows`` of the points
-    idx (g, S) of g manifolds (no dynamic body in two of them): summed per manifold."""
-    p = np.einsum("gsr,gsri->gi", d, cs.dirs[idx][:, :, rows])
-    head = idx[:, 0]
-    a, b = cs.a[head], cs.b[head]
-    v[a] -= inv_mass[a][:, None] * p
-    v[b] += inv_mass[b][:, None] * p
-    w[a] -= np.einsum("gsr,gsri->gi", d, jac.wa[idx][:, :, rows])
-    w[b] += np.einsum("gsr,gsri->gi", d, jac.wb[idx][:, :, rows])
-
-
-def warm_start(v, w, cs: ContactSet, jac: Jacobians, inv_mass) -> None:
-    """Apply the accumulated impulses (from the last sub-step, or the last frame's contacts
-    at the same place) before solving: resting contacts start where they ended."""
-    for group in cs.groups:
-        slots = cs.slots[group]
-        valid = slots >= 0
-        idx = np.where(valid, slots, 0)
-        cs.total[idx[valid]] += cs.impulse[idx[valid], 0]
-        d = np.where(valid[..., None], cs.impulse[idx], 0.0)
-        _apply_manifolds(v, w, cs, jac, idx, d, inv_mass, rows=slice(0, 3))
-
-
-def _by_slot(cs: ContactSet):
-    """Point index arrays in which no dynamic body appears twice: per colour, per slot."""
-    for group in cs.groups:
-        slots = cs.slots[group]
-        for k in range(slots.shape[1]):
-            pts = slots[:, k][slots[:, k] >= 0]
-            if len(pts):
-                yield pts
-
-
-def restitution(v, w, cs: ContactSet, jac: Jacobians, inv_mass) -> None:
-    """Bounce: contacts that were approaching faster than RESTITUTION_THRESHOLD when first
-    touched (within the frame) and took an impulse leave at restitution times that speed; each
+def restitution(vel: np.ndarray, cs: ContactSet, r: Rows) -> None:
+    """Bounce: points that were approaching faster than RESTITUTION_THRESHOLD before their
+    first impulse this frame and took one leave at restitution times that speed; each
     bounces once (its approach speed is then forgotten)."""
-    for idx in _by_slot(cs):
-        sel = idx[(cs.restitution[idx] > 0.0) & (cs.relative[idx] < -RESTITUTION_THRESHOLD)
-                  & (cs.total[idx] > 0.0)]
-        if not len(sel):
+    bounce = (cs.restitution > 0.0) & (cs.relative < -RESTITUTION_THRESHOLD) & cs.touched
+    if not bounce.any():
+        return
+    for s, e in cs.colours:
+        m = np.nonzero(bounce[s:e].any(axis=1))[0] + s
+        if not len(m):
             continue
-        rel = relative_velocity(v, w, cs, jac, sel)[:, 0]
-        n_old = cs.impulse[sel, 0]
-        n_new = np.maximum(n_old - jac.mass[sel, 0] * (rel + cs.restitution[sel] * cs.relative[sel]),
-                           0.0)
-        d = np.zeros((len(sel), 3))
-        d[:, 0] = n_new - n_old
-        cs.impulse[sel, 0] = n_new
-        cs.relative[sel] = 0.0
-        apply(v, w, cs, jac, sel, d, inv_mass)
+        local = _gather(vel, cs.ab[m])
+        for k in range(cs.valid.shape[1]):
+            sel = bounce[m, k]
+            rel = np.einsum("mj,mj->m", r.jn[m, k], local)
+            old = cs.impulse[m, k, 0]
+            new = np.where(sel, np.maximum(
+                old - r.mass_n[m, k] * (rel + cs.restitution[m, k] * cs.relative[m, k]), 0.0),
+                old)
+            local += (new - old)[:, None] * r.mn[m, k]
+            cs.impulse[m, k, 0] = new
+        _scatter(vel, cs.ab[m], local)
+    cs.relative[bounce] = 0.0

@@ -32,6 +32,9 @@ DEFAULT_SUBSTEPS = 8
 # sub-steps between contact searches: contacts are found with the normals of their time, so
 # bodies that meet at speed need them refreshed within a frame (1/24 s is long)
 COLLIDE_EVERY = 2
+# ... but only when some body has moved this fraction of its size since the last search (a
+# resting or slowly creeping pile keeps its contacts for the whole frame)
+REFRESH_FRACTION = 0.02
 
 
 @dataclass
@@ -81,16 +84,27 @@ class _FrameStep:
     posed: Posed
     posed_rows: np.ndarray  # rows of the posed bodies (kinematic bodies, then colliders)
     bodies: Bodies
-    contacts: cs_.ContactSet | None
-    x0: np.ndarray | None  # (N, 3), (N, 4): poses when the contacts were found
-    q0: np.ndarray | None
-    v: np.ndarray  # (N, 3), (N, 3): every body's velocities during the sub-steps
-    w: np.ndarray
+    vel: np.ndarray  # (N, 6) every body's [v, w] during the sub-steps ([m/s], [rad/s])
     inv_mass: np.ndarray  # (N,)
-    places: np.ndarray | None  # (k, 3) each contact's place in its lower body (warm starting)
     report: RigidReport
-    block: np.ndarray | None = None  # manifold blocks of the current contacts
+    contacts: cs_.ContactSet | None = None
+    x0: np.ndarray | None = None  # (N, 3), (N, 4): poses when the contacts were found
+    q0: np.ndarray | None = None
+    pair: np.ndarray | None = None  # (k,) each found point's pair key and its place in the
+    places: np.ndarray | None = None  # (k, 3) lower body (warm starting, :mod:`.warm`)
+    rows: cs_.Rows | None = None  # the contacts' rows and separations (M, S) at the poses now
+    separation: np.ndarray | None = None
     awake: np.ndarray | None = None  # indices of the dynamic bodies simulated this frame
+
+    @property
+    def v(self) -> np.ndarray:
+        """(N, 3) linear velocities (a view of ``vel``)."""
+        return self.vel[:, :3]
+
+    @property
+    def w(self) -> np.ndarray:
+        """(N, 3) angular velocities (a view of ``vel``)."""
+        return self.vel[:, 3:]
 
 
 class RigidBodySolver:
@@ -148,14 +162,13 @@ class RigidBodySolver:
         rows = np.concatenate([self.kinematic, n + np.arange(len(colliders[0]))]).astype(np.int64)
         inv_mass = np.concatenate([model.body_inv_mass, np.zeros(len(colliders[0]))])
         step = _FrameStep(state, inputs, inputs.frame_dt / self.substeps, g, posed, rows, bodies,
-                          None, None, None, bodies.v.copy(), bodies.w.copy(), inv_mass, None,
-                          RigidReport())
+                          np.concatenate([bodies.v, bodies.w], axis=1), inv_mass, RigidReport())
         fast = np.linalg.norm(bodies.v, axis=1) + np.linalg.norm(bodies.w, axis=1) * \
             bodies.bound > sleep.WAKE_SPEED
         self._wake_state(step, moving=fast)
         self._collide(step, inputs.frame_dt, state.contacts)
-        woken = sleep.wakers(state.body_asleep, state.body_island, step.contacts.a,
-                             step.contacts.b, (bodies.dynamic & fast) | bodies.moving)
+        woken = sleep.wakers(state.body_asleep, state.body_island, step.contacts.ab[:, 0],
+                             step.contacts.ab[:, 1], (bodies.dynamic & fast) | bodies.moving)
         if woken.any():  # touched: those islands take part in this frame after all
             state.body_asleep[woken] = False
             state.body_slow[woken] = 0
@@ -181,62 +194,59 @@ class RigidBodySolver:
         b = step.bodies
         b.v, b.w = step.v.copy(), step.w.copy()
         found = find_contacts(b, duration, step.g)
-        step.contacts = self._prepare(b, found, memory)
-        step.places = warm.places(found.a, found.b, found.point, b.x, b.q, len(b))[1]
+        step.pair, step.places = warm.places(found.a, found.b, found.point, b.x, b.q, len(b))
+        step.contacts = self._prepare(b, found, step.pair, step.places, memory)
         step.x0, step.q0 = b.x.copy(), b.q.copy()
-        step.block = None
+        self._pose_contacts(step)
         step.report.contacts = max(step.report.contacts, len(found.a))
 
     def _remembered(self, step: _FrameStep) -> warm.Remembered:
         cs = step.contacts
-        impulse = (cs.impulse[:, :1] * cs.normal + cs.impulse[:, 1:2] * cs.t1
-                   + cs.impulse[:, 2:] * cs.t2)
-        return warm.remember(cs.key, step.places, impulse)
+        points = cs.point[cs.valid]
+        return warm.remember(step.pair[points], step.places[points],
+                             cs.world_impulses()[cs.valid])
 
-    def _prepare(self, bodies: Bodies, found: Found, memory: warm.Remembered) -> cs_.ContactSet:
+    def _prepare(self, bodies: Bodies, found: Found, pair: np.ndarray, local: np.ndarray,
+                 memory: warm.Remembered) -> cs_.ContactSet:
         """Contact constraints from the found points: anchors, combined coefficients, the
         relative normal velocity (for restitution) and last frame's impulses by place
-        (:mod:`.warm`). The contact set's keys are the pairs, ``step.places`` the places."""
+        (:mod:`.warm`: ``pair`` keys and ``local`` places of the points)."""
         a, b, n = found.a, found.b, found.normal
         ra, rb = found.point - bodies.x[a], found.point - bodies.x[b]
-        t1, t2 = cs_.tangents(n) if len(n) else (n.copy(), n.copy())
         rel = np.einsum("ki,ki->k", n, (bodies.v[b] + np.cross(bodies.w[b], rb))
                         - (bodies.v[a] + np.cross(bodies.w[a], ra)))
-        pair, local = warm.places(a, b, found.point, bodies.x, bodies.q, len(bodies))
         size = np.where(bodies.dynamic, bodies.bound, np.inf)  # a collider's size says nothing
         tolerance = warm.MATCH_FRACTION * np.minimum(size[a], size[b])
         p = warm.recall(memory, pair, local, tolerance)  # world impulse vectors
+        t1, t2 = cs_.tangents(n) if len(n) else (n, n)
         impulse = np.stack([np.einsum("ki,ki->k", p, d) for d in (n, t1, t2)], 1) \
             if len(a) else np.zeros((0, 3))
         impulse[:, 0] = np.maximum(impulse[:, 0], 0.0)
-        dynamic = bodies.dynamic
-        slots, groups = cs_.manifolds(pair, a, b, dynamic)
-        return cs_.ContactSet(
-            a, b, n, t1, t2, ra, rb, found.separation - np.einsum("ki,ki->k", n, rb - ra),
-            np.sqrt(bodies.friction[a] * bodies.friction[b]),
-            bodies.restitution[a] * bodies.restitution[b], rel, impulse,
-            np.zeros(len(a)), pair, ~(dynamic[a] & dynamic[b]), slots, groups)
+        return cs_.ContactSet.of_points(
+            a, b, pair, bodies.dynamic, normal=n, point=found.point, xa=bodies.x[a],
+            xb=bodies.x[b], separation=found.separation,
+            friction=np.sqrt(bodies.friction[a] * bodies.friction[b]),
+            restitution=bodies.restitution[a] * bodies.restitution[b], relative=rel,
+            impulse=impulse)
 
     def substep(self, step: _FrameStep, k: int) -> None:
         """Sub-step ``k``: the passes of the module docstring."""
         h = step.h
         s0, s1 = k / self.substeps, (k + 1) / self.substeps
-        if k and k % self.collide_every == 0:  # contacts again, from where the bodies are now
+        if k and k % self.collide_every == 0 and self._moved(step):  # contacts again
             self._collide(step, (1.0 - s0) * step.inputs.frame_dt, self._remembered(step))
-        cs = step.contacts
+        cs, vel = step.contacts, step.vel
         self._move_posed(step, s0, s1)
         self._forces(step)
         soft = cs_.Softness.of(min(cs_.CONTACT_HERTZ, 0.25 / h), cs_.DAMPING_RATIO, h)
         hard = cs_.Softness.of(min(cs_.STATIC_HERTZ, 0.5 / h), cs_.DAMPING_RATIO, h)
-        jac = self._jacobians(step)
-        cs_.warm_start(step.v, step.w, cs, jac, step.inv_mass)
-        cs_.solve(step.v, step.w, cs, jac, step.inv_mass, self._separation(step), h, soft, hard,
-                  True)
+        cs_.record_approach(vel, cs, step.rows)
+        cs_.warm_start(vel, cs, step.rows)
+        cs_.solve(vel, cs, step.rows, cs_.Scales.of(cs, step.separation, h, soft, hard, True))
         self._integrate(step)
-        jac = self._jacobians(step)  # the bodies moved: arms and inertias at their new poses
-        cs_.solve(step.v, step.w, cs, jac, step.inv_mass, self._separation(step), h, soft, hard,
-                  False)
-        cs_.restitution(step.v, step.w, cs, jac, step.inv_mass)
+        self._pose_contacts(step)  # the bodies moved: arms, inertias and gaps at the new poses
+        cs_.solve(vel, cs, step.rows, cs_.Scales.of(cs, step.separation, h, soft, hard, False))
+        cs_.restitution(vel, cs, step.rows)
         self._store(step, last=k == self.substeps - 1)
 
     # -- passes ---------------------------------------------------------------------------------
@@ -265,27 +275,29 @@ class RigidBodySolver:
         out[d] = dynamics.world_tensor(q[d], self.model.body_inv_inertia[d])
         return out
 
-    def _jacobians(self, step: _FrameStep) -> cs_.Jacobians:
-        """Constraint rows at the bodies' current poses: each contact's anchors, carried with
-        their bodies, meet at their midpoint — the common point both impulses act at."""
-        cs, b = step.contacts, step.bodies
+    def _moved(self, step: _FrameStep) -> bool:
+        """Whether any body has moved more than REFRESH_FRACTION of its size (bound radius)
+        since the contacts were found, turning included."""
+        b = step.bodies
         turn = quat.multiply(b.q, quat.conjugate(step.q0))
-        pa = b.x[cs.a] + quat.rotate(turn[cs.a], cs.ra)
-        pb = b.x[cs.b] + quat.rotate(turn[cs.b], cs.rb)
-        mid = 0.5 * (pa + pb)
-        jac = cs_.jacobians(cs, step.inv_mass, self._inverse_inertia(step, b.q),
-                            mid - b.x[cs.a], mid - b.x[cs.b], step.block)
-        step.block = jac.block  # manifold blocks: once per contact search (they barely change)
-        return jac
+        angle = 2.0 * np.arctan2(np.linalg.norm(turn[:, 1:], axis=1), np.abs(turn[:, 0]))
+        drift = np.linalg.norm(b.x - step.x0, axis=1) + angle * b.bound
+        return bool((drift > REFRESH_FRACTION * b.bound).any())
 
-    def _separation(self, step: _FrameStep) -> np.ndarray:
-        """Each contact's current separation from the bodies' motion since it was found."""
+    def _pose_contacts(self, step: _FrameStep) -> None:
+        """The contacts' rows and separations at the bodies' current poses. Each point's
+        anchors are carried with their bodies; its separation is the found one plus how far
+        they have moved apart along the normal, and both impulses act at their midpoint. The
+        manifold blocks are kept from the contact search (they barely change)."""
         cs, b = step.contacts, step.bodies
-        turn = quat.multiply(b.q, quat.conjugate(step.q0))
-        dx = b.x - step.x0
-        pa = dx[cs.a] + quat.rotate(turn[cs.a], cs.ra)
-        pb = dx[cs.b] + quat.rotate(turn[cs.b], cs.rb)
-        return cs.base + np.einsum("ki,ki->k", cs.normal, pb - pa)
+        turn = quat.to_matrix(quat.multiply(b.q, quat.conjugate(step.q0)))
+        a, bb = cs.ab[:, 0], cs.ab[:, 1]
+        pa = b.x[a, None] + np.einsum("mij,msj->msi", turn[a], cs.ra)
+        pb = b.x[bb, None] + np.einsum("mij,msj->msi", turn[bb], cs.rb)
+        step.separation = cs.separation + np.einsum("msi,msi->ms", cs.normal, pb - pa)
+        mid = 0.5 * (pa + pb)
+        step.rows = cs_.rows(cs, step.inv_mass, self._inverse_inertia(step, b.q),
+                             mid - b.x[a, None], mid - b.x[bb, None])
 
     def _integrate(self, step: _FrameStep) -> None:
         """Positions of the dynamic bodies; their orientation turns with L held, and w is
@@ -308,7 +320,7 @@ class RigidBodySolver:
         if last:
             state.contacts = self._remembered(step)
             self._sleep(step)
-            sep = self._separation(step)
+            sep = step.separation[step.contacts.valid]
             step.report.overlap = float(max(0.0, -sep.min())) if len(sep) else 0.0
             step.report.moving = int(np.count_nonzero(
                 np.linalg.norm(step.v[d], axis=1) > 1e-3))
@@ -320,11 +332,12 @@ class RigidBodySolver:
         speed = np.linalg.norm(step.v[:n], axis=1) + np.linalg.norm(step.w[:n], axis=1) * \
             m.body_bound
         pinned = np.zeros(n, bool)
-        for this, other in ((cs.a, cs.b), (cs.b, cs.a)):
+        ca, cb = cs.ab[:, 0], cs.ab[:, 1]
+        for this, other in ((ca, cb), (cb, ca)):
             touch = (this < n) & b.moving[other]
             pinned[this[touch]] = True
-        now = sleep.update(state.body_asleep, state.body_slow, state.body_island, speed, cs.a,
-                           cs.b, b.dynamic[:n], pinned)
+        now = sleep.update(state.body_asleep, state.body_slow, state.body_island, speed, ca, cb,
+                           b.dynamic[:n], pinned)
         state.body_P[now] = 0.0
         state.body_L[now] = 0.0
         step.report.sleeping = int(state.body_asleep.sum())

@@ -8,7 +8,7 @@ import numpy as np
 from physanim.core.contact import ColliderFrame
 from physanim.core.rigid.mass import box_mass, sphere_mass
 from physanim.core.rigid.model import RigidBodyBuilder, RigidBodySettings
-from physanim.core.rigid.solver import RigidBodySolver, RigidFrameInputs
+from physanim.core.rigid.solver import DEFAULT_SUBSTEPS, RigidBodySolver, RigidFrameInputs
 
 FPS = 24.0
 DT = 1.0 / FPS
@@ -33,7 +33,7 @@ def ground(friction=0.5, restitution=0.0, tilt=0.0, name="Ground") -> ColliderFr
     return ColliderFrame(name, "HALF_SPACE", m, m, restitution, friction)
 
 
-def world(*bodies, substeps=8):
+def world(*bodies, substeps=DEFAULT_SUBSTEPS):
     builder = RigidBodyBuilder()
     for b in bodies:
         builder.add_body(b)
