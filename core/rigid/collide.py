@@ -64,9 +64,16 @@ class Bodies:
     meshes: dict | None = None  # row of a Mesh collider -> (hierarchy, local lo, local hi)
     sleeping: np.ndarray | None = None  # (N,) resting bodies: found only to be woken
     moving: np.ndarray | None = None  # (N,) bodies that move on their own this frame
+    fresh: np.ndarray | None = None  # (N,) bodies whose contacts are searched (None: all)
 
     def __len__(self) -> int:
         return len(self.shape)
+
+    def searched(self, rows: np.ndarray, other: int | np.ndarray) -> np.ndarray:
+        """Which of the pairs (rows, other) have contacts to search: one side is fresh."""
+        if self.fresh is None:
+            return np.ones(len(rows), bool)
+        return self.fresh[rows] | self.fresh[other]
 
     def centres(self, rotations: np.ndarray) -> np.ndarray:
         """(N, 3) world centres of the shapes."""
@@ -134,6 +141,7 @@ def _candidate_pairs(bodies: Bodies, reach: np.ndarray, ground: np.ndarray):
     if bodies.sleeping is not None:  # a moving kinematic body or collider wakes sleepers
         wake = bodies.sleeping & ~bodies.dynamic
         keep |= (wake[i] & bodies.moving[j]) | (bodies.moving[i] & wake[j])
+    keep &= bodies.searched(i, j)
     return i[keep], j[keep]
 
 
@@ -253,7 +261,8 @@ def _half_spaces(bodies: Bodies, rot: np.ndarray, reach: np.ndarray, ground: np.
     for g in np.nonzero(ground)[0]:
         n = rot[g, :, 2]
         height = (bodies.x[dyn] - bodies.x[g]) @ n
-        near = dyn[height - bodies.bound[dyn] < SPECULATIVE + reach[dyn] + reach[g]]
+        near = dyn[(height - bodies.bound[dyn] < SPECULATIVE + reach[dyn] + reach[g])
+                   & bodies.searched(dyn, g)]
         owner, feature, p = support_points(bodies, rot, near, n)
         sep = (p - bodies.x[g]) @ n - bodies.radius[g]  # radius: the collider's thickness
         margin = SPECULATIVE + reach[owner] + reach[g]

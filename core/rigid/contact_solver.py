@@ -20,7 +20,7 @@ colouring.
 
 The separation of a point follows the bodies from where the contact was found (its anchors
 move with their bodies, the normal is held): s = s0 + n . (p_B - p_A), p the anchors' world
-positions. A separated (speculative) point lets the bodies close the gap within one sub-step
+positions (both the contact point when found). A separated (speculative) point lets the bodies close the gap within one sub-step
 but no further; an overlapping one is pushed apart softly (a spring of CONTACT_HERTZ, heavily
 damped, at most MAX_PUSH m/s).
 """
@@ -36,7 +36,7 @@ STATIC_HERTZ = 60.0  # against bodies that do not move under impulses: stiffer
 DAMPING_RATIO = 10.0  # heavily over-damped: overlaps resolve without bounce
 MAX_PUSH = 1.0  # [m/s] fastest overlap recovery (gentle: overlaps in a pile add up)
 RESTITUTION_THRESHOLD = 1.0  # [m/s] slower impacts do not bounce (a resting stack stays put)
-PIVOTS = 4  # principal pivoting steps of a manifold whose block solution pulls
+PIVOTS = 2  # principal pivoting steps of a manifold whose block solution pulls
 
 
 @dataclass(frozen=True)
@@ -104,16 +104,19 @@ def _first_of_their_bodies(a: np.ndarray, b: np.ndarray, dynamic: np.ndarray) ->
 
 @dataclass
 class ContactSet:
-    """A frame's contact points by manifold: M manifolds (the points of one pair of bodies)
-    of S slots, ordered by colour.
+    """Contact points by manifold: M manifolds (the points of one pair of bodies) of S slots;
+    after :meth:`coloured`, ordered by colour.
 
     Attributes:
-        ab: (M, 2) the manifold's body rows a, b. valid: (M, S) the slot holds a point.
-        point: (M, S) the point's index among the points it was built from (-1: empty).
+        ab: (M, 2) the manifold's body rows a, b. pair: (M,) their key (lower row * N +
+            higher row). valid: (M, S) the slot holds a point.
+        place: (M, S, 3) each point in the frame of the pair's lower body [m] (warm starting
+            matches contacts by place: :mod:`.warm`).
         normal, t1, t2: (M, S, 3) unit normal from a to b and tangents (0 in empty slots).
-        ra, rb: (M, S, 3) anchors: the contact point from each body's centre of mass when
-            found (the same world point for both).
-        separation: (M, S) when found [m] (< 0: overlap).
+        ra, rb: (M, S, 3) anchors: the contact point from each body's centre of mass at the
+            poses of ``q0`` (the solver's reference orientations).
+        base: (M, S) [m]: the separation is base + n . (p_b - p_a), p the anchors' world
+            positions (when found both are the contact point: base is the found separation).
         friction, restitution: (M, S) combined coefficients (friction: the geometric mean of
             the two sides'; restitution: their product, so a body bounces only where both are
             bouncy — a default, unbouncy box stays down on any collider).
@@ -124,41 +127,42 @@ class ContactSet:
         static: (M,) one side does not move under impulses.
         colours: [(start, stop)] manifold slices in which no dynamic body appears twice.
         coupling: (M, S, S) each manifold's normal coupling K_ij = J_i M^-1 J_j^T and block its
-            pseudo-inverse (set by :func:`rows` from the poses when the contacts were found).
+            pseudo-inverse (set by :func:`rows` at the first poses after colouring).
     """
 
     ab: np.ndarray
+    pair: np.ndarray
     valid: np.ndarray
-    point: np.ndarray
+    place: np.ndarray
     normal: np.ndarray
     t1: np.ndarray
     t2: np.ndarray
     ra: np.ndarray
     rb: np.ndarray
-    separation: np.ndarray
+    base: np.ndarray
     friction: np.ndarray
     restitution: np.ndarray
     relative: np.ndarray
     impulse: np.ndarray
     touched: np.ndarray
-    static: np.ndarray
-    colours: list
+    static: np.ndarray | None = None
+    colours: list | None = None
     coupling: np.ndarray | None = None
     block: np.ndarray | None = None
+
+    _PER_SLOT = ("valid", "place", "normal", "t1", "t2", "ra", "rb", "base", "friction",
+                 "restitution", "relative", "impulse", "touched")
 
     def __len__(self) -> int:
         return len(self.ab)
 
     @classmethod
-    def of_points(cls, a, b, pair, dynamic, *, normal, point, xa, xb, separation, friction,
+    def of_points(cls, a, b, pair, *, place, normal, point, xa, xb, separation, friction,
                   restitution, relative, impulse) -> ContactSet:
-        """Group k points (bodies a, b (k,); ``pair`` (k,) a key per pair of bodies) into
-        coloured manifolds. ``point`` (k, 3) world points, ``xa``, ``xb`` (k, 3) the bodies'
-        centres of mass; the other arrays are per point."""
-        slots, groups = _manifolds(pair, a, b, dynamic)
-        order = np.concatenate(groups) if groups else np.zeros(0, np.int64)
-        slots = slots[order]
-        ends = np.cumsum([len(g) for g in groups]).tolist()
+        """Group k points (bodies a, b (k,); ``pair`` (k,) their key) into manifolds.
+        ``point`` (k, 3) world points, ``xa``, ``xb`` (k, 3) the bodies' centres of mass; the
+        other arrays are per point."""
+        slots = _manifolds(pair)
         valid = slots >= 0
         idx = np.where(valid, slots, 0)
 
@@ -169,12 +173,48 @@ class ContactSet:
 
         t1, t2 = tangents(normal) if len(normal) else (normal, normal)
         head = idx[:, 0]
-        ab = np.stack([a[head], b[head]], axis=1)
-        return cls(ab, valid, np.where(valid, slots, -1), pad(normal), pad(t1), pad(t2),
-                   pad(point - xa), pad(point - xb), pad(separation), pad(friction),
-                   pad(restitution), pad(relative), pad(impulse), pad(impulse[:, 0] > 0.0),
-                   ~(dynamic[ab[:, 0]] & dynamic[ab[:, 1]]),
-                   list(zip([0] + ends[:-1], ends)))
+        return cls(np.stack([a[head], b[head]], axis=1), pair[head], valid, pad(place),
+                   pad(normal), pad(t1), pad(t2), pad(point - xa), pad(point - xb),
+                   pad(separation), pad(friction), pad(restitution), pad(relative),
+                   pad(impulse), pad(impulse[:, 0] > 0.0))
+
+    def take(self, rows: np.ndarray) -> ContactSet:
+        """The manifolds ``rows`` (uncoloured)."""
+        return ContactSet(self.ab[rows], self.pair[rows],
+                          *(getattr(self, f)[rows] for f in self._PER_SLOT))
+
+    @classmethod
+    def join(cls, parts: list[ContactSet]) -> ContactSet:
+        """The manifolds of every part, padded to the widest (uncoloured)."""
+        width = max(p.valid.shape[1] for p in parts)
+
+        def widened(x):
+            pad = [(0, 0), (0, width - x.shape[1])] + [(0, 0)] * (x.ndim - 2)
+            return np.pad(x, pad)
+
+        return cls(np.concatenate([p.ab for p in parts]), np.concatenate([p.pair for p in parts]),
+                   *(np.concatenate([widened(getattr(p, f)) for p in parts])
+                     for f in cls._PER_SLOT))
+
+    def coloured(self, dynamic: np.ndarray) -> ContactSet:
+        """The manifolds ordered by colour for bodies that are ``dynamic`` (N,) now."""
+        a, b = self.ab[:, 0], self.ab[:, 1]
+        groups = colour(a, b, dynamic)
+        order = np.concatenate(groups) if groups else np.zeros(0, np.int64)
+        out = self.take(order)
+        ends = np.cumsum([len(g) for g in groups]).tolist()
+        out.colours = list(zip([0] + ends[:-1], ends))
+        out.static = ~(dynamic[out.ab[:, 0]] & dynamic[out.ab[:, 1]])
+        return out
+
+    def turned(self, turn: np.ndarray) -> ContactSet:
+        """The same contacts with their anchors carried by the bodies' rotations ``turn``
+        (N, 3, 3) since the reference orientations (so the current ones become the
+        reference); separations are unchanged."""
+        a, b = self.ab[:, 0], self.ab[:, 1]
+        self.ra = np.matmul(self.ra, turn[a].transpose(0, 2, 1))
+        self.rb = np.matmul(self.rb, turn[b].transpose(0, 2, 1))
+        return self
 
     def world_impulses(self) -> np.ndarray:
         """(M, S, 3) each point's accumulated impulse as a world vector [N s] (on body b)."""
@@ -182,18 +222,16 @@ class ContactSet:
         return i[..., :1] * self.normal + i[..., 1:2] * self.t1 + i[..., 2:] * self.t2
 
 
-def _manifolds(key: np.ndarray, a: np.ndarray, b: np.ndarray, dynamic: np.ndarray):
-    """Points grouped by pair: (slots (m, S) point indices, -1 padded; colour groups of
-    manifolds)."""
+def _manifolds(key: np.ndarray) -> np.ndarray:
+    """Points grouped by pair ``key``: (m, S) point indices, -1 padded."""
     if not len(key):
-        return np.zeros((0, 1), np.int64), []
+        return np.zeros((0, 1), np.int64)
     order = np.argsort(key, kind="stable")
     uniq, first, count = np.unique(key[order], return_index=True, return_counts=True)
     rank = np.arange(len(key)) - np.repeat(first, count)
     slots = np.full((len(uniq), int(count.max())), -1, np.int64)
     slots[np.repeat(np.arange(len(uniq)), count), rank] = order
-    head = slots[:, 0]
-    return slots, colour(a[head], b[head], dynamic)
+    return slots
 
 
 @dataclass
@@ -227,12 +265,14 @@ def rows(cs: ContactSet, inv_mass: np.ndarray, inv_inertia: np.ndarray, ra: np.n
     dirs = np.stack([cs.normal, cs.t1, cs.t2], axis=2)  # (M, S, 3, 3)
     ang_a = np.cross(ra[:, :, None, :], dirs)
     ang_b = np.cross(rb[:, :, None, :], dirs)
+    # I^-1 (r x d) for every row at once (matmul: the tensors are symmetric)
+    wa = np.matmul(ang_a.reshape(m, 3 * s, 3), inv_inertia[a]).reshape(m, s, 3, 3)
+    wb = np.matmul(ang_b.reshape(m, 3 * s, 3), inv_inertia[b]).reshape(m, s, 3, 3)
+    ma, mb = inv_mass[a, None, None, None], inv_mass[b, None, None, None]
     j = np.concatenate([-dirs, -ang_a, dirs, ang_b], axis=3)
-    mj = np.concatenate([-inv_mass[a, None, None, None] * dirs,
-                         -np.einsum("mij,msdj->msdi", inv_inertia[a], ang_a),
-                         inv_mass[b, None, None, None] * dirs,
-                         np.einsum("mij,msdj->msdi", inv_inertia[b], ang_b)], axis=3)
-    k = np.einsum("msdj,msdj->msd", j, mj)
+    mj = np.concatenate([-ma * dirs, -wa, mb * dirs, wb], axis=3)
+    k = (ma[..., 0] + mb[..., 0]) * cs.valid[:, :, None] + (ang_a * wa).sum(axis=3) + \
+        (ang_b * wb).sum(axis=3)  # (unit directions; empty slots have none)
     mass = np.where(k > 0.0, 1.0 / np.maximum(k, 1e-300), 0.0)
     jn, mn = np.ascontiguousarray(j[:, :, 0]), np.ascontiguousarray(mj[:, :, 0])
     if cs.block is None:
@@ -369,9 +409,13 @@ def _active_set(cs, sc, m, rel, old, active) -> np.ndarray:
         act = active[todo]
         let_go = np.where(act, 0.0, -o)
         rhs = sc.mass[mt] * (rel[todo] + np.einsum("gij,gj->gi", k, let_go)) + sc.bias[mt]
-        inv = _pinv(_restricted(k, act))
-        new = np.where(act, o - np.einsum("gij,gj->gi", inv, np.where(act, rhs, 0.0))
-                       - sc.impulse[mt] * o, 0.0)
+        new = np.zeros_like(o)
+        some = np.nonzero(act.any(axis=1))[0]  # (all let go: nothing to solve)
+        if len(some):
+            a_, o_ = act[some], o[some]
+            inv = _pinv(_restricted(k[some], a_))
+            new[some] = np.where(a_, o_ - np.einsum("gij,gj->gi", inv, np.where(a_, rhs[some], 0.0))
+                                 - sc.impulse[mt[some]] * o_, 0.0)
         after = sc.mass[mt] * (rel[todo] + np.einsum("gij,gj->gi", k, new - o)) + sc.bias[mt]
         scale = 1e-6 * (np.abs(rel[todo]) + np.abs(sc.bias[mt]) + 1e-3)
         wrong = (act & (new < 0.0)) | (valid[todo] & ~act & (after < -scale))

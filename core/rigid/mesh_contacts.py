@@ -82,7 +82,8 @@ def mesh_contacts(bodies, rot: np.ndarray, reach: np.ndarray) -> Found:
     for g, (bvh, lo, hi) in bodies.meshes.items():
         local = np.einsum("ji,nj->ni", rot[g], bodies.x[dyn] - bodies.x[g])  # R^T (x - x_g)
         grow = (bodies.bound[dyn] + reach[dyn] + reach[g] + SPECULATIVE)[:, None]
-        near = dyn[((local + grow >= lo) & (local - grow <= hi)).all(axis=1)]
+        near = dyn[((local + grow >= lo) & (local - grow <= hi)).all(axis=1)
+                   & bodies.searched(dyn, g)]
         if not len(near):
             continue
         owner, feature, p, radius = _points(bodies, rot, near)

@@ -19,7 +19,7 @@ from ..errors import PhysanimError
 from ..validate import frozen
 from . import quaternion as quat
 from .mass import MassProperties
-from .warm import Remembered
+from .warm import Kept
 
 SHAPES = ("SPHERE", "BOX", "CAPSULE", "HULL")
 SPHERE, BOX, CAPSULE, HULL = range(4)
@@ -147,14 +147,15 @@ class RigidBodyModel:
 class RigidBodyState:
     """Time-varying, (n, ...) each: body_x centre of mass [m], body_q unit quaternion,
     body_P linear momentum [kg m/s], body_L angular momentum about the centre of mass
-    [kg m^2/s], all world. ``contacts``: the last frame's contact impulses by place, to
-    warm-start the next frame (:mod:`.warm`); the sleep bookkeeping (:mod:`.sleep`)."""
+    [kg m^2/s], all world. ``contacts``: the last frame's contacts, kept for the bodies
+    that have not moved and warm-starting the others (:mod:`.warm`); the sleep bookkeeping
+    (:mod:`.sleep`)."""
 
     body_x: np.ndarray
     body_q: np.ndarray
     body_P: np.ndarray
     body_L: np.ndarray
-    contacts: Remembered = field(default_factory=Remembered.none)
+    contacts: Kept = field(default_factory=Kept.none)
     body_asleep: np.ndarray | None = None  # (n,) bool: resting, not simulated (:mod:`.sleep`)
     body_slow: np.ndarray | None = None  # (n,) int: consecutive slow frames
     body_island: np.ndarray | None = None  # (n,) int: the island a sleeping body sleeps in

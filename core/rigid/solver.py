@@ -23,7 +23,7 @@ from . import contact_solver as cs_
 from . import as_colliders, dynamics, sleep, warm
 from . import quaternion as quat
 from .bodies import Posed, collider_bodies, frame_bodies, mesh_colliders
-from .collide import Bodies, Found, find_contacts
+from .collide import SPECULATIVE, Bodies, Found, find_contacts
 from .hull_shape import HullSet
 from .mesh_contacts import MeshCache
 from .model import HULL, RigidBodyModel, RigidBodyState
@@ -32,8 +32,9 @@ DEFAULT_SUBSTEPS = 8
 # sub-steps between contact searches: contacts are found with the normals of their time, so
 # bodies that meet at speed need them refreshed within a frame (1/24 s is long)
 COLLIDE_EVERY = 2
-# ... but only when some body has moved this fraction of its size since the last search (a
-# resting or slowly creeping pile keeps its contacts for the whole frame)
+# ... but only for the bodies that have moved (or are about to move) this fraction of their size
+# since their contacts were last searched, at most a quarter of the speculative margin; the
+# others keep their contacts, across frames too (a resting pile is searched once)
 REFRESH_FRACTION = 0.02
 
 
@@ -88,10 +89,9 @@ class _FrameStep:
     inv_mass: np.ndarray  # (N,)
     report: RigidReport
     contacts: cs_.ContactSet | None = None
-    x0: np.ndarray | None = None  # (N, 3), (N, 4): poses when the contacts were found
-    q0: np.ndarray | None = None
-    pair: np.ndarray | None = None  # (k,) each found point's pair key and its place in the
-    places: np.ndarray | None = None  # (k, 3) lower body (warm starting, :mod:`.warm`)
+    q0: np.ndarray | None = None  # (N, 4) orientations the contacts' anchors are given at
+    x_ref: np.ndarray | None = None  # (N, 3), (N, 4): each body's pose when its contacts
+    q_ref: np.ndarray | None = None  # were last searched
     rows: cs_.Rows | None = None  # the contacts' rows and separations (M, S) at the poses now
     separation: np.ndarray | None = None
     awake: np.ndarray | None = None  # indices of the dynamic bodies simulated this frame
@@ -173,7 +173,8 @@ class RigidBodySolver:
             state.body_asleep[woken] = False
             state.body_slow[woken] = 0
             self._wake_state(step, bodies.moving)
-            self._collide(step, inputs.frame_dt, state.contacts)
+            self._collide(step, inputs.frame_dt, state.contacts,
+                          forced=np.concatenate([woken, np.zeros(len(bodies) - n, bool)]))
         return step
 
     def _wake_state(self, step: _FrameStep, moving: np.ndarray) -> None:
@@ -188,30 +189,80 @@ class RigidBodySolver:
             [m.body_inv_mass, np.zeros(len(b) - n)]), 0.0)
         step.v[asleep], step.w[asleep] = 0.0, 0.0
 
-    def _collide(self, step: _FrameStep, duration: float, memory: warm.Remembered) -> None:
-        """Find the contacts for the next ``duration`` [s] from the bodies' current poses and
-        velocities, warm-started from ``memory``."""
+    def _collide(self, step: _FrameStep, duration: float, kept: warm.Kept | None = None,
+                 forced: np.ndarray | None = None) -> None:
+        """Contacts for the next ``duration`` [s] from the bodies' current poses and velocities:
+        searched again for the fresh bodies (:meth:`_fresh`, and ``forced`` ones), kept for
+        pairs of the others. ``kept``: the contacts carried from the last frame; None within a
+        frame (the contacts in use; nothing happens when no body is fresh). New contacts are
+        warm-started from the old ones at the same place (:mod:`.warm`)."""
         b = step.bodies
         b.v, b.w = step.v.copy(), step.w.copy()
+        if kept is None:
+            fresh = self._fresh(step, duration)
+            if not fresh.any():
+                return
+            old = step.contacts.turned(self._turn(step))
+        elif kept.contacts is not None and kept.names == b.name:
+            step.x_ref, step.q_ref = kept.x.copy(), kept.q.copy()
+            fresh, old = self._fresh(step, duration), kept.contacts
+        else:  # the first frame, or the colliders changed: everything is searched
+            step.x_ref, step.q_ref = b.x.copy(), b.q.copy()
+            fresh, old = np.ones(len(b), bool), None
+        if forced is not None:
+            fresh |= forced
+        b.fresh = fresh
         found = find_contacts(b, duration, step.g)
-        step.pair, step.places = warm.places(found.a, found.b, found.point, b.x, b.q, len(b))
-        step.contacts = self._prepare(b, found, step.pair, step.places, memory)
-        step.x0, step.q0 = b.x.copy(), b.q.copy()
+        parts = [self._prepare(b, found, self._remembered(old))]
+        if old is not None:
+            a_, b_ = old.ab[:, 0], old.ab[:, 1]
+            keep = ~(fresh[a_] | fresh[b_]) & (b.dynamic[a_] | b.dynamic[b_])
+            parts.append(old.take(np.nonzero(keep)[0]))
+        step.contacts = cs_.ContactSet.join(parts).coloured(b.dynamic)
+        step.q0 = b.q.copy()
+        step.x_ref[fresh], step.q_ref[fresh] = b.x[fresh], b.q[fresh]
         self._pose_contacts(step)
-        step.report.contacts = max(step.report.contacts, len(found.a))
+        step.report.contacts = max(step.report.contacts, int(step.contacts.valid.sum()))
 
-    def _remembered(self, step: _FrameStep) -> warm.Remembered:
-        cs = step.contacts
-        points = cs.point[cs.valid]
-        return warm.remember(step.pair[points], step.places[points],
-                             cs.world_impulses()[cs.valid])
+    def _fresh(self, step: _FrameStep, duration: float) -> np.ndarray:
+        """(N,) bodies whose contacts must be searched again: those that have moved, or at
+        their speed will move within ``duration``, more than REFRESH_FRACTION of their size
+        (bound radius; turning counts at the bound) since their contacts were last searched,
+        and at most a quarter of the speculative margin (so two bodies that keep their
+        contacts cannot close a gap the last search did not see)."""
+        b = step.bodies
+        turn = quat.multiply(b.q, quat.conjugate(step.q_ref))
+        angle = 2.0 * np.arctan2(np.linalg.norm(turn[:, 1:], axis=1), np.abs(turn[:, 0]))
+        speed = np.linalg.norm(step.v, axis=1) + np.linalg.norm(step.w, axis=1) * b.bound
+        drift = np.linalg.norm(b.x - step.x_ref, axis=1) + angle * b.bound + speed * duration
+        return drift > np.minimum(REFRESH_FRACTION * b.bound, 0.25 * SPECULATIVE)
 
-    def _prepare(self, bodies: Bodies, found: Found, pair: np.ndarray, local: np.ndarray,
-                 memory: warm.Remembered) -> cs_.ContactSet:
+    def _turn(self, step: _FrameStep) -> np.ndarray:
+        """(N, 3, 3) each body's rotation since the contacts' reference orientations."""
+        return quat.to_matrix(quat.multiply(step.bodies.q, quat.conjugate(step.q0)))
+
+    def _carried(self, step: _FrameStep) -> warm.Kept:
+        """The contacts at the frame's end for the next frame: anchors at the poses now,
+        nothing touched yet."""
+        cs = step.contacts.turned(self._turn(step))
+        cs.touched = cs.impulse[..., 0] > 0.0
+        cs.relative = np.zeros_like(cs.relative)
+        return warm.Kept(cs, step.x_ref, step.q_ref, step.bodies.name)
+
+    @staticmethod
+    def _remembered(cs: cs_.ContactSet | None) -> warm.Remembered:
+        """The impulses of ``cs`` by place, to warm-start contacts found at the same places."""
+        if cs is None:
+            return warm.Remembered.none()
+        pair = np.broadcast_to(cs.pair[:, None], cs.valid.shape)[cs.valid]
+        return warm.remember(pair, cs.place[cs.valid], cs.world_impulses()[cs.valid])
+
+    def _prepare(self, bodies: Bodies, found: Found, memory: warm.Remembered) -> cs_.ContactSet:
         """Contact constraints from the found points: anchors, combined coefficients, the
-        relative normal velocity (for restitution) and last frame's impulses by place
-        (:mod:`.warm`: ``pair`` keys and ``local`` places of the points)."""
+        relative normal velocity (for restitution) and the remembered impulses by place
+        (:mod:`.warm`)."""
         a, b, n = found.a, found.b, found.normal
+        pair, local = warm.places(a, b, found.point, bodies.x, bodies.q, len(bodies))
         ra, rb = found.point - bodies.x[a], found.point - bodies.x[b]
         rel = np.einsum("ki,ki->k", n, (bodies.v[b] + np.cross(bodies.w[b], rb))
                         - (bodies.v[a] + np.cross(bodies.w[a], ra)))
@@ -223,7 +274,7 @@ class RigidBodySolver:
             if len(a) else np.zeros((0, 3))
         impulse[:, 0] = np.maximum(impulse[:, 0], 0.0)
         return cs_.ContactSet.of_points(
-            a, b, pair, bodies.dynamic, normal=n, point=found.point, xa=bodies.x[a],
+            a, b, pair, place=local, normal=n, point=found.point, xa=bodies.x[a],
             xb=bodies.x[b], separation=found.separation,
             friction=np.sqrt(bodies.friction[a] * bodies.friction[b]),
             restitution=bodies.restitution[a] * bodies.restitution[b], relative=rel,
@@ -233,8 +284,8 @@ class RigidBodySolver:
         """Sub-step ``k``: the passes of the module docstring."""
         h = step.h
         s0, s1 = k / self.substeps, (k + 1) / self.substeps
-        if k and k % self.collide_every == 0 and self._moved(step):  # contacts again
-            self._collide(step, (1.0 - s0) * step.inputs.frame_dt, self._remembered(step))
+        if k and k % self.collide_every == 0:  # contacts again where bodies have moved
+            self._collide(step, (1.0 - s0) * step.inputs.frame_dt)
         cs, vel = step.contacts, step.vel
         self._move_posed(step, s0, s1)
         self._forces(step)
@@ -275,26 +326,17 @@ class RigidBodySolver:
         out[d] = dynamics.world_tensor(q[d], self.model.body_inv_inertia[d])
         return out
 
-    def _moved(self, step: _FrameStep) -> bool:
-        """Whether any body has moved more than REFRESH_FRACTION of its size (bound radius)
-        since the contacts were found, turning included."""
-        b = step.bodies
-        turn = quat.multiply(b.q, quat.conjugate(step.q0))
-        angle = 2.0 * np.arctan2(np.linalg.norm(turn[:, 1:], axis=1), np.abs(turn[:, 0]))
-        drift = np.linalg.norm(b.x - step.x0, axis=1) + angle * b.bound
-        return bool((drift > REFRESH_FRACTION * b.bound).any())
-
     def _pose_contacts(self, step: _FrameStep) -> None:
         """The contacts' rows and separations at the bodies' current poses. Each point's
         anchors are carried with their bodies; its separation is the found one plus how far
         they have moved apart along the normal, and both impulses act at their midpoint. The
         manifold blocks are kept from the contact search (they barely change)."""
         cs, b = step.contacts, step.bodies
-        turn = quat.to_matrix(quat.multiply(b.q, quat.conjugate(step.q0)))
+        turn = self._turn(step)
         a, bb = cs.ab[:, 0], cs.ab[:, 1]
-        pa = b.x[a, None] + np.einsum("mij,msj->msi", turn[a], cs.ra)
-        pb = b.x[bb, None] + np.einsum("mij,msj->msi", turn[bb], cs.rb)
-        step.separation = cs.separation + np.einsum("msi,msi->ms", cs.normal, pb - pa)
+        pa = b.x[a, None] + np.matmul(cs.ra, turn[a].transpose(0, 2, 1))
+        pb = b.x[bb, None] + np.matmul(cs.rb, turn[bb].transpose(0, 2, 1))
+        step.separation = cs.base + np.einsum("msi,msi->ms", cs.normal, pb - pa)
         mid = 0.5 * (pa + pb)
         step.rows = cs_.rows(cs, step.inv_mass, self._inverse_inertia(step, b.q),
                              mid - b.x[a, None], mid - b.x[bb, None])
@@ -318,10 +360,10 @@ class RigidBodySolver:
         state.body_L[d] = dynamics.angular_momentum(b.q[d], m.body_inertia[d], step.w[d])
         self._check(step)
         if last:
-            state.contacts = self._remembered(step)
             self._sleep(step)
             sep = step.separation[step.contacts.valid]
             step.report.overlap = float(max(0.0, -sep.min())) if len(sep) else 0.0
+            state.contacts = self._carried(step)
             step.report.moving = int(np.count_nonzero(
                 np.linalg.norm(step.v[d], axis=1) > 1e-3))
 

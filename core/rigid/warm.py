@@ -32,6 +32,28 @@ class Remembered:
         return cls(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)))
 
 
+@dataclass
+class Kept:
+    """Contacts carried from one search to the next, across frames too.
+
+    Attributes:
+        contacts: the contact set (a :class:`~.contact_solver.ContactSet`, anchors given at
+            the poses it was left at), or None before the first frame.
+        x, q: (N, 3), (N, 4) each solver body's pose when its contacts were last searched.
+        names: the solver bodies' names: carried contacts hold only while the rows are the
+            same bodies (colliders may come and go between frames).
+    """
+
+    contacts: object | None
+    x: np.ndarray
+    q: np.ndarray
+    names: tuple
+
+    @classmethod
+    def none(cls) -> Kept:
+        return cls(None, np.zeros((0, 3)), np.zeros((0, 4)), ())
+
+
 def places(a, b, point, x, q, count: int):
     """(pair keys, places in the lower body's frame) of contact points between rows a and b."""
     lo = np.minimum(a, b)
