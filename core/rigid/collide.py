@@ -101,16 +101,20 @@ class Found:
                      ("a", "b", "point", "normal", "separation", "key")))
 
 
-def find_contacts(bodies: Bodies, frame_dt: float, gravity: np.ndarray) -> Found:
-    """Every contact point of the frame (speculative ones included)."""
+def find_contacts(bodies: Bodies, frame_dt: float, gravity: np.ndarray,
+                  interval: float | None = None) -> Found:
+    """Every contact point for the next ``frame_dt`` [s] (speculative ones included);
+    ``interval`` [s]: until the next search (which points of a body against a surface matter
+    most: :func:`reduce_manifolds`), the whole duration when not given."""
     rot = quat.to_matrix(bodies.q)
     reach = _reach(bodies, frame_dt, gravity)
     ground = bodies.shape == HALF_SPACE
-    parts = [_half_spaces(bodies, rot, reach, ground)]
+    interval = frame_dt if interval is None else interval
+    parts = [_half_spaces(bodies, rot, reach, ground, interval)]
     if bodies.meshes:
         from .mesh_contacts import mesh_contacts  # it builds on this module
 
-        parts.append(mesh_contacts(bodies, rot, reach))
+        parts.append(mesh_contacts(bodies, rot, reach, interval))
     i, j = _candidate_pairs(bodies, reach, ground | (bodies.shape == MESH))
     margin = SPECULATIVE + reach[i] + reach[j]
     centre = bodies.centres(rot)
@@ -222,8 +226,9 @@ _KINDS = (((SPHERE, SPHERE), _sphere_sphere), ((SPHERE, BOX), _sphere_box),
 
 def support_points(bodies: Bodies, rot: np.ndarray, idx: np.ndarray, normal: np.ndarray):
     """World points of bodies ``idx`` that can touch a plane with outward ``normal`` (3,):
-    (owner (p,), feature (p,), point (p, 3)) — a sphere's lowest point, a box's corners, a
-    capsule's two lowest cap points, a hull's vertices."""
+    (owner (p,), feature (p,), point (p, 3)) — a sphere's lowest point, the corners of a box's
+    face turned most towards the plane (a box turning fast onto a face keeps the corners it
+    is about to land on), a capsule's two lowest cap points, a hull's vertices."""
     out = []
     centre = bodies.centres(rot)[idx]
     shape = bodies.shape[idx]
@@ -235,11 +240,15 @@ def support_points(bodies: Bodies, rot: np.ndarray, idx: np.ndarray, normal: np.
             p = centre[sel] + axis - bodies.radius[idx[sel], None] * normal
             out.append((idx[sel], np.full(len(sel), f), p))
     sel = np.nonzero(shape == BOX)[0]
-    if len(sel):
-        local = BOX_CORNERS[None, :, :] * bodies.half[idx[sel], None, :]
-        corners = centre[sel, None, :] + np.einsum("nij,ncj->nci", rot[idx[sel]], local)
-        out.append((np.repeat(idx[sel], 8), np.tile(np.arange(8), len(sel)),
-                    corners.reshape(-1, 3)))
+    if len(sel):  # the corners of the face turned most towards the plane (the deepest is one)
+        facing = np.einsum("nji,j->ni", rot[idx[sel]], normal)  # the normal in box axes
+        axis = np.argmax(np.abs(facing), axis=1)
+        side = -np.sign(facing[np.arange(len(sel)), axis])
+        face = BOX_CORNERS.T[axis] == side[:, None]  # (boxes, 8): 4 corners each
+        owner, corner = np.nonzero(face)
+        local = BOX_CORNERS[corner] * bodies.half[idx[sel][owner]]
+        out.append((idx[sel][owner], corner, centre[sel][owner]
+                    + np.einsum("nij,nj->ni", rot[idx[sel][owner]], local)))
     sel = np.nonzero(shape == HULL)[0]
     if len(sel):
         body = idx[sel]
@@ -254,7 +263,8 @@ def support_points(bodies: Bodies, rot: np.ndarray, idx: np.ndarray, normal: np.
     return tuple(np.concatenate(parts) for parts in zip(*out))
 
 
-def _half_spaces(bodies: Bodies, rot: np.ndarray, reach: np.ndarray, ground: np.ndarray) -> Found:
+def _half_spaces(bodies: Bodies, rot: np.ndarray, reach: np.ndarray, ground: np.ndarray,
+                 interval: float) -> Found:
     """Contacts of every dynamic body with every half-space collider."""
     parts = []
     dyn = np.nonzero(bodies.dynamic & ~ground)[0]
@@ -268,7 +278,8 @@ def _half_spaces(bodies: Bodies, rot: np.ndarray, reach: np.ndarray, ground: np.
         margin = SPECULATIVE + reach[owner] + reach[g]
         keep = sep < margin
         owner, feature, p, sep = owner[keep], feature[keep], p[keep], sep[keep]
-        sel = reduce_manifolds(owner, p, sep)
+        ahead = sep + interval * approach(bodies, owner, g, p, n)
+        sel = reduce_manifolds(owner, p, np.minimum(sep, ahead))
         owner, feature, p, sep = owner[sel], feature[sel], p[sel], sep[sel]
         point = p - 0.5 * sep[:, None] * n
         key = (owner * len(bodies) + g) * FEATURES + feature
@@ -277,10 +288,21 @@ def _half_spaces(bodies: Bodies, rot: np.ndarray, reach: np.ndarray, ground: np.
     return Found.join(parts)
 
 
+def approach(bodies: Bodies, owner: np.ndarray, other: int, p: np.ndarray,
+             n: np.ndarray) -> np.ndarray:
+    """(k,) speed [m/s] at which points p (k, 3) of bodies ``owner`` move along the outward
+    normals n (3,) or (k, 3) of body ``other``'s surface (< 0: into it)."""
+    def velocity(rows):
+        return bodies.v[rows] + np.cross(bodies.w[rows], p - bodies.x[rows])
+    return np.einsum("ki,ki->k", velocity(owner) - velocity(np.full(len(owner), other)),
+                     np.broadcast_to(n, p.shape))
+
+
 def reduce_manifolds(owner: np.ndarray, p: np.ndarray, sep: np.ndarray) -> np.ndarray:
     """Indices keeping at most 4 points per owner (a hull's many vertices on the ground): the
     deepest, the farthest from it, the farthest from their line, and the farthest on the
-    other side of that line — the widest support with the deepest point in it."""
+    other side of that line — the widest support with the deepest point in it. ``sep`` [m]
+    ranks the points: pass the least separation expected until the next search."""
     if not len(owner):
         return np.zeros(0, np.int64)
     order = np.argsort(owner, kind="stable")

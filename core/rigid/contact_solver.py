@@ -18,9 +18,9 @@ a few small products and a scatter. Bodies that impulses do not move (kinematic 
 colliders, sleepers) have zero inverse mass: they take no velocity change, so they never limit
 colouring.
 
-The separation of a point follows the bodies from where the contact was found (its anchors
-move with their bodies, the normal is held): s = s0 + n . (p_B - p_A), p the anchors' world
-positions (both the contact point when found). A separated (speculative) point lets the bodies close the gap within one sub-step
+The separation of a point follows the bodies from where the contact was found (its anchors,
+each body's surface point, move with their bodies; the normal is held): s = n . (p_B - p_A),
+p the anchors' world positions. A separated (speculative) point lets the bodies close the gap within one sub-step
 but no further; an overlapping one is pushed apart softly (a spring of CONTACT_HERTZ, heavily
 damped, at most MAX_PUSH m/s).
 """
@@ -113,10 +113,10 @@ class ContactSet:
         place: (M, S, 3) each point in the frame of the pair's lower body [m] (warm starting
             matches contacts by place: :mod:`.warm`).
         normal, t1, t2: (M, S, 3) unit normal from a to b and tangents (0 in empty slots).
-        ra, rb: (M, S, 3) anchors: the contact point from each body's centre of mass at the
+        ra, rb: (M, S, 3) anchors: each body's surface point from its centre of mass at the
             poses of ``q0`` (the solver's reference orientations).
         base: (M, S) [m]: the separation is base + n . (p_b - p_a), p the anchors' world
-            positions (when found both are the contact point: base is the found separation).
+            positions (0 for the surface points as found).
         friction, restitution: (M, S) combined coefficients (friction: the geometric mean of
             the two sides'; restitution: their product, so a body bounces only where both are
             bouncy — a default, unbouncy box stays down on any collider).
@@ -127,7 +127,8 @@ class ContactSet:
         static: (M,) one side does not move under impulses.
         colours: [(start, stop)] manifold slices in which no dynamic body appears twice.
         coupling: (M, S, S) each manifold's normal coupling K_ij = J_i M^-1 J_j^T and block its
-            pseudo-inverse (set by :func:`rows` at the first poses after colouring).
+            pseudo-inverse, set by :func:`rows` at the poses where the manifold was found (NaN
+            until then; kept with the manifold: they barely change).
     """
 
     ab: np.ndarray
@@ -160,8 +161,11 @@ class ContactSet:
     def of_points(cls, a, b, pair, *, place, normal, point, xa, xb, separation, friction,
                   restitution, relative, impulse) -> ContactSet:
         """Group k points (bodies a, b (k,); ``pair`` (k,) their key) into manifolds.
-        ``point`` (k, 3) world points, ``xa``, ``xb`` (k, 3) the bodies' centres of mass; the
-        other arrays are per point."""
+        ``point`` (k, 3) world points midway between the surfaces, ``xa``, ``xb`` (k, 3) the
+        bodies' centres of mass; the other arrays are per point. Each body's anchor is its own
+        surface point (half the separation either side of the midpoint), so a separation
+        found far ahead (a fast or fast-turning body) stays exact against a flat surface as
+        the body turns: base 0."""
         slots = _manifolds(pair)
         valid = slots >= 0
         idx = np.where(valid, slots, 0)
@@ -172,16 +176,21 @@ class ContactSet:
             return out
 
         t1, t2 = tangents(normal) if len(normal) else (normal, normal)
+        surface_a = point - 0.5 * separation[:, None] * normal
+        surface_b = point + 0.5 * separation[:, None] * normal
         head = idx[:, 0]
         return cls(np.stack([a[head], b[head]], axis=1), pair[head], valid, pad(place),
-                   pad(normal), pad(t1), pad(t2), pad(point - xa), pad(point - xb),
-                   pad(separation), pad(friction), pad(restitution), pad(relative),
+                   pad(normal), pad(t1), pad(t2), pad(surface_a - xa), pad(surface_b - xb),
+                   np.zeros(valid.shape), pad(friction), pad(restitution), pad(relative),
                    pad(impulse), pad(impulse[:, 0] > 0.0))
 
     def take(self, rows: np.ndarray) -> ContactSet:
         """The manifolds ``rows`` (uncoloured)."""
-        return ContactSet(self.ab[rows], self.pair[rows],
-                          *(getattr(self, f)[rows] for f in self._PER_SLOT))
+        out = ContactSet(self.ab[rows], self.pair[rows],
+                         *(getattr(self, f)[rows] for f in self._PER_SLOT))
+        if self.block is not None:
+            out.coupling, out.block = self.coupling[rows], self.block[rows]
+        return out
 
     @classmethod
     def join(cls, parts: list[ContactSet]) -> ContactSet:
@@ -192,9 +201,21 @@ class ContactSet:
             pad = [(0, 0), (0, width - x.shape[1])] + [(0, 0)] * (x.ndim - 2)
             return np.pad(x, pad)
 
-        return cls(np.concatenate([p.ab for p in parts]), np.concatenate([p.pair for p in parts]),
-                   *(np.concatenate([widened(getattr(p, f)) for p in parts])
-                     for f in cls._PER_SLOT))
+        def square(p, x):  # a coupling or block: padded slots decoupled unit rows
+            if x is None:
+                return np.full((len(p), width, width), np.nan)
+            out = np.zeros((len(p), width, width))
+            out[:, :x.shape[1], :x.shape[2]] = x
+            extra = np.arange(x.shape[1], width)
+            out[:, extra, extra] = 1.0
+            return out
+
+        out = cls(np.concatenate([p.ab for p in parts]), np.concatenate([p.pair for p in parts]),
+                  *(np.concatenate([widened(getattr(p, f)) for p in parts])
+                    for f in cls._PER_SLOT))
+        out.coupling = np.concatenate([square(p, p.coupling) for p in parts])
+        out.block = np.concatenate([square(p, p.block) for p in parts])
+        return out
 
     def coloured(self, dynamic: np.ndarray) -> ContactSet:
         """The manifolds ordered by colour for bodies that are ``dynamic`` (N,) now."""
@@ -259,7 +280,7 @@ def rows(cs: ContactSet, inv_mass: np.ndarray, inv_inertia: np.ndarray, ra: np.n
          rb: np.ndarray) -> Rows:
     """Rows for world inverse inertias (N, 3, 3) and lever arms ra, rb (M, S, 3) from each
     body's centre of mass to one common world point (an impulse and its reaction act at the
-    same point, so angular momentum is conserved). Sets ``cs.block`` the first time."""
+    same point, so angular momentum is conserved). Sets the blocks of new manifolds."""
     m, s = cs.valid.shape
     a, b = cs.ab[:, 0], cs.ab[:, 1]
     dirs = np.stack([cs.normal, cs.t1, cs.t2], axis=2)  # (M, S, 3, 3)
@@ -276,8 +297,11 @@ def rows(cs: ContactSet, inv_mass: np.ndarray, inv_inertia: np.ndarray, ra: np.n
     mass = np.where(k > 0.0, 1.0 / np.maximum(k, 1e-300), 0.0)
     jn, mn = np.ascontiguousarray(j[:, :, 0]), np.ascontiguousarray(mj[:, :, 0])
     if cs.block is None:
-        cs.coupling = _coupling(cs.valid, jn, mn)
-        cs.block = _pinv(cs.coupling)
+        cs.coupling, cs.block = np.full((2, m, s, s), np.nan)
+    new = np.nonzero(np.isnan(cs.block[:, 0, 0]))[0]
+    if len(new):
+        cs.coupling[new] = _coupling(cs.valid[new], jn[new], mn[new])
+        cs.block[new] = _pinv(cs.coupling[new])
     count = np.maximum(cs.valid.sum(axis=1), 1)[:, None]
     return Rows(jn, mn, mass[:, :, 0], j[:, :, 1:].reshape(m, 2 * s, 12),
                 mj[:, :, 1:].reshape(m, 2 * s, 12), mass[:, :, 1:].reshape(m, 2 * s) / count)
@@ -378,15 +402,23 @@ def solve(vel: np.ndarray, cs: ContactSet, r: Rows, sc: Scales) -> None:
 
 
 def _normal(local, cs, r, sc, s, e) -> None:
-    """The normal impulses of manifolds s:e against their velocities ``local`` (updated)."""
+    """The normal impulses of manifolds s:e against their velocities ``local`` (updated).
+    Points with no impulse that need none (separating, or closing a gap slower than it
+    allows) stay out; manifolds without such points are solved as a block, the others (and
+    blocks that would pull) as small complementarity problems (:func:`_active_set`)."""
     rel = np.einsum("msj,mj->ms", r.jn[s:e], local)
     old = cs.impulse[s:e, :, 0].copy()
-    new = old - np.einsum("mij,mj->mi", cs.block[s:e], sc.mass[s:e] * rel + sc.bias[s:e]) \
-        - sc.impulse[s:e] * old
-    pulling = np.nonzero((new < 0.0).any(axis=1))[0]
-    if len(pulling):
-        new[pulling] = _active_set(cs, sc, pulling + s, rel[pulling], old[pulling],
-                                   new[pulling] >= 0.0)
+    want = sc.mass[s:e] * rel + sc.bias[s:e]
+    idle = cs.valid[s:e] & (old == 0.0) & (want >= 0.0)
+    new = old - np.einsum("mij,mj->mi", cs.block[s:e], want) - sc.impulse[s:e] * old
+    none = (idle | ~cs.valid[s:e]).all(axis=1)
+    new[none] = 0.0
+    mixed = idle.any(axis=1) & ~none
+    pulling = (new < 0.0).any(axis=1) & ~none
+    hard = np.nonzero(mixed | pulling)[0]
+    if len(hard):
+        start = np.where(mixed[hard, None], ~idle[hard], new[hard] >= 0.0)
+        new[hard] = _active_set(cs, sc, hard + s, rel[hard], old[hard], start)
     local += np.einsum("ms,msj->mj", new - old, r.mn[s:e])
     cs.impulse[s:e, :, 0] = new
 

@@ -15,7 +15,7 @@ import numpy as np
 from ..collision.build import build_bvh
 from ..collision.distance import closest_points
 from ..collision.mesh import TriangleMesh
-from .collide import BOX_CORNERS, FEATURES, SPECULATIVE, Found, reduce_manifolds
+from .collide import BOX_CORNERS, FEATURES, SPECULATIVE, Found, approach, reduce_manifolds
 from .model import BOX, CAPSULE, HULL, SPHERE
 
 
@@ -75,7 +75,7 @@ def _side(bvh, bodies, rot, g: int, near: np.ndarray, count: int) -> np.ndarray:
     return side
 
 
-def mesh_contacts(bodies, rot: np.ndarray, reach: np.ndarray) -> Found:
+def mesh_contacts(bodies, rot: np.ndarray, reach: np.ndarray, interval: float) -> Found:
     """Contacts of every dynamic body with every Mesh collider of the frame."""
     parts = []
     dyn = np.nonzero(bodies.dynamic)[0]
@@ -98,7 +98,8 @@ def mesh_contacts(bodies, rot: np.ndarray, reach: np.ndarray) -> Found:
         n_out = np.einsum("ij,nj->ni", rot[g], cp.normal[keep]) * side[keep, None]
         q = bodies.x[g] + np.einsum("ij,nj->ni", rot[g], cp.point[keep])
         point = q + 0.5 * sep[:, None] * n_out
-        sel = reduce_manifolds(owner, point, sep)
+        ahead = sep + interval * approach(bodies, owner, g, point, n_out)
+        sel = reduce_manifolds(owner, point, np.minimum(sep, ahead))
         owner, feature, point, sep, n_out = owner[sel], feature[sel], point[sel], sep[sel], n_out[sel]
         key = (owner * len(bodies) + g) * FEATURES + feature
         parts.append(Found(owner, np.full(len(owner), g), point, -n_out, sep, key))

@@ -212,7 +212,7 @@ class RigidBodySolver:
         if forced is not None:
             fresh |= forced
         b.fresh = fresh
-        found = find_contacts(b, duration, step.g)
+        found = find_contacts(b, duration, step.g, self.collide_every * step.h)
         parts = [self._prepare(b, found, self._remembered(old))]
         if old is not None:
             a_, b_ = old.ab[:, 0], old.ab[:, 1]

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from physanim.core.contact import ColliderFrame
+from physanim.core.rigid import quaternion as quat
 from physanim.tests.core.rigid_helpers import DT, box, ground, run, sphere, world
 
 
@@ -218,3 +219,25 @@ def test_kinematic_body_follows_its_path_and_pushes_a_dynamic_one():
     assert paddle_x == pytest.approx(-1.0 + 2.0 * 36 * DT, abs=1e-9)  # on its path exactly
     assert state.body_x[1, 0] > paddle_x + 0.1 + 0.25 - 0.01  # pushed ahead, not overlapped
     assert state.body_x[1, 0] > 0.5  # it moved with the paddle
+
+
+@pytest.mark.parametrize("friction", [0.3, 0.8])
+def test_a_domino_tipped_over_lands_flat_without_sinking(friction):
+    """A 5 x 25 x 50 cm box tipped over falls onto its face at speed (its top edge near
+    4 m/s): the corners it lands on are found before it lands — whether its foot holds
+    (friction 0.8) or slides out (0.3, a collider's default) — and it ends flat, at rest."""
+    half = np.array([0.025, 0.125, 0.25])
+    model, solver, state = world(box("Domino", tuple(half), (0.0, 0.0, 0.25),
+                                     angular_velocity=(0.0, 2.5, 0.0)))
+    lows = []
+
+    def low(f, s):
+        rot = quat.to_matrix(s.body_q)[0]
+        lows.append(s.body_x[0, 2] - np.abs(rot[2]) @ half)  # deepest corner's height
+
+    run(solver, state, 48, colliders=[ground(friction=friction)], each=low)
+    assert min(lows) > -0.002, min(lows)
+    up = quat.to_matrix(state.body_q)[0][:, 2]
+    assert abs(up[2]) < 0.05  # lying on its face
+    assert abs(state.body_x[0, 2] - half[0]) < 0.002
+    assert np.linalg.norm(state.body_P) < 1e-3
