@@ -60,8 +60,11 @@ def shape_of(co: np.ndarray, tris: np.ndarray, choice: str) -> tuple[str, dict]:
     return "HULL", {"hull": hull.points[hull.vertices]}
 
 
-def mass_of(shape: str, params: dict, p, name: str):
-    """Mass properties from the shape (density or total mass), with the user's overrides."""
+def mass_of(shape: str, params: dict, p, name: str, mesh=None):
+    """Mass properties (from density or total mass) with the user's overrides: of the
+    analytic shape; for a hull, of the mesh itself when it is closed (``mesh``: local
+    vertices and triangles — a concave T-handle weighs as what the user sees, not as its
+    hull), else of the hull (an open shell's mass is that of the solid it collides as)."""
     amount = {"density": p.density} if p.use_density else {"mass": p.mass}
     if shape == "BOX":
         props = box_mass(params["half_extents"], **amount)
@@ -74,7 +77,8 @@ def mass_of(shape: str, params: dict, p, name: str):
         if hull.dimension < 3:
             raise PhysanimError("the mesh is flat (its convex hull has no volume) — give it "
                                 "thickness, or use the Box shape", obj=name, kind="rigid body")
-        props = polyhedron_mass(hull.points, hull.triangles, name=name, **amount)
+        props = _closed_mesh_mass(mesh, name, amount) or \
+            polyhedron_mass(hull.points, hull.triangles, name=name, **amount)
         return with_override(props, com=tuple(p.com) if p.use_custom_com else None,
                              inertia=np.diag(p.inertia) if p.use_custom_inertia else None,
                              name=name)
@@ -83,6 +87,17 @@ def mass_of(shape: str, params: dict, p, name: str):
     return with_override(props, com=tuple(p.com) if p.use_custom_com else None,
                          inertia=np.diag(p.inertia) if p.use_custom_inertia else None,
                          name=name)
+
+
+def _closed_mesh_mass(mesh, name: str, amount: dict):
+    """Mass properties of a closed, consistently wound mesh (co, triangles); None when it is
+    open, non-manifold, inside out or flat (its hull stands in)."""
+    if mesh is None or not len(mesh[1]):
+        return None
+    try:
+        return polyhedron_mass(mesh[0], mesh[1], name=name, **amount)
+    except PhysanimError:
+        return None
 
 
 def body_settings(ob, depsgraph, frame: int) -> RigidBodySettings:
@@ -103,7 +118,7 @@ def body_settings(ob, depsgraph, frame: int) -> RigidBodySettings:
     co = mesh.co * scale
     shape, params = shape_of(co, mesh.triangles, p.shape)
     try:
-        props = mass_of(shape, params, p, ob.name)
+        props = mass_of(shape, params, p, ob.name, mesh=(co, mesh.triangles))
         return RigidBodySettings(
             ob.name, shape, props, restitution=p.restitution, friction=p.friction,
             linear_damping=p.linear_damping, angular_damping=p.angular_damping,

@@ -99,6 +99,54 @@ def test_automatic_shape_follows_what_the_user_sees(physanim_ext, tmp_path, kind
     assert settings.shape == shape
 
 
+def _l_prism(name="L"):
+    """A closed L-shaped prism: the boxes [0, 2] x [0, 1] x [0, 1] and [0, 1] x [1, 2] x [0, 1]
+    (the outline extruded along Z)."""
+    import bmesh
+
+    me = bpy.data.meshes.new(name)
+    bm = bmesh.new()
+    outline = [(0, 0), (2, 0), (2, 1), (1, 1), (1, 2), (0, 2)]
+    face = bm.faces.new([bm.verts.new((x, y, 0.0)) for x, y in outline])
+    face.normal_update()
+    if face.normal.z > 0:
+        face.normal_flip()  # the bottom faces down
+    up = bmesh.ops.extrude_face_region(bm, geom=[face])
+    bmesh.ops.translate(bm, verts=[v for v in up["geom"] if isinstance(v, bmesh.types.BMVert)],
+                        vec=(0.0, 0.0, 1.0))
+    bmesh.ops.recalc_face_normals(bm, faces=bm.faces[:])
+    bm.to_mesh(me)
+    bm.free()
+    ob = bpy.data.objects.new(name, me)
+    bpy.context.scene.collection.objects.link(ob)
+    return ob
+
+
+def test_a_concave_mesh_weighs_as_the_mesh_not_its_hull(physanim_ext, tmp_path):
+    """At the defaults a concave mesh collides as its convex hull, but its mass properties are
+    the mesh's own (closed form for the L's two boxes), not the hull's."""
+    _scene(tmp_path)
+    ob = _l_prism()
+    ob.physanim.rigid_body.enabled = True
+    rigid = _addon(physanim_ext, "rigid")
+    settings = rigid.body_settings(ob, bpy.context.evaluated_depsgraph_get(), FRAME_START)
+    assert settings.shape == "HULL"
+    boxes = [(np.array([2.0, 1.0, 1.0]), np.array([1.0, 0.5, 0.5])),
+             (np.array([1.0, 1.0, 1.0]), np.array([0.5, 1.5, 0.5]))]
+    mass = np.array([np.prod(size) for size, _ in boxes]) / 3.0  # 1 kg, density uniform
+    com = sum(m * c for m, (_, c) in zip(mass, boxes))
+    inertia = np.zeros((3, 3))
+    for m, (size, centre) in zip(mass, boxes):
+        d = centre - com
+        inertia += np.diag(m * (np.sum(size ** 2) - size ** 2) / 12.0) \
+            + m * (d @ d * np.eye(3) - np.outer(d, d))
+    props = settings.mass_properties
+    assert props.mass == pytest.approx(1.0)
+    assert props.volume == pytest.approx(3.0, rel=1e-9)  # its hull holds 3.5
+    np.testing.assert_allclose(props.com, com, atol=1e-9)
+    np.testing.assert_allclose(props.inertia, inertia, atol=1e-9)
+
+
 def test_keys_reproduce_the_simulation_under_a_scaled_rotated_parent(physanim_ext, tmp_path):
     _scene(tmp_path)
     _ground()
