@@ -269,11 +269,14 @@ class PHYSANIM_PG_spring_mesh(bpy.types.PropertyGroup):
 
 RIGID_SHAPE_ITEMS = [
     ('AUTO', "Automatic", "What you see: a mesh that is exactly a box collides as a box, one "
-     "whose vertices all lie on a sphere as a sphere, any other as its convex hull"),
+     "whose vertices all lie on a sphere as a sphere, a closed concave one (a ring, a cup) as "
+     "itself (Mesh), any other as its convex hull"),
     ('BOX', "Box", "The mesh's bounding box (in the object's axes)"),
     ('SPHERE', "Sphere", "A sphere around the mesh's bounding box centre"),
     ('CAPSULE', "Capsule", "A capsule along the object's local Z axis around the mesh"),
     ('CONVEX_HULL', "Convex Hull", "The convex hull of the mesh's vertices"),
+    ('MESH', "Mesh", "The closed mesh itself, concave parts included (rings fall over pegs); "
+     "its vertices touch what they meet. Slower than the convex shapes"),
 ]
 
 

@@ -27,12 +27,14 @@ from .mesh_read import evaluated_mesh
 
 STREAM = "bodies"
 SPHERE_TOLERANCE = 1e-3  # vertices within this fraction of the radius: the mesh is a sphere
+CONCAVE_FRACTION = 0.9  # a closed mesh with less volume than this of its hull's is concave
 
 
 def shape_of(co: np.ndarray, tris: np.ndarray, choice: str) -> tuple[str, dict]:
     """The core shape of a mesh (local vertices ``co`` with the object's scale applied) and
     its parameters. Automatic: an axis-aligned box is a BOX, vertices all on a sphere a
-    SPHERE, anything else its CONVEX_HULL."""
+    SPHERE, a closed mesh that is clearly concave (a ring, a cup, a T) its own MESH, anything
+    else its CONVEX_HULL."""
     lo, hi = co.min(axis=0), co.max(axis=0)
     centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
     if choice == 'AUTO':
@@ -43,7 +45,7 @@ def shape_of(co: np.ndarray, tris: np.ndarray, choice: str) -> tuple[str, dict]:
         elif len(co) >= 12 and np.ptp(dist) <= SPHERE_TOLERANCE * dist.max():
             choice = 'SPHERE'
         else:
-            choice = 'CONVEX_HULL'
+            choice = 'MESH' if _concave(co, tris) else 'CONVEX_HULL'
     if choice == 'BOX':
         return "BOX", {"half_extents": tuple(half), "shape_centre": tuple(centre)}
     if choice == 'SPHERE':
@@ -54,15 +56,31 @@ def shape_of(co: np.ndarray, tris: np.ndarray, choice: str) -> tuple[str, dict]:
         length = float(max(half[2] - radius, 0.0))
         return "CAPSULE", {"radius": radius, "half_extents": (0.0, 0.0, length),
                            "shape_centre": tuple(centre)}
+    if choice == 'MESH':
+        return "MESH", {"mesh": (co, np.asarray(tris, np.int64).reshape(-1, 3))}
     hull = convex_hull(co)
     if hull.dimension < 3:
         return "HULL", {"hull": co}  # flat: the mass properties step says so, naming it
     return "HULL", {"hull": hull.points[hull.vertices]}
 
 
+def _concave(co: np.ndarray, tris: np.ndarray) -> bool:
+    """A closed, consistently wound mesh whose volume is less than CONCAVE_FRACTION of its
+    convex hull's (open or flat meshes are not: they collide as their hull)."""
+    hull = convex_hull(co)
+    if not len(tris) or hull.dimension < 3:
+        return False
+    solid = _closed_mesh_mass((co, tris), "mesh", {"density": 1.0})
+    if solid is None:
+        return False
+    return solid.volume < CONCAVE_FRACTION * polyhedron_mass(
+        hull.points, hull.triangles, density=1.0).volume
+
+
 def mass_of(shape: str, params: dict, p, name: str, mesh=None):
     """Mass properties (from density or total mass) with the user's overrides: of the
-    analytic shape; for a hull, of the mesh itself when it is closed (``mesh``: local
+    analytic shape; for a Mesh body, of its closed mesh (an open one is an error naming the
+    shapes that work); for a hull, of the mesh itself when it is closed (``mesh``: local
     vertices and triangles — a concave T-handle weighs as what the user sees, not as its
     hull), else of the hull (an open shell's mass is that of the solid it collides as)."""
     amount = {"density": p.density} if p.use_density else {"mass": p.mass}
@@ -73,12 +91,16 @@ def mass_of(shape: str, params: dict, p, name: str, mesh=None):
     elif shape == "CAPSULE":
         props = capsule_mass(params["radius"], params["half_extents"][2], **amount)
     else:
-        hull = convex_hull(params["hull"])
-        if hull.dimension < 3:
-            raise PhysanimError("the mesh is flat (its convex hull has no volume) — give it "
-                                "thickness, or use the Box shape", obj=name, kind="rigid body")
-        props = _closed_mesh_mass(mesh, name, amount) or \
-            polyhedron_mass(hull.points, hull.triangles, name=name, **amount)
+        if shape == "MESH":  # must be closed: open or inside out fails, naming the way out
+            props = polyhedron_mass(*params["mesh"], name=name, **amount)
+        else:
+            hull = convex_hull(params["hull"])
+            if hull.dimension < 3:
+                raise PhysanimError("the mesh is flat (its convex hull has no volume) — give "
+                                    "it thickness, or use the Box shape", obj=name,
+                                    kind="rigid body")
+            props = _closed_mesh_mass(mesh, name, amount) or \
+                polyhedron_mass(hull.points, hull.triangles, name=name, **amount)
         return with_override(props, com=tuple(p.com) if p.use_custom_com else None,
                              inertia=np.diag(p.inertia) if p.use_custom_inertia else None,
                              name=name)

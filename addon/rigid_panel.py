@@ -8,7 +8,8 @@ import numpy as np
 from ..core.errors import PhysanimError
 from .panels import AUTO_SHAPE_PREVIEW_LIMIT, _PhysicsPanel
 
-SHAPE_NAMES = {"BOX": "Box", "SPHERE": "Sphere", "CAPSULE": "Capsule", "HULL": "Convex Hull"}
+SHAPE_NAMES = {"BOX": "Box", "SPHERE": "Sphere", "CAPSULE": "Capsule", "HULL": "Convex Hull",
+               "MESH": "Mesh (concave)"}
 
 
 def _preview(ob):
@@ -29,10 +30,11 @@ def _preview(ob):
     ob.data.calc_loop_triangles()
     tris = np.empty(len(ob.data.loop_triangles) * 3, np.int32)
     ob.data.loop_triangles.foreach_get("vertices", tris)
-    shape, params = rigid.shape_of(co.reshape(-1, 3).astype(np.float64) * np.abs(scale),
-                                   tris.reshape(-1, 3), p.shape)
+    co = co.reshape(-1, 3).astype(np.float64) * np.abs(scale)
+    tris = tris.reshape(-1, 3).astype(np.int64)
+    shape, params = rigid.shape_of(co, tris, p.shape)
     try:
-        return shape, rigid.mass_of(shape, params, p, ob.name)
+        return shape, rigid.mass_of(shape, params, p, ob.name, mesh=(co, tris))
     except (PhysanimError, ValueError) as exc:
         return None, str(exc)
 

@@ -1,4 +1,5 @@
-"""Procedural triangle meshes for tests, benchmarks and demos: grids, spheres, boxes."""
+"""Procedural triangle meshes for tests, benchmarks and demos: grids, spheres, boxes, tori,
+cylinders."""
 from __future__ import annotations
 
 import numpy as np
@@ -56,3 +57,41 @@ def box_mesh(half=(1.0, 1.0, 1.0), name: str = "box") -> TriangleMesh:
     f = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
                   [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
     return TriangleMesh(v, f, name)
+
+
+def torus_mesh(major: float = 1.0, minor: float = 0.25, segments: int = 32, sides: int = 12,
+               name: str = "torus") -> TriangleMesh:
+    """A closed torus about the z axis: ring radius ``major``, tube radius ``minor`` [m],
+    ``segments`` around the ring, ``sides`` around the tube; wound outward."""
+    if not 0.0 < minor < major:
+        raise ValueError(f"a torus needs 0 < minor < major (got {minor}, {major})")
+    u = np.linspace(0.0, 2.0 * np.pi, segments, endpoint=False)[:, None]
+    v = np.linspace(0.0, 2.0 * np.pi, sides, endpoint=False)[None, :]
+    ring = major + minor * np.cos(v)
+    verts = np.stack(np.broadcast_arrays(ring * np.cos(u), ring * np.sin(u),
+                                         minor * np.sin(v)), axis=-1).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(segments), np.arange(sides), indexing="ij")
+    a = i * sides + j
+    b = (i + 1) % segments * sides + j
+    c = (i + 1) % segments * sides + (j + 1) % sides
+    d = i * sides + (j + 1) % sides
+    tri = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3),
+                          np.stack([a, c, d], -1).reshape(-1, 3)])
+    return TriangleMesh(verts, tri, name)
+
+
+def cylinder_mesh(radius: float = 1.0, half_height: float = 1.0, segments: int = 24,
+                  name: str = "cylinder") -> TriangleMesh:
+    """A closed cylinder about the z axis (|z| <= half_height), caps fanned from their
+    centres; wound outward."""
+    t = np.linspace(0.0, 2.0 * np.pi, segments, endpoint=False)
+    rim = np.stack([radius * np.cos(t), radius * np.sin(t), np.zeros(segments)], axis=1)
+    verts = np.concatenate([rim - (0, 0, half_height), rim + (0, 0, half_height),
+                            [(0.0, 0.0, -half_height), (0.0, 0.0, half_height)]])
+    k = np.arange(segments)
+    k1 = (k + 1) % segments
+    lo, hi, bottom, top = k, segments + k, 2 * segments, 2 * segments + 1
+    tri = np.concatenate([np.stack([lo, k1, segments + k1], 1), np.stack([lo, segments + k1, hi], 1),
+                          np.stack([np.full(segments, bottom), k1, lo], 1),
+                          np.stack([np.full(segments, top), hi, segments + k1], 1)])
+    return TriangleMesh(verts, tri, name)

@@ -2,7 +2,8 @@
 rigid bodies as shapes moving from their pose at the frame's start to their pose at its end.
 
 Boxes and spheres become the analytic Box and Sphere colliders (scaled unit shapes); convex
-hulls and capsules become Mesh colliders over their hull's triangles.
+hulls and capsules become Mesh colliders over their hull's triangles, Mesh bodies Mesh colliders
+over their own.
 """
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ import numpy as np
 from ..collision.hull import convex_hull
 from ..contact import ColliderFrame
 from . import quaternion as quat
-from .model import BOX, CAPSULE, HULL, SPHERE, RigidBodyModel
+from .model import BOX, CAPSULE, HULL, MESH, SPHERE, RigidBodyModel
 
 CAPSULE_SEGMENTS = 12  # around a capsule's axis, for its collider mesh
 
@@ -29,9 +30,9 @@ def _capsule_points(radius: float, half: float, offset: np.ndarray) -> np.ndarra
 
 
 def shapes(model: RigidBodyModel) -> dict:
-    """Per HULL or CAPSULE body, (local vertices (from the centre of mass), triangles) of the
-    mesh it collides as (made once: they do not change)."""
-    out = {}
+    """Per HULL, CAPSULE or MESH body, (local vertices (from the centre of mass), triangles) of
+    the mesh it collides as (made once: they do not change)."""
+    out = {int(i): model.body_mesh[i] for i in np.nonzero(model.body_shape == MESH)[0]}
     for i in np.nonzero(np.isin(model.body_shape, (HULL, CAPSULE)))[0]:
         if model.body_shape[i] == HULL:
             s, c = model.body_hull_start[i], model.body_hull_count[i]

@@ -9,8 +9,8 @@ from ..contact import ColliderFrame
 from ..errors import PhysanimError
 from ..transforms import TransformPath
 from . import quaternion as quat
-from .collide import HALF_SPACE, MESH, Bodies
-from .model import BOX, RigidBodyModel, RigidBodyState
+from .collide import HALF_SPACE, Bodies
+from .model import BOX, MESH, RigidBodyModel, RigidBodyState
 
 FLAT = 1e-3  # [m] half thickness given to a two-sided Plane collider
 
@@ -75,17 +75,18 @@ def collider_bodies(colliders: list[ColliderFrame], frame: int):
             tuple(c.name for c in colliders))
 
 
-def mesh_colliders(colliders: list[ColliderFrame], first_row: int, cache) -> dict:
-    """Row -> (hierarchy, local lo (3,), local hi (3,)) of each Mesh collider, its vertices
+def mesh_shapes(model: RigidBodyModel, colliders: list[ColliderFrame], cache) -> dict:
+    """Row -> :class:`~.mesh_contacts.MeshShape` of each Mesh body (closed, in its frame at
+    the centre of mass) and each Mesh collider (rows after the bodies), a collider's vertices
     scaled by its object's scale (the solver poses it with rotation and translation only)."""
-    out = {}
+    out = {int(i): cache.shape(model.body_name[i], *model.body_mesh[i], body=True)
+           for i in np.nonzero(model.body_shape == MESH)[0]}
     for k, c in enumerate(colliders):
         if c.shape != "MESH":
             continue
         scale = np.linalg.norm(np.asarray(c.matrix0)[:3, :3], axis=0)
         verts = np.asarray(c.vertices0, dtype=np.float64) * scale
-        out[first_row + k] = (cache.bvh(c.name, verts, np.asarray(c.triangles, np.int64)),
-                              verts.min(axis=0) - c.thickness, verts.max(axis=0) + c.thickness)
+        out[model.body_count + k] = cache.shape(c.name, verts, c.triangles, c.thickness)
     return out
 
 

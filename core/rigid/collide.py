@@ -17,12 +17,13 @@ from ..collision.broadphase import UniformGrid
 from . import narrow, narrow_hull
 from . import quaternion as quat
 from .hull_shape import HullSet
-from .model import BOX, CAPSULE, HULL, SPHERE
+from .model import BOX, CAPSULE, HULL, MESH, SPHERE
 
-HALF_SPACE = 4  # a collider's code: the solid below a plane (normal = local +Z)
-MESH = 5  # a collider's code: a triangle mesh (see :mod:`.mesh_contacts`)
+HALF_SPACE = 5  # a collider's code: the solid below a plane (normal = local +Z)
+# MESH (model.MESH): a triangle mesh, a Mesh collider or a concave Mesh body (:mod:`.mesh_contacts`)
 SPECULATIVE = 0.02  # [m] contacts this far apart are always reported
 FEATURES = 4096  # feature ids per pair in a contact key
+SUPPORT_TOLERANCE = 0.25 * SPECULATIVE  # [m] see reduce_manifolds
 BOX_CORNERS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)],
                        dtype=np.float64)
 
@@ -61,7 +62,7 @@ class Bodies:
     name: tuple
     hulls: HullSet | None = None
     hull_index: np.ndarray | None = None
-    meshes: dict | None = None  # row of a Mesh collider -> (hierarchy, local lo, local hi)
+    meshes: dict | None = None  # row of a Mesh collider or body -> MeshShape
     sleeping: np.ndarray | None = None  # (N,) resting bodies: found only to be woken
     moving: np.ndarray | None = None  # (N,) bodies that move on their own this frame
     fresh: np.ndarray | None = None  # (N,) bodies whose contacts are searched (None: all)
@@ -249,7 +250,7 @@ def support_points(bodies: Bodies, rot: np.ndarray, idx: np.ndarray, normal: np.
         local = BOX_CORNERS[corner] * bodies.half[idx[sel][owner]]
         out.append((idx[sel][owner], corner, centre[sel][owner]
                     + np.einsum("nij,nj->ni", rot[idx[sel][owner]], local)))
-    sel = np.nonzero(shape == HULL)[0]
+    sel = np.nonzero((shape == HULL) | (shape == MESH))[0]  # a Mesh body: its hull's vertices
     if len(sel):
         body = idx[sel]
         count = bodies.hull_count[body]
@@ -288,21 +289,23 @@ def _half_spaces(bodies: Bodies, rot: np.ndarray, reach: np.ndarray, ground: np.
     return Found.join(parts)
 
 
-def approach(bodies: Bodies, owner: np.ndarray, other: int, p: np.ndarray,
+def approach(bodies: Bodies, owner: np.ndarray, other, p: np.ndarray,
              n: np.ndarray) -> np.ndarray:
     """(k,) speed [m/s] at which points p (k, 3) of bodies ``owner`` move along the outward
-    normals n (3,) or (k, 3) of body ``other``'s surface (< 0: into it)."""
+    normals n (3,) or (k, 3) of body ``other``'s surface (one body, or one per point) (< 0:
+    into it)."""
     def velocity(rows):
         return bodies.v[rows] + np.cross(bodies.w[rows], p - bodies.x[rows])
-    return np.einsum("ki,ki->k", velocity(owner) - velocity(np.full(len(owner), other)),
+    return np.einsum("ki,ki->k", velocity(owner) - velocity(np.broadcast_to(other, owner.shape)),
                      np.broadcast_to(n, p.shape))
 
 
 def reduce_manifolds(owner: np.ndarray, p: np.ndarray, sep: np.ndarray) -> np.ndarray:
     """Indices keeping at most 4 points per owner (a hull's many vertices on the ground): the
     deepest, the farthest from it, the farthest from their line, and the farthest on the
-    other side of that line — the widest support with the deepest point in it. ``sep`` [m]
-    ranks the points: pass the least separation expected until the next search."""
+    other side of that line, among the points within SUPPORT_TOLERANCE of the deepest — the
+    widest support with the deepest point in it. ``sep`` [m] ranks the points: pass the
+    least separation expected until the next search."""
     if not len(owner):
         return np.zeros(0, np.int64)
     order = np.argsort(owner, kind="stable")
@@ -313,9 +316,13 @@ def reduce_manifolds(owner: np.ndarray, p: np.ndarray, sep: np.ndarray) -> np.nd
     idx = np.full((len(uniq), int(count.max())), -1, np.int64)
     idx[np.repeat(np.arange(len(uniq)), count), slot] = order
     valid = idx >= 0
+    rank = np.where(valid, sep[np.where(valid, idx, 0)], np.inf)
+    # the support: points about as deep as the deepest (a ring's lowest row, not the wider row
+    # above it: a manifold of points that do not touch lets the body sink to them)
+    valid &= rank <= rank.min(axis=1, keepdims=True) + SUPPORT_TOLERANCE
     q = p[np.where(valid, idx, 0)]
     rows = np.arange(len(uniq))
-    pick = [np.argmin(np.where(valid, sep[np.where(valid, idx, 0)], np.inf), axis=1)]
+    pick = [np.argmin(rank, axis=1)]
     far = np.linalg.norm(q - q[rows, pick[0]][:, None], axis=2)
     pick.append(np.argmax(np.where(valid, far, -1.0), axis=1))
     axis = q[rows, pick[1]] - q[rows, pick[0]]

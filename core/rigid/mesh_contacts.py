@@ -1,43 +1,110 @@
-"""Rigid bodies against Mesh colliders (any triangle mesh: a bowl, terrain, Suzanne).
+"""Contacts with triangle meshes: Mesh colliders (a bowl, terrain, Suzanne: open or closed) and
+concave Mesh bodies (a ring, a torus knot: closed meshes that move).
 
-Each nearby body offers its contact points — a box's or hull's corners, a sphere's centre, a
-capsule's axis ends, with their radius — and the mesh's hierarchy answers the closest surface
-point and signed distance of each (pseudo-normals), taken on the side of the mesh the body's
-centre of mass is on (an open mesh has no inside, and its winding says nothing). A point
-closer than its pair's margin becomes a contact along the surface normal facing the body; each
-body keeps at most 4 per mesh (the widest support). Mesh features poking into a body's flat face between
-its corners are not seen (a box on a sharp ridge rests on its corners' nearest surface).
+Two directions meet in each pair with a mesh, both through the mesh's hierarchy (built once
+in the mesh's own frame: a rigid mesh never needs a refit) or, for a convex partner, its exact
+signed distance:
+
+* a convex body's contact points — a box's or hull's corners, a sphere's centre, a capsule's
+  axis ends, with their radius — against the mesh's closest surface points;
+* a Mesh body's vertices against its partner: a convex shape's signed distance (sphere, box,
+  capsule, hull planes), another mesh's closest surface points (a Mesh body's or a Mesh
+  collider's), and a Mesh collider's vertices against a Mesh body the same way.
+
+A point closer than its pair's margin becomes a contact along the partner's surface normal at
+the closest point. An open Mesh collider has no inside: its surface faces the side the other
+body's centre of mass is on, whatever the winding; a Mesh body, and a watertight Mesh collider
+wound outward, is closed and its outside is outside (a ring around a peg has its centre of mass
+inside the peg). Each pair keeps up to 3 places it touches at, each with at most 4 points (the widest
+support with the deepest point). What
+lies between vertices is not seen: a mesh ridge poking into a box's face between its corners,
+or two edges crossing between their ends (dense meshes leave small gaps).
 """
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..collision.build import build_bvh
 from ..collision.distance import closest_points
 from ..collision.mesh import TriangleMesh
-from .collide import BOX_CORNERS, FEATURES, SPECULATIVE, Found, approach, reduce_manifolds
-from .model import BOX, CAPSULE, HULL, SPHERE
+from .collide import (BOX_CORNERS, FEATURES, HALF_SPACE, SPECULATIVE, Found, approach,
+                      reduce_manifolds)
+from .model import BOX, CAPSULE, HULL, MESH, SPHERE
+
+
+SITES = 3  # places a pair with a mesh keeps apart, each with up to 4 points (:func:`_sites`)
+SITE_FRACTION = 0.5  # a site's reach: this fraction of the smaller body's bound radius
+
+
+@dataclass(frozen=True)
+class MeshShape:
+    """A mesh in its body's frame (from the body's x, unscaled): hierarchy, bounds (lo, hi
+    (3,), grown by the thickness), vertices (v, 3), whether it is closed (its outside is
+    outside: a Mesh body, a watertight Mesh collider) and whether it is a rigid body's (a
+    collider's size says nothing about where it touches)."""
+
+    bvh: object
+    lo: np.ndarray
+    hi: np.ndarray
+    vertices: np.ndarray
+    closed: bool
+    body: bool = False
+
+    @property
+    def radius(self) -> float:
+        """[m] a sphere about the frame's origin holding the mesh (and its thickness)."""
+        return float(np.linalg.norm(np.maximum(np.abs(self.lo), np.abs(self.hi))))
 
 
 class MeshCache:
-    """Hierarchies of the frame's mesh colliders, kept between frames while a mesh's (scaled,
-    local) vertices stay the same. One per solver."""
+    """Hierarchies of the meshes of a solver (Mesh colliders, Mesh bodies), kept between frames
+    while a mesh's (scaled, local) vertices stay the same. One per solver."""
 
     def __init__(self):
         self._known: dict[str, tuple[bytes, object]] = {}
 
-    def bvh(self, name: str, vertices: np.ndarray, triangles: np.ndarray):
+    def _entry(self, name: str, vertices: np.ndarray, triangles: np.ndarray):
         key = vertices.tobytes() + triangles.tobytes()
         known = self._known.get(name)
         if known is None or known[0] != key:
             mesh = TriangleMesh(vertices, triangles, name=name)
-            known = (key, build_bvh(mesh, "aabb"))
+            known = (key, build_bvh(mesh, "aabb"), watertight(vertices, triangles))
             self._known[name] = known
-        return known[1]
+        return known
+
+    def bvh(self, name: str, vertices: np.ndarray, triangles: np.ndarray):
+        return self._entry(name, vertices, triangles)[1]
+
+    def shape(self, name: str, vertices, triangles, thickness: float = 0.0,
+              body: bool = False) -> MeshShape:
+        """A mesh's :class:`MeshShape`; a Mesh collider that is watertight and wound outward
+        is closed too (a peg: a ring around it has its centre inside it)."""
+        verts = np.asarray(vertices, dtype=np.float64)
+        _, bvh, tight = self._entry(name, verts, np.asarray(triangles, np.int64))
+        return MeshShape(bvh, verts.min(axis=0) - thickness, verts.max(axis=0) + thickness,
+                         verts, body or tight, body)
+
+
+def watertight(vertices: np.ndarray, triangles: np.ndarray) -> bool:
+    """Every edge is used once in each direction (a closed, consistently wound surface) and the
+    enclosed volume is positive (wound outward)."""
+    t = np.asarray(triangles, np.int64)
+    if not len(t):
+        return False
+    n = len(vertices)
+    directed = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+    code = directed[:, 0] * n + directed[:, 1]
+    reverse = directed[:, 1] * n + directed[:, 0]
+    if len(np.unique(code)) != len(code) or not np.isin(reverse, code).all():
+        return False
+    a, b, c = (np.asarray(vertices, np.float64)[t[:, k]] for k in range(3))
+    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum()) > 0.0
 
 
 def _points(bodies, rot: np.ndarray, idx: np.ndarray):
-    """(owner, feature, world point, radius) of the contact points of bodies ``idx``."""
+    """(owner, feature, world point, radius) of the contact points of convex bodies ``idx``."""
     out = []
     centre = bodies.centres(rot)[idx]
     shape = bodies.shape[idx]
@@ -65,42 +132,207 @@ def _points(bodies, rot: np.ndarray, idx: np.ndarray):
     return tuple(np.concatenate(p) for p in zip(*out))
 
 
-def _side(bvh, bodies, rot, g: int, near: np.ndarray, count: int) -> np.ndarray:
-    """(count,) +1 or -1 per body: the side of the mesh its centre of mass is on (an open
-    mesh has no inside: a body meets it from where it is, whatever the faces' winding)."""
-    local = np.einsum("ji,nj->ni", rot[g], bodies.x[near] - bodies.x[g])
-    sd = closest_points(bvh, local).signed_distance
-    side = np.ones(count)
-    side[near] = np.where(sd < 0.0, -1.0, 1.0)
-    return side
+def _side(mesh: MeshShape, bodies, rot, g: int, rows: np.ndarray) -> np.ndarray:
+    """(len(rows),) +1 or -1: the side of mesh ``g`` the centres of mass of bodies ``rows`` are
+    on (an open mesh has no inside: a body meets it from where it is, whatever the faces'
+    winding); +1 for a closed Mesh body."""
+    if mesh.closed or not len(rows):
+        return np.ones(len(rows))
+    local = np.einsum("ji,nj->ni", rot[g], bodies.x[rows] - bodies.x[g])
+    return np.where(closest_points(mesh.bvh, local).signed_distance < 0.0, -1.0, 1.0)
+
+
+def _near(bodies, rot, reach, g: int, mesh: MeshShape) -> np.ndarray:
+    """Bodies whose bounds reach into mesh ``g``'s box this search, one of the pair dynamic."""
+    rows = np.nonzero((bodies.shape != HALF_SPACE) & (bodies.dynamic | bodies.dynamic[g]))[0]
+    rows = rows[rows != g]
+    local = np.einsum("ji,nj->ni", rot[g], bodies.x[rows] - bodies.x[g])  # R^T (x - x_g)
+    grow = (bodies.bound[rows] + reach[rows] + reach[g] + SPECULATIVE)[:, None]
+    inside = ((local + grow >= mesh.lo) & (local - grow <= mesh.hi)).all(axis=1)
+    return rows[inside & bodies.searched(rows, g)]
+
+
+@dataclass(frozen=True)
+class _Points:
+    """Points of bodies ``owner`` against the surface of bodies ``other`` (k each): world
+    points on the owner, the other's outward surface normal there (k, 3), the separation."""
+
+    owner: np.ndarray
+    other: np.ndarray
+    feature: np.ndarray
+    p: np.ndarray
+    normal: np.ndarray
+    separation: np.ndarray
+
+
+def _on_mesh(bodies, rot, g: int, mesh: MeshShape, owner, feature, p, radius, margin):
+    """Points p (k, 3) of ``owner`` (radius each) against mesh g's surface."""
+    lp = np.einsum("ji,nj->ni", rot[g], p - bodies.x[g])
+    cp = closest_points(mesh.bvh, lp, max_distance=float((margin + radius).max()))
+    side = _side(mesh, bodies, rot, g, np.unique(owner))
+    side = side[np.searchsorted(np.unique(owner), owner)]
+    found = cp.triangle >= 0
+    sep = np.where(found, side * cp.signed_distance - radius - bodies.radius[g], np.inf)
+    keep = sep < margin
+    n_out = np.einsum("ij,nj->ni", rot[g], cp.normal[keep]) * side[keep, None]
+    return _Points(owner[keep], np.full(int(keep.sum()), g), feature[keep], p[keep], n_out,
+                   sep[keep])
+
+
+def _convex_on_mesh(bodies, rot, reach, g: int, mesh: MeshShape, near) -> _Points:
+    """The contact points of the convex bodies ``near`` against mesh g."""
+    convex = near[bodies.shape[near] != MESH]
+    if not len(convex):
+        return None
+    owner, feature, p, radius = _points(bodies, rot, convex)
+    return _on_mesh(bodies, rot, g, mesh, owner, feature, p, radius,
+                    SPECULATIVE + reach[owner] + reach[g])
+
+
+def _vertices_on(bodies, rot, reach, g: int, mesh: MeshShape, near) -> list[_Points]:
+    """Mesh g's vertices against the bodies ``near``: meshes (g a Mesh body or collider) by
+    their hierarchy, convex shapes (g a Mesh body) by their signed distance."""
+    out = []
+    world = bodies.x[g] + mesh.vertices @ rot[g].T
+    for o in near[bodies.shape[near] == MESH]:
+        other = bodies.meshes[int(o)]
+        margin = SPECULATIVE + reach[g] + reach[o]
+        local = (world - bodies.x[o]) @ rot[o]
+        sel = np.nonzero(((local + margin >= other.lo) & (local - margin <= other.hi))
+                         .all(axis=1))[0]
+        if len(sel):
+            out.append(_on_mesh(bodies, rot, int(o), other, np.full(len(sel), g), sel,
+                                world[sel], np.zeros(len(sel)), margin))
+    convex = near[bodies.shape[near] != MESH]
+    if len(convex):
+        margin = SPECULATIVE + reach[g] + reach[convex]
+        o, v = within(world, bodies.x[convex], bodies.bound[convex] + margin)
+        sd, n_out = convex_distance(bodies, rot, convex[o], world[v])
+        sd -= bodies.radius[g]  # a Mesh collider's thickness
+        keep = sd < margin[o]
+        out.append(_Points(np.full(int(keep.sum()), g), convex[o][keep], v[keep],
+                           world[v][keep], n_out[keep], sd[keep]))
+    return out
+
+
+def within(points: np.ndarray, centres: np.ndarray, radii: np.ndarray):
+    """(k, v) index pairs: points[v] (V, 3) closer than radii[k] to centres[k] (K, 3), found
+    through a hash of cells as wide as the largest radius (27 cells around each centre)."""
+    cell = max(float(radii.max()), 1e-9)
+    prime = np.array([73856093, 19349663, 83492791], np.int64)
+
+    def hashed(ijk):
+        h = ijk * prime
+        return h[..., 0] ^ h[..., 1] ^ h[..., 2]
+    keys = hashed(np.floor(points / cell).astype(np.int64))
+    order = np.argsort(keys, kind="stable")
+    sorted_keys = keys[order]
+    around = np.array([(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1)])
+    ask = hashed(np.floor(centres / cell).astype(np.int64)[:, None] + around).ravel()
+    lo, hi = np.searchsorted(sorted_keys, ask, "left"), np.searchsorted(sorted_keys, ask, "right")
+    count = hi - lo
+    body = np.repeat(np.arange(len(ask)) // len(around), count)
+    at = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
+    vertex = order[np.repeat(lo, count) + at]
+    close = np.linalg.norm(points[vertex] - centres[body], axis=1) < radii[body]
+    pair = np.unique(body[close] * len(points) + vertex[close])  # hashes may repeat cells
+    return pair // len(points), pair % len(points)
+
+
+def convex_distance(bodies, rot, rows: np.ndarray, p: np.ndarray):
+    """Signed distance [m] (k,) of world points p (k, 3) to the convex shapes of bodies
+    ``rows`` (k,) (sphere, box, capsule, hull), and the shapes' outward unit normals (k, 3)
+    at their closest surface points (for a hull: of the face it is least inside)."""
+    local = np.einsum("kji,kj->ki", rot[rows], p - bodies.centres(rot)[rows])
+    sd, n = np.full(len(rows), np.inf), np.zeros((len(rows), 3))
+    shape = bodies.shape[rows]
+    sel = np.nonzero(shape == SPHERE)[0]
+    _unit_into(local[sel], sd, n, sel, -bodies.radius[rows[sel]])
+    sel = np.nonzero(shape == CAPSULE)[0]
+    if len(sel):
+        half = bodies.half[rows[sel], 2]
+        axis = local[sel].copy()
+        axis[:, 2] -= np.clip(axis[:, 2], -half, half)
+        _unit_into(axis, sd, n, sel, -bodies.radius[rows[sel]])
+    sel = np.nonzero(shape == BOX)[0]
+    if len(sel):
+        q = np.abs(local[sel]) - bodies.half[rows[sel]]
+        out = np.maximum(q, 0.0)
+        outside = np.linalg.norm(out, axis=1)
+        face = np.argmax(q, axis=1)
+        inward = np.zeros_like(q)
+        inward[np.arange(len(sel)), face] = 1.0
+        dirs = np.where((outside > 0.0)[:, None], out / np.maximum(outside, 1e-300)[:, None],
+                        inward) * np.where(local[sel] < 0.0, -1.0, 1.0)
+        sd[sel] = outside + np.minimum(q.max(axis=1), 0.0)
+        n[sel] = dirs
+    sel = np.nonzero(shape == HULL)[0]
+    if len(sel):
+        batch = bodies.hulls.batch(bodies.hull_index[rows[sel]])
+        lp = np.einsum("kji,kj->ki", rot[rows[sel]], p[sel] - bodies.x[rows[sel]])
+        planes = np.einsum("kfi,ki->kf", batch.normal, lp) - batch.offset
+        face = np.argmax(planes, axis=1)
+        sd[sel] = planes[np.arange(len(sel)), face]
+        # the hull's normals are in the body's axes, as the other shapes' local ones
+        n[sel] = batch.normal[np.arange(len(sel)), face]
+    return sd, np.einsum("kij,kj->ki", rot[rows], n)
+
+
+def _unit_into(d: np.ndarray, sd, n, sel, add) -> None:
+    """sd[sel] = |d| + add, n[sel] = d / |d| (any unit vector at 0)."""
+    length = np.linalg.norm(d, axis=1)
+    sd[sel] = length + add
+    n[sel] = np.where((length > 1e-12)[:, None], d / np.maximum(length, 1e-300)[:, None],
+                      [0.0, 0.0, 1.0])
 
 
 def mesh_contacts(bodies, rot: np.ndarray, reach: np.ndarray, interval: float) -> Found:
-    """Contacts of every dynamic body with every Mesh collider of the frame."""
+    """Contacts of every pair with a mesh (Mesh colliders and Mesh bodies) and a dynamic side,
+    at most 4 per pair (ranked by the least separation expected within ``interval`` [s])."""
     parts = []
-    dyn = np.nonzero(bodies.dynamic)[0]
-    for g, (bvh, lo, hi) in bodies.meshes.items():
-        local = np.einsum("ji,nj->ni", rot[g], bodies.x[dyn] - bodies.x[g])  # R^T (x - x_g)
-        grow = (bodies.bound[dyn] + reach[dyn] + reach[g] + SPECULATIVE)[:, None]
-        near = dyn[((local + grow >= lo) & (local - grow <= hi)).all(axis=1)
-                   & bodies.searched(dyn, g)]
-        if not len(near):
-            continue
-        owner, feature, p, radius = _points(bodies, rot, near)
-        margin = SPECULATIVE + reach[owner] + reach[g]
-        lp = np.einsum("ji,nj->ni", rot[g], p - bodies.x[g])
-        cp = closest_points(bvh, lp, max_distance=float((margin + radius).max()))
-        side = _side(bvh, bodies, rot, g, near, len(bodies))[owner]
-        found = cp.triangle >= 0
-        sep = np.where(found, side * cp.signed_distance - radius, np.inf)
-        keep = sep < margin
-        owner, feature, sep = owner[keep], feature[keep], sep[keep]
-        n_out = np.einsum("ij,nj->ni", rot[g], cp.normal[keep]) * side[keep, None]
-        q = bodies.x[g] + np.einsum("ij,nj->ni", rot[g], cp.point[keep])
-        point = q + 0.5 * sep[:, None] * n_out
-        ahead = sep + interval * approach(bodies, owner, g, point, n_out)
-        sel = reduce_manifolds(owner, point, np.minimum(sep, ahead))
-        owner, feature, point, sep, n_out = owner[sel], feature[sel], point[sel], sep[sel], n_out[sel]
-        key = (owner * len(bodies) + g) * FEATURES + feature
-        parts.append(Found(owner, np.full(len(owner), g), point, -n_out, sep, key))
-    return Found.join(parts)
+    for g, mesh in bodies.meshes.items():
+        near = _near(bodies, rot, reach, g, mesh)
+        if len(near):
+            parts.append(_convex_on_mesh(bodies, rot, reach, g, mesh, near))
+            parts += _vertices_on(bodies, rot, reach, g, mesh, near)
+    parts = [p for p in parts if p is not None and len(p.owner)]
+    if not parts:
+        return Found.join([])
+    owner, other, feature, p, n_out, sep = (np.concatenate([getattr(q, f) for q in parts])
+                                            for f in ("owner", "other", "feature", "p",
+                                                      "normal", "separation"))
+    point = p - 0.5 * sep[:, None] * n_out
+    n = len(bodies)
+    pair = np.minimum(owner, other) * n + np.maximum(owner, other)
+    rank = np.minimum(sep, sep + interval * approach(bodies, owner, other, point, n_out))
+    size = bodies.bound.copy()
+    size[[g for g, m in bodies.meshes.items() if not m.body]] = np.inf  # colliders: no size
+    site = _sites(pair, point, rank, SITE_FRACTION * np.minimum(size[owner], size[other]))
+    sel = reduce_manifolds(pair * SITES + site, point, rank)
+    owner, other, n_out = owner[sel], other[sel], n_out[sel]
+    # one manifold per pair, every point from its lower row a to its higher row b (both
+    # directions meet in a pair of meshes): the normal from a to b
+    flip = owner > other
+    key = (pair[sel] * 2 + flip) * FEATURES + feature[sel] % FEATURES
+    return Found(np.where(flip, other, owner), np.where(flip, owner, other), point[sel],
+                 np.where(flip[:, None], n_out, -n_out), sep[sel], key)
+
+
+def _sites(pair: np.ndarray, point: np.ndarray, rank: np.ndarray, reach: np.ndarray):
+    """(k,) each point's site in its pair, 0 .. SITES - 1: the points within ``reach`` (k,) [m]
+    of the pair's deepest point (by ``rank``), then of the deepest of the rest, and so on; the
+    last site takes what is left. A concave pair touches at several places (a ring resting
+    across two others, a ring on a peg's side and on the ground): each place keeps its own
+    support, where one manifold of the widest points would keep only the deepest place."""
+    site = np.full(len(pair), SITES - 1)
+    left = np.arange(len(pair))
+    for k in range(SITES - 1):
+        if not len(left):
+            break
+        order = left[np.lexsort((rank[left], pair[left]))]
+        heads = order[np.r_[True, pair[order][1:] != pair[order][:-1]]]
+        deepest = heads[np.searchsorted(pair[heads], pair[left])]
+        here = np.linalg.norm(point[left] - point[deepest], axis=1) <= reach[left]
+        site[left[here]] = k
+        left = left[~here]
+    return site

@@ -15,14 +15,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..collision.hull import convex_hull
 from ..errors import PhysanimError
 from ..validate import frozen
 from . import quaternion as quat
 from .mass import MassProperties
 from .warm import Kept
 
-SHAPES = ("SPHERE", "BOX", "CAPSULE", "HULL")
-SPHERE, BOX, CAPSULE, HULL = range(4)
+SHAPES = ("SPHERE", "BOX", "CAPSULE", "HULL", "MESH")
+SPHERE, BOX, CAPSULE, HULL, MESH = range(5)
 MAX_SPEED = 1.0e5  # [m/s], [rad/s]: initial velocities beyond this are input errors
 
 
@@ -39,6 +40,9 @@ class RigidBodySettings:
             its axis (local Z) between the cap centres.
         radius: SPHERE and CAPSULE radius [m].
         hull: (m, 3) HULL vertices, local (from the object's origin) [m].
+        mesh: MESH: (vertices (m, 3) local from the object's origin [m], triangles (t, 3)) of
+            a closed mesh; the body collides as this concave surface (its convex hull is
+            made from the vertices for flat colliders).
         shape_centre: (3,) where the shape's centre lies, local from the object's origin.
         restitution, friction: contact coefficients (combined with the other side's).
         linear_damping, angular_damping: fraction of velocity lost per second [1/s].
@@ -53,6 +57,7 @@ class RigidBodySettings:
     half_extents: tuple = (0.0, 0.0, 0.0)
     radius: float = 0.0
     hull: np.ndarray | None = None
+    mesh: tuple | None = None
     shape_centre: tuple = (0.0, 0.0, 0.0)
     restitution: float = 0.0
     friction: float = 0.5
@@ -92,6 +97,16 @@ class RigidBodySettings:
             fail(f"a {self.shape.lower()} needs a positive radius (got {self.radius})")
         if self.shape == "HULL" and (self.hull is None or len(self.hull) < 4):
             fail("a convex hull needs at least 4 vertices that enclose a volume")
+        if self.shape == "MESH":
+            if self.mesh is None or len(self.mesh) != 2:
+                fail("a Mesh body needs its vertices and triangles")
+            verts, tris = (np.asarray(a) for a in self.mesh)
+            if verts.ndim != 2 or verts.shape[1] != 3 or len(verts) < 4 or \
+                    not np.isfinite(verts).all():
+                fail("a Mesh body needs at least 4 finite vertices")
+            if tris.ndim != 2 or tris.shape[1] != 3 or not len(tris) or tris.min() < 0 or \
+                    tris.max() >= len(verts):
+                fail("a Mesh body needs triangles indexing its vertices")
 
 
 @dataclass(frozen=True)
@@ -110,7 +125,10 @@ class RigidBodyModel:
         body_restitution, body_friction, body_linear_damping, body_angular_damping: (n,).
         body_kinematic: (n,) bool.
         hull_points: (m, 3) hull vertices from the centre of mass, local [m];
-        body_hull_start, body_hull_count: (n,) each body's range in it (0 for other shapes).
+        body_hull_start, body_hull_count: (n,) each body's range in it (0 for other shapes;
+            a MESH body's convex hull vertices: what can touch a flat collider).
+        body_mesh: per body, None or a MESH body's (vertices from the centre of mass, local
+            [m], triangles) (read-only arrays).
     """
 
     body_name: tuple[str, ...]
@@ -132,6 +150,7 @@ class RigidBodyModel:
     hull_points: np.ndarray
     body_hull_start: np.ndarray
     body_hull_count: np.ndarray
+    body_mesh: tuple = ()
     initial: tuple = field(repr=False, default=())  # (x, q, P, L) at the start
 
     @property
@@ -189,8 +208,10 @@ class RigidBodyBuilder:
         n = len(b)
         com = np.array([s.mass_properties.com for s in b], dtype=np.float64).reshape(n, 3)
         offset = np.array([s.shape_centre for s in b], dtype=np.float64).reshape(n, 3) - com
+        meshes = tuple(_mesh(s, c) for s, c in zip(b, com))
         hulls = [np.asarray(s.hull, dtype=np.float64).reshape(-1, 3) - c if s.shape == "HULL"
-                 else np.zeros((0, 3)) for s, c in zip(b, com)]
+                 else _hull_of(m[0]) if m is not None else np.zeros((0, 3))
+                 for s, c, m in zip(b, com, meshes)]
         counts = np.array([len(h) for h in hulls], dtype=np.int64)
         starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64) if n else counts
         half = np.array([s.half_extents for s in b], dtype=np.float64).reshape(n, 3)
@@ -209,7 +230,8 @@ class RigidBodyBuilder:
             *(frozen([getattr(s, k) for s in b]) for k in (
                 "restitution", "friction", "linear_damping", "angular_damping")),
             frozen(kinematic, bool), frozen(np.concatenate(hulls) if n else np.zeros((0, 3))),
-            frozen(starts, np.int64), frozen(counts, np.int64), self._initial(com, mass, inertia))
+            frozen(starts, np.int64), frozen(counts, np.int64), meshes,
+            self._initial(com, mass, inertia))
 
     def _initial(self, com, mass, inertia) -> tuple:
         b = self._bodies
@@ -221,6 +243,21 @@ class RigidBodyBuilder:
         r = quat.to_matrix(q)
         world_inertia = r @ inertia @ np.swapaxes(r, 1, 2)
         return x, q, mass[:, None] * v, np.einsum("nij,nj->ni", world_inertia, w)
+
+
+def _mesh(s: RigidBodySettings, com: np.ndarray):
+    """A MESH body's (vertices from the centre of mass, triangles), read-only; else None."""
+    if s.shape != "MESH":
+        return None
+    verts, tris = s.mesh
+    return (frozen(np.asarray(verts, dtype=np.float64) - com),
+            frozen(np.asarray(tris, dtype=np.int64), np.int64))
+
+
+def _hull_of(points: np.ndarray) -> np.ndarray:
+    """The vertices of the convex hull of ``points`` (m, 3) (all of them when flat)."""
+    hull = convex_hull(points)
+    return hull.points[hull.vertices] if hull.dimension == 3 else np.asarray(points)
 
 
 def _bound(s: RigidBodySettings, offset: np.ndarray, hull: np.ndarray) -> float:

@@ -22,7 +22,7 @@ from ..world import SolverSystem, World, WorldFrame
 from . import contact_solver as cs_
 from . import as_colliders, dynamics, sleep, warm
 from . import quaternion as quat
-from .bodies import Posed, collider_bodies, frame_bodies, mesh_colliders
+from .bodies import Posed, collider_bodies, frame_bodies, mesh_shapes
 from .collide import SPECULATIVE, Bodies, Found, find_contacts
 from .hull_shape import HullSet
 from .mesh_contacts import MeshCache
@@ -126,7 +126,7 @@ class RigidBodySolver:
         self.kinematic = np.nonzero(model.body_kinematic)[0]
         self.dynamic = np.nonzero(~model.body_kinematic)[0]
         self.hulls = _hulls(model)
-        self._meshes = MeshCache()  # Mesh colliders' hierarchies, kept between frames
+        self._meshes = MeshCache()  # meshes' hierarchies, kept between frames
 
     # -- the frame ------------------------------------------------------------------------------
     def advance(self, state: RigidBodyState, inputs: RigidFrameInputs) -> RigidReport:
@@ -157,7 +157,9 @@ class RigidBodySolver:
         v[self.kinematic], w[self.kinematic] = pv[:nk], pw[:nk]
         bodies = frame_bodies(model, state, colliders, posed, self.kinematic, (v, w), self.hulls)
         bodies.v[n:], bodies.w[n:] = pv[nk:], pw[nk:]
-        bodies.meshes = mesh_colliders(list(inputs.colliders), n, self._meshes)
+        bodies.meshes = mesh_shapes(model, list(inputs.colliders), self._meshes)
+        for row, mesh in bodies.meshes.items():  # a Mesh collider's size is its mesh's
+            bodies.bound[row] = max(bodies.bound[row], mesh.radius)
         g = np.asarray(inputs.gravity, dtype=np.float64)
         rows = np.concatenate([self.kinematic, n + np.arange(len(colliders[0]))]).astype(np.int64)
         inv_mass = np.concatenate([model.body_inv_mass, np.zeros(len(colliders[0]))])

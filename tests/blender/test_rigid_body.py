@@ -38,7 +38,8 @@ def _ground(size=20.0):
 
 def _body(kind="cube", location=(0.0, 0.0, 3.0), **props):
     add = {"cube": bpy.ops.mesh.primitive_cube_add, "uv": bpy.ops.mesh.primitive_uv_sphere_add,
-           "ico": bpy.ops.mesh.primitive_ico_sphere_add, "monkey": bpy.ops.mesh.primitive_monkey_add}
+           "ico": bpy.ops.mesh.primitive_ico_sphere_add, "monkey": bpy.ops.mesh.primitive_monkey_add,
+           "torus": bpy.ops.mesh.primitive_torus_add}
     add[kind](location=location)
     ob = bpy.context.object
     ob.physanim.rigid_body.enabled = True
@@ -90,7 +91,7 @@ def test_default_cube_falls_and_rests_on_a_default_plane(physanim_ext, tmp_path)
 
 
 @pytest.mark.parametrize("kind, shape", [("cube", "BOX"), ("uv", "SPHERE"), ("ico", "SPHERE"),
-                                         ("monkey", "HULL")])
+                                         ("monkey", "HULL"), ("torus", "MESH")])
 def test_automatic_shape_follows_what_the_user_sees(physanim_ext, tmp_path, kind, shape):
     _scene(tmp_path)
     ob = _body(kind)
@@ -122,15 +123,18 @@ def _l_prism(name="L"):
     return ob
 
 
-def test_a_concave_mesh_weighs_as_the_mesh_not_its_hull(physanim_ext, tmp_path):
-    """At the defaults a concave mesh collides as its convex hull, but its mass properties are
-    the mesh's own (closed form for the L's two boxes), not the hull's."""
+@pytest.mark.parametrize("choice, shape", [("AUTO", "MESH"), ("CONVEX_HULL", "HULL")])
+def test_a_concave_mesh_weighs_as_the_mesh_not_its_hull(physanim_ext, tmp_path, choice, shape):
+    """At the defaults a closed concave mesh collides as itself; as itself or as its convex
+    hull, its mass properties are the mesh's own (closed form for the L's two boxes), not the
+    hull's."""
     _scene(tmp_path)
     ob = _l_prism()
     ob.physanim.rigid_body.enabled = True
+    ob.physanim.rigid_body.shape = choice
     rigid = _addon(physanim_ext, "rigid")
     settings = rigid.body_settings(ob, bpy.context.evaluated_depsgraph_get(), FRAME_START)
-    assert settings.shape == "HULL"
+    assert settings.shape == shape
     boxes = [(np.array([2.0, 1.0, 1.0]), np.array([1.0, 0.5, 0.5])),
              (np.array([1.0, 1.0, 1.0]), np.array([0.5, 1.5, 0.5]))]
     mass = np.array([np.prod(size) for size, _ in boxes]) / 3.0  # 1 kg, density uniform
@@ -145,6 +149,27 @@ def test_a_concave_mesh_weighs_as_the_mesh_not_its_hull(physanim_ext, tmp_path):
     assert props.volume == pytest.approx(3.0, rel=1e-9)  # its hull holds 3.5
     np.testing.assert_allclose(props.com, com, atol=1e-9)
     np.testing.assert_allclose(props.inertia, inertia, atol=1e-9)
+
+
+def test_a_default_torus_dropped_over_a_peg_ends_around_it(physanim_ext, tmp_path):
+    """Blender's torus with only its Rigid Body box ticked (Automatic: Mesh) falls over a thin
+    cylinder (an Automatic collider: Mesh) and lands on the ground around it: the peg passes
+    through its hole, which its convex hull (a disc) could not let happen."""
+    _scene(tmp_path)
+    _ground()
+    bpy.ops.mesh.primitive_cylinder_add(radius=0.3, depth=2.0, location=(0.0, 0.0, 1.0))
+    peg = bpy.context.object
+    peg.physanim.collider.enabled = True
+    torus = _body("torus", location=(0.1, 0.0, 3.0))  # major radius 1, minor 0.25
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    m = _world(torus, FRAME_END)
+    assert m[2, 3] == pytest.approx(0.25, abs=5e-3)  # lying on the ground
+    assert abs(m[2, 2]) > 0.999  # flat
+    assert np.hypot(m[0, 3], m[1, 3]) < 0.75 - 0.3  # the peg is in its hole
+    ev = torus.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
+    co = np.array([m[:3, :3] @ v.co + m[:3, 3] for v in ev.vertices])
+    assert co[:, 2].min() > -5e-3
+    assert np.hypot(co[:, 0], co[:, 1]).min() > 0.3 - 5e-3  # no vertex inside the peg
 
 
 def test_keys_reproduce_the_simulation_under_a_scaled_rotated_parent(physanim_ext, tmp_path):
