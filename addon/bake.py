@@ -308,7 +308,7 @@ class BakeJob:
         if self.rigid is not None:
             rigid_keys.write_keys(self.scene, self.rigid.objects,
                                   os.path.join(rigid_path, rigid.STREAM), self.frame_start,
-                                  self.frame_end)
+                                  self.frame_end, self.rigid.simulated)
             for ob in self.rigid.objects:
                 ob.physanim.rigid_body.bake_hash = self.rigid_hash
             self.rigid_suspended.clear()

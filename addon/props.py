@@ -305,9 +305,11 @@ class PHYSANIM_PG_rigid_body(bpy.types.PropertyGroup):
     initial_angular_velocity: FloatVectorProperty(
         name="Initial Angular Velocity", size=3, min=-1.0e4, max=1.0e4, options=STATIC,
         description="World angular velocity at the start, rad/s")
-    kinematic: BoolProperty(name="Animated", options=STATIC,
+    kinematic: BoolProperty(name="Animated",
                             description="Follows its own animation and pushes other bodies "
-                                        "(is not pushed)")
+                                        "(is not pushed). Keyframe it off to let the body go "
+                                        "with the velocity its animation gives it (a throw), "
+                                        "on to have it join its animation")
     linear_damping: FloatProperty(name="Damping", min=0.0, max=1.0e3, soft_max=1.0,
                                   default=0.04, options=STATIC,
                                   description="Fraction of linear velocity lost per second")

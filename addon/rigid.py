@@ -171,25 +171,34 @@ class RigidBake:
         for ob in self.objects:
             builder.add_body(body_settings(ob, depsgraph, frame))
         self.model = builder.finalize()
-        self.kinematic = [i for i, ob in enumerate(self.objects)
-                          if ob.physanim.rigid_body.kinematic]
+        self.kinematic = self._animated()
+        self.simulated = set(range(len(self.objects))) - set(self.kinematic)
         self.solver = RigidBodySolver(self.model, self.scene.physanim.rigid_substeps,
                                       limits.bounds(self.scene), colliders)
         self.system = RigidBodySystem(self.solver, self.model.state())
         self._last = self.kinematic_matrices(frame)
         self.write_frame(frame)
 
+    def _animated(self) -> list[int]:
+        """The bodies whose Animated switch is on now (it is keyframable: the scene is at the
+        frame it is read for)."""
+        return [i for i, ob in enumerate(self.objects) if ob.physanim.rigid_body.kinematic]
+
     def kinematic_matrices(self, frame: float) -> dict:
-        """The kinematic bodies' world matrices at ``frame`` (the scene is there)."""
+        """The animated bodies' world matrices at ``frame`` (the scene is there)."""
         return {i: world_matrix(self.objects[i], frame, "rigid body") for i in self.kinematic}
 
     def begin(self, frame: int, between: list[dict]) -> dict:
-        """The kinematic bodies' paths over the interval to ``frame`` (the scene is there;
-        ``between``: their matrices at the sub-frames, read by the bake)."""
+        """The animated bodies' paths over the interval to ``frame`` (the scene is there;
+        ``between``: their matrices at the sub-frames, read by the bake). A body is animated
+        over an interval when its switch is on at the interval's start; the switch read at
+        ``frame`` decides the next interval."""
         now = self.kinematic_matrices(frame)
         paths = {i: np.stack([self._last[i], *(b[i] for b in between), now[i]])
                  for i in self.kinematic}
-        self._last = now
+        self.kinematic = self._animated()
+        self.simulated |= set(range(len(self.objects))) - set(self.kinematic)
+        self._last = {**now, **self.kinematic_matrices(frame)}
         return paths
 
     def write_frame(self, frame: int) -> None:

@@ -68,12 +68,15 @@ def _local(ob, space, position, rotation):
     return basis[:, :3, 3], quat.from_matrix(lin / np.linalg.norm(lin, axis=1)[:, None, :])
 
 
-def write_keys(scene, objects: list, folder: str, frame_start: int, frame_end: int) -> None:
-    """Key every dynamic body's location and rotation_quaternion once per frame."""
+def write_keys(scene, objects: list, folder: str, frame_start: int, frame_end: int,
+               simulated) -> None:
+    """Key the location and rotation_quaternion of every body ``simulated`` (indices: the
+    bodies not on their animation for at least one frame) once per frame; the others keep
+    their own animation."""
     frames, pos, rot = _tracks(folder, frame_start, frame_end)
     if not len(frames):
         return
-    dynamic = [(i, ob) for i, ob in enumerate(objects) if not ob.physanim.rigid_body.kinematic]
+    dynamic = [(i, ob) for i, ob in enumerate(objects) if i in simulated]
     spaces = _parent_spaces(scene, [ob for _, ob in dynamic], frames)
     f32 = frames.astype(np.float32)
     for i, ob in dynamic:

@@ -92,8 +92,9 @@ def mesh_shapes(model: RigidBodyModel, colliders: list[ColliderFrame], cache) ->
 
 def frame_bodies(model: RigidBodyModel, state: RigidBodyState, colliders, posed: Posed,
                  kinematic: np.ndarray, velocities, hulls) -> Bodies:
-    """Every body at the frame's start: dynamic ones from ``state``, the posed ones (kinematic
-    bodies, then colliders) from their paths; ``velocities`` is (v, w) of the dynamic ones."""
+    """Every body at the frame's start: dynamic ones from ``state``, the posed ones (the bodies
+    ``kinematic`` on their paths this frame, then colliders) from their paths; ``velocities``
+    is (v, w) of every body."""
     codes, half, radius, _, friction, restitution, names = colliders
     x, q = state.body_x.copy(), state.body_q.copy()
     px, pq = posed.pose(0.0)
@@ -110,7 +111,8 @@ def frame_bodies(model: RigidBodyModel, state: RigidBodyState, colliders, posed:
         x=np.concatenate([x, px[nk:]]), q=np.concatenate([q, pq[nk:]]),
         v=np.concatenate([v, zeros]), w=np.concatenate([w, zeros]),
         bound=np.concatenate([model.body_bound, np.linalg.norm(half, axis=1) + radius]),
-        dynamic=np.concatenate([~model.body_kinematic, np.zeros(c, bool)]),
+        dynamic=np.concatenate([~np.isin(np.arange(model.body_count), kinematic),
+                                np.zeros(c, bool)]),
         friction=np.concatenate([model.body_friction, friction]),
         restitution=np.concatenate([model.body_restitution, restitution]),
         hull_points=model.hull_points, hull_start=np.concatenate([model.body_hull_start,

@@ -119,11 +119,12 @@ class RigidBodyModel:
         body_radius: (n,) [m]. body_shape_offset: (n, 3) shape centre from the centre of mass,
             local [m]. body_com: (n, 3) centre of mass from the object's origin, local [m].
         body_bound: (n,) radius of a sphere about the centre of mass holding the shape [m].
-        body_mass, body_inv_mass: (n,) [kg], [1/kg] (0 for kinematic bodies).
-        body_inertia, body_inv_inertia: (n, 3, 3) about the centre of mass, local axes
-            (inverse 0 for kinematic bodies).
+        body_mass, body_inv_mass: (n,) [kg], [1/kg] (a body on its path this frame takes no
+            impulse whatever its mass: the solver's per-frame masses say so).
+        body_inertia, body_inv_inertia: (n, 3, 3) about the centre of mass, local axes.
         body_restitution, body_friction, body_linear_damping, body_angular_damping: (n,).
-        body_kinematic: (n,) bool.
+        body_kinematic: (n,) bool: follows its animation at the start (the frame inputs say
+            which bodies follow their paths in each frame).
         hull_points: (m, 3) hull vertices from the centre of mass, local [m];
         body_hull_start, body_hull_count: (n,) each body's range in it (0 for other shapes;
             a MESH body's convex hull vertices: what can touch a flat collider).
@@ -220,12 +221,11 @@ class RigidBodyBuilder:
         mass = np.array([s.mass_properties.mass for s in b], dtype=np.float64)
         inertia = np.array([s.mass_properties.inertia for s in b], dtype=np.float64).reshape(n, 3, 3)
         inv_inertia = np.linalg.inv(inertia) if n else inertia.copy()
-        inv_inertia[kinematic] = 0.0
         bound = np.array([_bound(s, o, h) for s, o, h in zip(b, offset, hulls)])
         return RigidBodyModel(
             tuple(s.name for s in b), frozen([SHAPES.index(s.shape) for s in b], np.int8),
             frozen(half), frozen(radius), frozen(offset), frozen(com), frozen(bound),
-            frozen(mass), frozen(np.where(kinematic, 0.0, 1.0 / mass)), frozen(inertia),
+            frozen(mass), frozen(1.0 / mass), frozen(inertia),
             frozen(inv_inertia),
             *(frozen([getattr(s, k) for s in b]) for k in (
                 "restitution", "friction", "linear_damping", "angular_damping")),

@@ -45,7 +45,9 @@ class RigidFrameInputs:
     Args:
         frame: scene frame at the start (messages). t0 [s], frame_dt [s]. gravity (3,).
         colliders: the frame's colliders. kinematic: body index -> (k + 1, 4, 4) world matrices
-            of a kinematic body's object over the interval (k >= 1).
+            of the object of a body that follows its animation over this interval (k >= 1);
+            the others are simulated. A body leaves its path with the path's velocity (an
+            arm lets a box go), and joins a path where it starts.
     """
 
     frame: int
@@ -95,6 +97,7 @@ class _FrameStep:
     rows: cs_.Rows | None = None  # the contacts' rows and separations (M, S) at the poses now
     separation: np.ndarray | None = None
     awake: np.ndarray | None = None  # indices of the dynamic bodies simulated this frame
+    driven: np.ndarray | None = None  # indices of the bodies on their paths this frame
 
     @property
     def v(self) -> np.ndarray:
@@ -123,8 +126,6 @@ class RigidBodySolver:
         self.model, self.substeps, self.bounds = model, int(substeps), bounds
         self.collide_every = max(1, int(collide_every))
         self.colliders = ColliderPaths() if colliders is None else colliders
-        self.kinematic = np.nonzero(model.body_kinematic)[0]
-        self.dynamic = np.nonzero(~model.body_kinematic)[0]
         self.hulls = _hulls(model)
         self._meshes = MeshCache()  # meshes' hierarchies, kept between frames
 
@@ -138,33 +139,36 @@ class RigidBodySolver:
     def begin_frame(self, state: RigidBodyState, inputs: RigidFrameInputs, paths) -> _FrameStep:
         """Pose, find and prepare the frame's contacts."""
         model = self.model
-        missing = [model.body_name[i] for i in self.kinematic if int(i) not in inputs.kinematic]
-        if missing:
-            raise ValueError(f"kinematic bodies without a path: {', '.join(missing)}")
+        n = model.body_count
+        kin = np.array(sorted(int(i) for i in inputs.kinematic), np.int64)
+        if len(kin) and (kin[0] < 0 or kin[-1] >= n):
+            raise ValueError(f"paths given for bodies {kin.tolist()} of {n}")
+        d = np.setdiff1d(np.arange(n), kin)
+        state.body_asleep[kin] = False
         colliders = collider_bodies(list(inputs.colliders), inputs.frame)
         paths_ = [TransformPath(inputs.kinematic[int(i)][0], inputs.kinematic[int(i)][-1],
-                                inputs.kinematic[int(i)]) for i in self.kinematic]
+                                inputs.kinematic[int(i)]) for i in kin]
         posed = Posed(paths_ + colliders[3], np.concatenate(
-            [model.body_com[self.kinematic], np.zeros((len(colliders[3]), 3))]))
-        n = model.body_count
+            [model.body_com[kin], np.zeros((len(colliders[3]), 3))]))
         v = np.zeros((n, 3))
         w = np.zeros((n, 3))
-        d = self.dynamic
         v[d] = state.body_P[d] / model.body_mass[d, None]
         w[d] = dynamics.angular_velocity(state.body_q[d], model.body_inv_inertia[d], state.body_L[d])
         pv, pw = posed.velocity(0.0, 1.0, inputs.frame_dt)
-        nk = len(self.kinematic)
-        v[self.kinematic], w[self.kinematic] = pv[:nk], pw[:nk]
-        bodies = frame_bodies(model, state, colliders, posed, self.kinematic, (v, w), self.hulls)
+        nk = len(kin)
+        v[kin], w[kin] = pv[:nk], pw[:nk]
+        bodies = frame_bodies(model, state, colliders, posed, kin, (v, w), self.hulls)
         bodies.v[n:], bodies.w[n:] = pv[nk:], pw[nk:]
         bodies.meshes = mesh_shapes(model, list(inputs.colliders), self._meshes)
         for row, mesh in bodies.meshes.items():  # a Mesh collider's size is its mesh's
             bodies.bound[row] = max(bodies.bound[row], mesh.radius)
         g = np.asarray(inputs.gravity, dtype=np.float64)
-        rows = np.concatenate([self.kinematic, n + np.arange(len(colliders[0]))]).astype(np.int64)
+        rows = np.concatenate([kin, n + np.arange(len(colliders[0]))]).astype(np.int64)
         inv_mass = np.concatenate([model.body_inv_mass, np.zeros(len(colliders[0]))])
+        inv_mass[kin] = 0.0
         step = _FrameStep(state, inputs, inputs.frame_dt / self.substeps, g, posed, rows, bodies,
-                          np.concatenate([bodies.v, bodies.w], axis=1), inv_mass, RigidReport())
+                          np.concatenate([bodies.v, bodies.w], axis=1), inv_mass, RigidReport(),
+                          driven=kin)
         fast = np.linalg.norm(bodies.v, axis=1) + np.linalg.norm(bodies.w, axis=1) * \
             bodies.bound > sleep.WAKE_SPEED
         self._wake_state(step, moving=fast)
@@ -184,7 +188,10 @@ class RigidBodySolver:
         b, m, state = step.bodies, self.model, step.state
         n = m.body_count
         asleep = np.concatenate([state.body_asleep, np.zeros(len(b) - n, bool)])
-        b.dynamic = np.concatenate([~m.body_kinematic, np.zeros(len(b) - n, bool)]) & ~asleep
+        free = np.ones(len(b), bool)
+        free[step.driven] = False
+        free[n:] = False
+        b.dynamic = free & ~asleep
         b.sleeping, b.moving = asleep, moving & ~b.dynamic
         step.awake = np.nonzero(b.dynamic[:n])[0]
         step.inv_mass = np.where(b.dynamic, np.concatenate(
@@ -358,6 +365,8 @@ class RigidBodySolver:
         n = m.body_count
         state.body_x[:] = b.x[:n]
         state.body_q[:] = b.q[:n]
+        d = np.concatenate([d, step.driven])  # on a path: its momenta are the path's (a body
+        # let go leaves with them)
         state.body_P[d] = m.body_mass[d, None] * step.v[d]
         state.body_L[d] = dynamics.angular_momentum(b.q[d], m.body_inertia[d], step.w[d])
         self._check(step)

@@ -274,3 +274,38 @@ def test_particles_land_on_a_falling_rigid_cube(physanim_ext, tmp_path):
     over = (np.abs(x[:, 0]) < 0.95) & (np.abs(x[:, 1]) < 0.95)
     assert over.sum() > 50
     assert (x[over, 2] > top - 0.01).all()  # on the cube, none inside
+
+
+def test_an_animated_body_keyed_to_let_go_is_thrown_with_its_animations_velocity(
+        physanim_ext, tmp_path):
+    """A cube animated along a line (keys at frames 1 and 11) with its Animated switch keyed
+    on, then off at frame 11: it follows its keys to frame 11, then flies on with the
+    velocity they gave it (4.8 m/s along x and z) under gravity, and lands. The bake keys it
+    over the whole range; Free Bake gives its own animation (switch included) back."""
+    scene = _scene(tmp_path)
+    _ground()
+    cube = _body(location=(0.0, 0.0, 1.0))
+    cube.scale = (0.2, 0.2, 0.2)
+    p = cube.physanim.rigid_body
+    for frame, where, on in ((1, (0.0, 0.0, 1.0), True), (11, (2.0, 0.0, 3.0), False)):
+        cube.location = where
+        cube.keyframe_insert("location", frame=frame)
+        p.kinematic = on
+        cube.keyframe_insert("physanim.rigid_body.kinematic", frame=frame)
+    for fc in _curves(physanim_ext, cube).values():
+        for k in fc.keyframe_points:
+            k.interpolation = 'LINEAR' if fc.data_path == "location" else 'CONSTANT'
+    own = cube.animation_data.action
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    assert cube.animation_data.action is not own  # keyed by the bake
+    path = [_world(cube, f)[:3, 3] for f in range(1, 12)]
+    np.testing.assert_allclose(path, [(0.2 * k, 0.0, 1.0 + 0.2 * k) for k in range(11)],
+                               atol=1e-5)
+    fps = scene.render.fps
+    v = (_world(cube, 13)[:3, 3] - _world(cube, 12)[:3, 3]) * fps
+    t = 1.5 / fps  # the middle of frames 12-13, from the release at 11
+    assert v[0] == pytest.approx(4.8, rel=0.02)
+    assert v[2] == pytest.approx(4.8 - 9.81 * t, rel=0.02)
+    assert 0.2 - 3e-3 < _world(cube, FRAME_END)[2, 3] < 0.35  # landed (on a face or tumbling)
+    assert bpy.ops.physanim.free_bake() == {'FINISHED'}
+    assert cube.animation_data.action is own
