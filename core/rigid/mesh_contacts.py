@@ -169,8 +169,8 @@ def _on_mesh(bodies, rot, g: int, mesh: MeshShape, owner, feature, p, radius, ma
     """Points p (k, 3) of ``owner`` (radius each) against mesh g's surface."""
     lp = np.einsum("ji,nj->ni", rot[g], p - bodies.x[g])
     cp = closest_points(mesh.bvh, lp, max_distance=float((margin + radius).max()))
-    side = _side(mesh, bodies, rot, g, np.unique(owner))
-    side = side[np.searchsorted(np.unique(owner), owner)]
+    owners, which = np.unique(owner, return_inverse=True)
+    side = _side(mesh, bodies, rot, g, owners)[which]
     found = cp.triangle >= 0
     sep = np.where(found, side * cp.signed_distance - radius - bodies.radius[g], np.inf)
     keep = sep < margin

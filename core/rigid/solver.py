@@ -20,6 +20,7 @@ from ..errors import SimulationError
 from ..transforms import TransformPath
 from ..world import SolverSystem, World, WorldFrame
 from . import contact_solver as cs_
+from .contact_set import ContactSet, tangents
 from . import as_colliders, dynamics, sleep, warm
 from . import quaternion as quat
 from .bodies import Posed, collider_bodies, frame_bodies, mesh_shapes
@@ -90,7 +91,7 @@ class _FrameStep:
     vel: np.ndarray  # (N, 6) every body's [v, w] during the sub-steps ([m/s], [rad/s])
     inv_mass: np.ndarray  # (N,)
     report: RigidReport
-    contacts: cs_.ContactSet | None = None
+    contacts: ContactSet | None = None
     q0: np.ndarray | None = None  # (N, 4) orientations the contacts' anchors are given at
     x_ref: np.ndarray | None = None  # (N, 3), (N, 4): each body's pose when its contacts
     q_ref: np.ndarray | None = None  # were last searched
@@ -227,7 +228,7 @@ class RigidBodySolver:
             a_, b_ = old.ab[:, 0], old.ab[:, 1]
             keep = ~(fresh[a_] | fresh[b_]) & (b.dynamic[a_] | b.dynamic[b_])
             parts.append(old.take(np.nonzero(keep)[0]))
-        step.contacts = cs_.ContactSet.join(parts).coloured(b.dynamic)
+        step.contacts = ContactSet.join(parts).coloured(b.dynamic)
         step.q0 = b.q.copy()
         step.x_ref[fresh], step.q_ref[fresh] = b.x[fresh], b.q[fresh]
         self._pose_contacts(step)
@@ -259,14 +260,14 @@ class RigidBodySolver:
         return warm.Kept(cs, step.x_ref, step.q_ref, step.bodies.name)
 
     @staticmethod
-    def _remembered(cs: cs_.ContactSet | None) -> warm.Remembered:
+    def _remembered(cs: ContactSet | None) -> warm.Remembered:
         """The impulses of ``cs`` by place, to warm-start contacts found at the same places."""
         if cs is None:
             return warm.Remembered.none()
         pair = np.broadcast_to(cs.pair[:, None], cs.valid.shape)[cs.valid]
         return warm.remember(pair, cs.place[cs.valid], cs.world_impulses()[cs.valid])
 
-    def _prepare(self, bodies: Bodies, found: Found, memory: warm.Remembered) -> cs_.ContactSet:
+    def _prepare(self, bodies: Bodies, found: Found, memory: warm.Remembered) -> ContactSet:
         """Contact constraints from the found points: anchors, combined coefficients, the
         relative normal velocity (for restitution) and the remembered impulses by place
         (:mod:`.warm`)."""
@@ -278,11 +279,11 @@ class RigidBodySolver:
         size = np.where(bodies.dynamic, bodies.bound, np.inf)  # a collider's size says nothing
         tolerance = warm.MATCH_FRACTION * np.minimum(size[a], size[b])
         p = warm.recall(memory, pair, local, tolerance)  # world impulse vectors
-        t1, t2 = cs_.tangents(n) if len(n) else (n, n)
+        t1, t2 = tangents(n) if len(n) else (n, n)
         impulse = np.stack([np.einsum("ki,ki->k", p, d) for d in (n, t1, t2)], 1) \
             if len(a) else np.zeros((0, 3))
         impulse[:, 0] = np.maximum(impulse[:, 0], 0.0)
-        return cs_.ContactSet.of_points(
+        return ContactSet.of_points(
             a, b, pair, place=local, normal=n, point=found.point, xa=bodies.x[a],
             xb=bodies.x[b], separation=found.separation,
             friction=np.sqrt(bodies.friction[a] * bodies.friction[b]),

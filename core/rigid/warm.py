@@ -37,7 +37,7 @@ class Kept:
     """Contacts carried from one search to the next, across frames too.
 
     Attributes:
-        contacts: the contact set (a :class:`~.contact_solver.ContactSet`, anchors given at
+        contacts: the contact set (a :class:`~.contact_set.ContactSet`, anchors given at
             the poses it was left at), or None before the first frame.
         x, q: (N, 3), (N, 4) each solver body's pose when its contacts were last searched.
         names: the solver bodies' names: carried contacts hold only while the rows are the

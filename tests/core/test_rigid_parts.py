@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from physanim.core.rigid import quaternion as quat
-from physanim.core.rigid.contact_solver import Softness, colour, tangents
+from physanim.core.rigid.contact_set import colour, tangents
+from physanim.core.rigid.contact_solver import Softness
 
 
 def _random_q(rng, n):
