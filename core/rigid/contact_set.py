@@ -79,6 +79,9 @@ class ContactSet:
         coupling: (M, S, S) each manifold's normal coupling K_ij = J_i M^-1 J_j^T and block its
             pseudo-inverse, set by :func:`rows` at the poses where the manifold was found (NaN
             until then; kept with the manifold: they barely change).
+        subsets: (M, 2^W, W, W), W = min(S, 4): the pseudo-inverse of the coupling restricted
+            to each subset of the first W slots (bit i of the subset's index: slot i), set with
+            ``block`` (:func:`.contact_solver.subset_blocks`).
     """
 
     ab: np.ndarray
@@ -100,6 +103,7 @@ class ContactSet:
     colours: list | None = None
     coupling: np.ndarray | None = None
     block: np.ndarray | None = None
+    subsets: np.ndarray | None = None
 
     _PER_SLOT = ("valid", "place", "normal", "t1", "t2", "ra", "rb", "base", "friction",
                  "restitution", "relative", "impulse", "touched")
@@ -140,6 +144,7 @@ class ContactSet:
                          *(getattr(self, f)[rows] for f in self._PER_SLOT))
         if self.block is not None:
             out.coupling, out.block = self.coupling[rows], self.block[rows]
+            out.subsets = self.subsets[rows]
         return out
 
     @classmethod
@@ -165,6 +170,7 @@ class ContactSet:
                     for f in cls._PER_SLOT))
         out.coupling = np.concatenate([square(p, p.coupling) for p in parts])
         out.block = np.concatenate([square(p, p.block) for p in parts])
+        out.subsets = np.concatenate([_subsets_widened(p, width) for p in parts])
         return out
 
     def coloured(self, dynamic: np.ndarray) -> ContactSet:
@@ -191,6 +197,24 @@ class ContactSet:
         """(M, S, 3) each point's accumulated impulse as a world vector [N s] (on body b)."""
         i = self.impulse
         return i[..., :1] * self.normal + i[..., 1:2] * self.t1 + i[..., 2:] * self.t2
+
+
+def subset_width(slots: int) -> int:
+    """How many leading slots the subset blocks cover."""
+    return min(slots, 4)
+
+
+def _subsets_widened(part: ContactSet, width: int) -> np.ndarray:
+    """The subset blocks of ``part`` for manifolds padded to ``width`` slots (NaN: not set).
+    A subset's index keeps its meaning (bit i: slot i); subsets with padded slots are never
+    used (a padded slot holds no point)."""
+    w = subset_width(width)
+    out = np.full((len(part), 1 << w, w, w), np.nan)
+    if part.subsets is not None:
+        c, v = part.subsets.shape[1], part.subsets.shape[2]
+        out[:, :c] = 0.0
+        out[:, :c, :v, :v] = part.subsets
+    return out
 
 
 def _manifolds(key: np.ndarray) -> np.ndarray:

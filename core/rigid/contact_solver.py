@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .contact_set import ContactSet
+from .contact_set import ContactSet, subset_width
 
 CONTACT_HERTZ = 30.0  # stiffness of the soft contact [Hz] (at most a quarter of the step rate)
 STATIC_HERTZ = 60.0  # against bodies that do not move under impulses: stiffer
@@ -104,10 +104,13 @@ def rows(cs: ContactSet, inv_mass: np.ndarray, inv_inertia: np.ndarray, ra: np.n
     jn, mn = np.ascontiguousarray(j[:, :, 0]), np.ascontiguousarray(mj[:, :, 0])
     if cs.block is None:
         cs.coupling, cs.block = np.full((2, m, s, s), np.nan)
+        w = subset_width(s)
+        cs.subsets = np.full((m, 1 << w, w, w), np.nan)
     new = np.nonzero(np.isnan(cs.block[:, 0, 0]))[0]
     if len(new):
         cs.coupling[new] = _coupling(cs.valid[new], jn[new], mn[new])
         cs.block[new] = _pinv(cs.coupling[new])
+        cs.subsets[new] = subset_blocks(cs.coupling[new], cs.block[new])
     count = np.maximum(cs.valid.sum(axis=1), 1)[:, None]
     return Rows(jn, mn, mass[:, :, 0], j[:, :, 1:].reshape(m, 2 * s, 12),
                 mj[:, :, 1:].reshape(m, 2 * s, 12), mass[:, :, 1:].reshape(m, 2 * s) / count)
@@ -128,6 +131,67 @@ def _pinv(k: np.ndarray) -> np.ndarray:
     keep = value > 1e-10 * value[:, -1:]
     inverse = np.where(keep, 1.0 / np.where(keep, value, 1.0), 0.0)
     return np.einsum("gik,gk,gjk->gij", vector, inverse, vector)
+
+
+def _subset_masks(width: int) -> np.ndarray:
+    """(2^width, width) bool: slot i is in subset c when bit i of c is set."""
+    return (np.arange(1 << width)[:, None] >> np.arange(width)) & 1 == 1
+
+
+def subset_blocks(k: np.ndarray, block: np.ndarray) -> np.ndarray:
+    """(g, 2^W, W, W): the pseudo-inverse of each coupling (g, S, S) restricted to each
+    subset of its first W = min(S, 4) slots (zero outside the subset), so that a manifold
+    whose block solution would pull finds its complementary solution without a
+    factorisation (:func:`_enumerated`). ``block`` (g, S, S): the pseudo-inverses of the
+    whole couplings (the subset of all W slots when S = W). Subsets of up to three points are
+    inverted in closed form; singular ones (collinear points) through :func:`_pinv`."""
+    g, w = len(k), subset_width(k.shape[1])
+    masks = _subset_masks(w)
+    size = masks.sum(axis=1)
+    out = np.zeros((g, len(masks), w, w))
+    for n in range(1, w + 1):
+        which = np.nonzero(size == n)[0]
+        slots = np.array([np.nonzero(masks[c])[0] for c in which])  # (c, n)
+        if n == k.shape[1]:
+            inv = block[:, None]
+        else:
+            sub = k[:, slots[:, :, None], slots[:, None, :]]  # (g, c, n, n)
+            inv = _small_inverse(sub)
+        out[:, which[:, None, None], slots[:, :, None], slots[:, None, :]] = inv
+    return out
+
+
+def _small_inverse(k: np.ndarray) -> np.ndarray:
+    """Pseudo-inverses of symmetric positive semi-definite matrices (..., n, n), n <= 4: the
+    adjugate over the determinant for n <= 3 where the matrix is far from singular,
+    :func:`_pinv` otherwise."""
+    n = k.shape[-1]
+    shape = k.shape
+    flat = k.reshape(-1, n, n)
+    if n == 1:
+        d = flat[:, 0, 0]
+        return np.where(d > 0.0, 1.0 / np.where(d > 0.0, d, 1.0), 0.0).reshape(shape)
+    if n == 2:
+        a, b, d = flat[:, 0, 0], flat[:, 0, 1], flat[:, 1, 1]
+        det = a * d - b * b
+        adj = np.stack([d, -b, -b, a], axis=1).reshape(-1, 2, 2)
+        scale = a * d
+    elif n == 3:
+        a, b, c = flat[:, 0, 0], flat[:, 0, 1], flat[:, 0, 2]
+        d, e, f = flat[:, 1, 1], flat[:, 1, 2], flat[:, 2, 2]
+        ca, cb, cc = d * f - e * e, c * e - b * f, b * e - c * d
+        cd, ce, cf = a * f - c * c, b * c - a * e, a * d - b * b
+        det = a * ca + b * cb + c * cc
+        adj = np.stack([ca, cb, cc, cb, cd, ce, cc, ce, cf], axis=1).reshape(-1, 3, 3)
+        scale = a * d * f
+    else:
+        return _pinv(flat).reshape(shape)
+    good = det > 1e-8 * np.maximum(scale, 1e-300)
+    out = adj / np.where(good, det, 1.0)[:, None, None]
+    bad = np.nonzero(~good)[0]
+    if len(bad):
+        out[bad] = _pinv(flat[bad])
+    return out.reshape(shape)
 
 
 def _restricted(k: np.ndarray, rows_: np.ndarray) -> np.ndarray:
@@ -223,10 +287,58 @@ def _normal(local, cs, r, sc, s, e) -> None:
     pulling = (new < 0.0).any(axis=1) & ~none
     hard = np.nonzero(mixed | pulling)[0]
     if len(hard):
-        start = np.where(mixed[hard, None], ~idle[hard], new[hard] >= 0.0)
-        new[hard] = _active_set(cs, sc, hard + s, rel[hard], old[hard], start)
+        new[hard], solved = _enumerated(cs, sc, hard + s, rel[hard], old[hard])
+        rest = hard[~solved]
+        if len(rest):
+            start = np.where(mixed[rest, None], ~idle[rest], new[rest] >= 0.0)
+            new[rest] = _active_set(cs, sc, rest + s, rel[rest], old[rest], start)
     local += np.einsum("ms,msj->mj", new - old, r.mn[s:e])
     cs.impulse[s:e, :, 0] = new
+
+
+def _enumerated(cs, sc, m, rel, old) -> tuple[np.ndarray, np.ndarray]:
+    """Normal impulses (g, S) of manifolds m whose block solution would pull at some points
+    or that have points needing no impulse: the complementary solution (each point pushes
+    with the others holding it exactly, or lets go and is left not approaching) found among
+    every subset of its points at once, the largest that works (all four points of a face
+    when they all push: the load stays shared symmetrically); where soft scaling leaves no
+    subset exactly complementary, the one closest to it. Only for manifolds of at most W = 4
+    points (the precomputed subset blocks); ``solved`` (g,) says which were."""
+    w = cs.subsets.shape[2]
+    valid = cs.valid[m]
+    solved = valid[:, w:].sum(axis=1) == 0 if valid.shape[1] > w else np.ones(len(m), bool)
+    out = np.zeros_like(old)
+    g = np.nonzero(solved)[0]
+    if not len(g):
+        return out, solved
+    mg = m[g]
+    masks = _subset_masks(w)  # (C, w)
+    v = valid[g, :w]
+    act = masks[None] & v[:, None]  # (g, C, w)
+    allowed = ~(masks[None] & ~v[:, None]).any(axis=2)  # subsets of the valid points only
+    o, r = old[g, :w], rel[g, :w]
+    mass, bias, imp = sc.mass[mg, :w], sc.bias[mg, :w], sc.impulse[mg, :w]
+    k = cs.coupling[mg, :w, :w]
+    let_go = np.where(act, 0.0, -o[:, None])
+    rhs = mass[:, None] * (r[:, None] + np.einsum("gij,gcj->gci", k, let_go)) + bias[:, None]
+    new = np.where(act, o[:, None] - np.einsum("gcij,gcj->gci", cs.subsets[mg],
+                                               np.where(act, rhs, 0.0))
+                   - imp[:, None] * o[:, None], 0.0)
+    after = mass[:, None] * (r[:, None] + np.einsum("gij,gcj->gci", k, new - o[:, None])) + \
+        bias[:, None]
+    scale = 1e-6 * (np.abs(r) + np.abs(bias) + 1e-3)[:, None]
+    tiny = 1e-9 * np.abs(new).max(axis=2, keepdims=True)
+    # how far each subset's answer is from complementary: pull at its points (as the
+    # velocity it makes) and approach at the others
+    pull = np.where(act & (new < -tiny), -new, 0.0) * np.diagonal(k, axis1=1, axis2=2)[:, None]
+    approach = np.where(v[:, None] & ~act & (after < -scale), -after, 0.0)
+    wrong = np.where(allowed, (pull + approach).sum(axis=2), np.inf)
+    ok = wrong == 0.0
+    size = masks.sum(axis=1)
+    best = np.where(ok.any(axis=1), np.argmax(np.where(ok, size * 64 - np.arange(len(masks)), -1),
+                                              axis=1), np.argmin(wrong, axis=1))
+    out[g, :w] = np.maximum(new[np.arange(len(g)), best], 0.0)
+    return out, solved
 
 
 def _active_set(cs, sc, m, rel, old, active) -> np.ndarray:

@@ -1,13 +1,16 @@
-"""The rigid bodies' small parts: quaternion algebra, contact colouring, soft constraints."""
+"""The rigid bodies' small parts: quaternion algebra, contact colouring, soft constraints, the
+normal blocks of a manifold and their complementary solutions."""
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from physanim.core.rigid import quaternion as quat
 from physanim.core.rigid.contact_set import colour, tangents
+from physanim.core.rigid import contact_solver as cs_
 from physanim.core.rigid.contact_solver import Softness
 
 
@@ -78,3 +81,79 @@ def test_soft_constraint_coefficients_are_those_of_a_damped_spring():
     assert soft.mass_scale + soft.impulse_scale == pytest.approx(1.0)
     rigid = Softness.of(0.0, 10.0, h)
     assert (rigid.bias_rate, rigid.mass_scale, rigid.impulse_scale) == (0.0, 1.0, 0.0)
+
+
+def _rows(rng, g):
+    """(g, 4, 6) normal rows of four contact points each over the 6 velocities of a body
+    (M = 1): some with four coplanar points' rank 3 (a face on a face), some with a point
+    repeated (rank-deficient sub-blocks)."""
+    j = rng.normal(size=(g, 4, 6))
+    j[: g // 3, 3] = j[: g // 3, :3].mean(axis=1)  # four rows spanning three
+    j[g // 3: 2 * g // 3, 1] = j[g // 3: 2 * g // 3, 0]  # a point twice
+    return j
+
+
+def _couplings(rng, g):
+    """(g, 4, 4) K = J M^-1 J^T of :func:`_rows`."""
+    j = _rows(rng, g)
+    return np.einsum("gij,gkj->gik", j, j)
+
+
+def test_subset_blocks_are_the_pseudo_inverses_of_every_principal_sub_block():
+    rng = np.random.default_rng(5)
+    k = _couplings(rng, 30)
+    blocks = cs_.subset_blocks(k, np.linalg.pinv(k, rcond=1e-10, hermitian=True))
+    assert blocks.shape == (30, 16, 4, 4)
+    for c in range(16):
+        slots = [i for i in range(4) if c >> i & 1]
+        for g in range(30):
+            want = np.zeros((4, 4))
+            if slots:
+                sub = k[g][np.ix_(slots, slots)]
+                want[np.ix_(slots, slots)] = np.linalg.pinv(sub, rcond=1e-10, hermitian=True)
+            assert np.allclose(blocks[g, c], want, rtol=1e-7, atol=1e-9 * np.abs(want).max())
+
+
+def _lcp(k, rel, old, valid):
+    """The normal impulses of manifolds (hard contacts, no bias) by the solver's subset
+    enumeration."""
+    g = len(k)
+    block = np.linalg.pinv(k, rcond=1e-10, hermitian=True)
+    cs = SimpleNamespace(valid=valid, coupling=k, subsets=cs_.subset_blocks(k, block))
+    sc = SimpleNamespace(mass=np.ones((g, 4)), bias=np.zeros((g, 4)), impulse=np.zeros((g, 4)))
+    return cs_._enumerated(cs, sc, np.arange(g), rel, old)
+
+
+def test_enumerated_normal_impulses_are_complementary():
+    """Each point pushes (impulse >= 0) and is then left not approaching, or lets go (impulse
+    0) and is left separating: x >= 0, w = rel + K (x - old) >= 0, x w = 0."""
+    rng = np.random.default_rng(8)
+    g = 300
+    j = _rows(rng, g)
+    k = np.einsum("gij,gkj->gik", j, j)
+    rel = np.einsum("gij,gj->gi", j, rng.normal(size=(g, 6)))  # of some velocity
+    old = np.maximum(rng.normal(size=(g, 4)), 0.0)
+    valid = np.arange(4) < rng.integers(1, 5, g)[:, None]  # 1 to 4 points
+    k = np.where(valid[:, :, None] & valid[:, None, :], k, np.eye(4))
+    x, solved = _lcp(k, rel, np.where(valid, old, 0.0), valid)
+    assert solved.all()
+    w = rel + np.einsum("gij,gj->gi", k, x - old * valid)
+    scale = np.abs(rel).max() + np.abs(k).max() * np.abs(x).max()
+    assert (x >= 0.0).all() and (x[~valid] == 0.0).all()
+    assert (w[valid] > -1e-9 * scale).all()
+    assert np.abs(x * w)[valid].max() < 1e-9 * scale ** 2
+
+
+def test_a_symmetric_load_on_four_coplanar_points_is_shared_equally():
+    """A box resting flat: four points of one face, the load pressing the middle and the
+    corner rows rank 3 — the four impulses come out equal (a point-by-point pass would
+    load whichever came first)."""
+    corners = np.array([[1, 1], [1, -1], [-1, 1], [-1, -1]], float) * 0.25
+    inv_mass, inv_inertia = 1.0, np.array([3.0, 3.0, 2.0])
+    arm = np.column_stack([corners, np.full(4, -0.25)])
+    ang = np.cross(arm, [0.0, 0.0, 1.0])
+    k = inv_mass + np.einsum("ik,jk->ij", ang * inv_inertia, ang)
+    x, solved = _lcp(k[None], np.full((1, 4), -1.0), np.zeros((1, 4)), np.ones((1, 4), bool))
+    assert solved.all()
+    assert np.allclose(x, x.mean(), rtol=1e-9) and x.min() > 0.0
+    assert x.sum() == pytest.approx(1.0 / inv_mass, rel=1e-9)  # stops the fall, exactly
