@@ -86,22 +86,32 @@ def rows(cs: ContactSet, inv_mass: np.ndarray, inv_inertia: np.ndarray, ra: np.n
          rb: np.ndarray) -> Rows:
     """Rows for world inverse inertias (N, 3, 3) and lever arms ra, rb (M, S, 3) from each
     body's centre of mass to one common world point (an impulse and its reaction act at the
-    same point, so angular momentum is conserved). Sets the blocks of new manifolds."""
+    same point, so angular momentum is conserved). Sets the blocks of new manifolds.
+
+    Every row of a manifold is built at once in one (M, 3 S, 12) array: the S normal rows,
+    then the 2 S tangent rows; the Rows are views of it."""
     m, s = cs.valid.shape
     a, b = cs.ab[:, 0], cs.ab[:, 1]
-    dirs = np.stack([cs.normal, cs.t1, cs.t2], axis=2)  # (M, S, 3, 3)
-    ang_a = np.cross(ra[:, :, None, :], dirs)
-    ang_b = np.cross(rb[:, :, None, :], dirs)
+    slot = np.concatenate([np.arange(s), np.repeat(np.arange(s), 2)])
+    dirs = np.concatenate([cs.normal, np.stack([cs.t1, cs.t2], axis=2).reshape(m, 2 * s, 3)],
+                          axis=1)  # (M, 3 S, 3)
+    ang_a, ang_b = _cross(ra[:, slot], dirs), _cross(rb[:, slot], dirs)
     # I^-1 (r x d) for every row at once (matmul: the tensors are symmetric)
-    wa = np.matmul(ang_a.reshape(m, 3 * s, 3), inv_inertia[a]).reshape(m, s, 3, 3)
-    wb = np.matmul(ang_b.reshape(m, 3 * s, 3), inv_inertia[b]).reshape(m, s, 3, 3)
-    ma, mb = inv_mass[a, None, None, None], inv_mass[b, None, None, None]
-    j = np.concatenate([-dirs, -ang_a, dirs, ang_b], axis=3)
-    mj = np.concatenate([-ma * dirs, -wa, mb * dirs, wb], axis=3)
-    k = (ma[..., 0] + mb[..., 0]) * cs.valid[:, :, None] + (ang_a * wa).sum(axis=3) + \
-        (ang_b * wb).sum(axis=3)  # (unit directions; empty slots have none)
+    wa, wb = np.matmul(ang_a, inv_inertia[a]), np.matmul(ang_b, inv_inertia[b])
+    ma, mb = inv_mass[a, None, None], inv_mass[b, None, None]
+    j, mj = np.empty((2, m, 3 * s, 12))
+    np.negative(dirs, out=j[..., :3])
+    np.negative(ang_a, out=j[..., 3:6])
+    j[..., 6:9] = dirs
+    j[..., 9:] = ang_b
+    np.multiply(-ma, dirs, out=mj[..., :3])
+    np.negative(wa, out=mj[..., 3:6])
+    np.multiply(mb, dirs, out=mj[..., 6:9])
+    mj[..., 9:] = wb
+    k = (ma[..., 0] + mb[..., 0]) * cs.valid[:, slot] + np.einsum("mri,mri->mr", ang_a, wa) + \
+        np.einsum("mri,mri->mr", ang_b, wb)  # (unit directions; empty slots have none)
     mass = np.where(k > 0.0, 1.0 / np.maximum(k, 1e-300), 0.0)
-    jn, mn = np.ascontiguousarray(j[:, :, 0]), np.ascontiguousarray(mj[:, :, 0])
+    jn, mn = j[:, :s], mj[:, :s]
     if cs.block is None:
         cs.coupling, cs.block = np.full((2, m, s, s), np.nan)
         w = subset_width(s)
@@ -112,8 +122,18 @@ def rows(cs: ContactSet, inv_mass: np.ndarray, inv_inertia: np.ndarray, ra: np.n
         cs.block[new] = _pinv(cs.coupling[new])
         cs.subsets[new] = subset_blocks(cs.coupling[new], cs.block[new])
     count = np.maximum(cs.valid.sum(axis=1), 1)[:, None]
-    return Rows(jn, mn, mass[:, :, 0], j[:, :, 1:].reshape(m, 2 * s, 12),
-                mj[:, :, 1:].reshape(m, 2 * s, 12), mass[:, :, 1:].reshape(m, 2 * s) / count)
+    return Rows(jn, mn, mass[:, :s], j[:, s:], mj[:, s:], mass[:, s:] / count)
+
+
+def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """u x v over the last axis (numpy's cross, without its broadcasting copies)."""
+    u0, u1, u2 = u[..., 0], u[..., 1], u[..., 2]
+    v0, v1, v2 = v[..., 0], v[..., 1], v[..., 2]
+    out = np.empty(np.broadcast_shapes(u.shape, v.shape))
+    np.subtract(u1 * v2, u2 * v1, out=out[..., 0])
+    np.subtract(u2 * v0, u0 * v2, out=out[..., 1])
+    np.subtract(u0 * v1, u1 * v0, out=out[..., 2])
+    return out
 
 
 def _coupling(valid: np.ndarray, jn: np.ndarray, mn: np.ndarray) -> np.ndarray:
