@@ -129,3 +129,32 @@ def triangles(ob) -> np.ndarray:
 def signed_volume(x: np.ndarray, tris: np.ndarray) -> float:
     a, b, c = x[tris[:, 0]], x[tris[:, 1]], x[tris[:, 2]]
     return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
+
+
+def arm_segment(scene, name: str, length: float, parent, color) -> bpy.types.Object:
+    """A robot arm's segment: a 0.25 m square bar ``length`` [m] long along its local +Z from
+    its joint (its origin), jointed to the top of ``parent`` (None: the base), turning about
+    its joint in XYZ Euler."""
+    import bmesh
+
+    def make(bm):
+        bmesh.ops.create_cube(bm, size=1.0)
+        for v in bm.verts:
+            v.co.x *= 0.25
+            v.co.y *= 0.25
+            v.co.z = (v.co.z + 0.5) * length
+    ob = add_mesh(scene, name, make)
+    ob.data.materials.append(material(name, color))
+    if parent is not None:
+        ob.parent = parent
+        ob.location = (0.0, 0.0, parent["length"])
+    ob["length"] = length
+    ob.rotation_mode = 'XYZ'
+    return ob
+
+
+def key_values(ob, path: str, index: int, frames_values) -> None:
+    """Keys on ``ob.<path>[index]``: (frame, value) pairs."""
+    for frame, value in frames_values:
+        getattr(ob, path)[index] = value
+        ob.keyframe_insert(path, index=index, frame=frame)

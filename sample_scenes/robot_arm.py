@@ -18,30 +18,6 @@ SEGMENTS = (("Base", 0.6), ("UpperArm", 2.0), ("Forearm", 1.6))
 SHOWCASE = (64, 70, 100)
 README_FRAME = 70
 
-def _segment(scene, name, length, parent, color):
-    import bmesh
-
-    def make(bm):
-        bmesh.ops.create_cube(bm, size=1.0)
-        for v in bm.verts:
-            v.co.x *= 0.25
-            v.co.y *= 0.25
-            v.co.z = (v.co.z + 0.5) * length
-    ob = _common.add_mesh(scene, name, make)
-    ob.data.materials.append(_common.material(name, color))
-    if parent is not None:
-        ob.parent = parent
-        ob.location = (0.0, 0.0, parent["length"])
-    ob["length"] = length
-    ob.rotation_mode = 'XYZ'
-    return ob
-
-
-def _key(ob, path, index, frames_values):
-    for frame, value in frames_values:
-        getattr(ob, path)[index] = value
-        ob.keyframe_insert(path, index=index, frame=frame)
-
 
 def build(scene) -> None:
     _common.stage(scene, (6.0, -14.0, 5.0), (3.0, 0.0, 2.0), frame_end=120)
@@ -50,19 +26,19 @@ def build(scene) -> None:
     parent = None
     joints = []
     for (name, length), color in zip(SEGMENTS, colors):
-        parent = _segment(scene, name, length, parent, color)
+        parent = _common.arm_segment(scene, name, length, parent, color)
         joints.append(parent)
     base, upper, fore = joints
     # a throwing motion, repeated: wind up slowly, whip forward fast
     cycle = 40
     for start in range(0, 121, cycle):
-        _key(base, "rotation_euler", 2, [(start + 1, 0.0), (start + 20, math.radians(-25)),
+        _common.key_values(base, "rotation_euler", 2, [(start + 1, 0.0), (start + 20, math.radians(-25)),
                                          (start + 28, math.radians(20)), (start + cycle, 0.0)])
-        _key(upper, "rotation_euler", 1, [(start + 1, math.radians(-20)),
+        _common.key_values(upper, "rotation_euler", 1, [(start + 1, math.radians(-20)),
                                           (start + 20, math.radians(-70)),
                                           (start + 28, math.radians(50)),
                                           (start + cycle, math.radians(-20))])
-        _key(fore, "rotation_euler", 1, [(start + 1, math.radians(10)),
+        _common.key_values(fore, "rotation_euler", 1, [(start + 1, math.radians(10)),
                                          (start + 20, math.radians(-60)),
                                          (start + 28, math.radians(40)),
                                          (start + cycle, math.radians(10))])
