@@ -18,7 +18,7 @@ from ..core.rigid import quaternion as quat
 from ..core.rigid.mass import (box_mass, capsule_mass, polyhedron_mass, sphere_mass,
                                with_override)
 from ..core.rigid.model import RigidBodyBuilder, RigidBodySettings
-from ..core.rigid.solver import RigidBodySolver, RigidBodySystem
+from ..core.rigid.solver import RigidBodySolver, RigidBodySystem, RigidPaths
 from ..core.transforms import decompose
 from . import limits
 from .cache_paths import rigid_cache_dir
@@ -188,7 +188,7 @@ class RigidBake:
         """The animated bodies' world matrices at ``frame`` (the scene is there)."""
         return {i: world_matrix(self.objects[i], frame, "rigid body") for i in self.kinematic}
 
-    def begin(self, frame: int, between: list[dict]) -> dict:
+    def begin(self, frame: int, between: list[dict]) -> RigidPaths:
         """The animated bodies' paths over the interval to ``frame`` (the scene is there;
         ``between``: their matrices at the sub-frames, read by the bake). A body is animated
         over an interval when its switch is on at the interval's start; the switch read at
@@ -199,7 +199,7 @@ class RigidBake:
         self.kinematic = self._animated()
         self.simulated |= set(range(len(self.objects))) - set(self.kinematic)
         self._last = {**now, **self.kinematic_matrices(frame)}
-        return paths
+        return RigidPaths(paths)
 
     def write_frame(self, frame: int) -> None:
         state = self.system.state

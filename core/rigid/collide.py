@@ -66,6 +66,7 @@ class Bodies:
     sleeping: np.ndarray | None = None  # (N,) resting bodies: found only to be woken
     moving: np.ndarray | None = None  # (N,) bodies that move on their own this frame
     fresh: np.ndarray | None = None  # (N,) bodies whose contacts are searched (None: all)
+    excluded: np.ndarray | None = None  # keys lo * N + hi of pairs that never collide (joined)
 
     def __len__(self) -> int:
         return len(self.shape)
@@ -124,7 +125,13 @@ def find_contacts(bodies: Bodies, frame_dt: float, gravity: np.ndarray,
         if len(sel[0]):
             a, b, at = sel
             parts.append(_keyed(bodies, a, b, run(bodies, rot, centre, a, b, margin[at])))
-    return Found.join(parts)
+    found = Found.join(parts)
+    if bodies.excluded is not None and len(bodies.excluded):
+        pair = np.minimum(found.a, found.b) * len(bodies) + np.maximum(found.a, found.b)
+        keep = ~np.isin(pair, bodies.excluded)
+        found = Found(*(getattr(found, f)[keep] for f in
+                        ("a", "b", "point", "normal", "separation", "key")))
+    return found
 
 
 def _reach(bodies: Bodies, frame_dt: float, gravity: np.ndarray) -> np.ndarray:

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..collision.hull import convex_hull
+from .joints import JointModel, JointSettings, JointState, joint_model
 from ..errors import PhysanimError
 from ..validate import frozen
 from . import quaternion as quat
@@ -130,6 +131,7 @@ class RigidBodyModel:
             a MESH body's convex hull vertices: what can touch a flat collider).
         body_mesh: per body, None or a MESH body's (vertices from the centre of mass, local
             [m], triangles) (read-only arrays).
+        joints: the joints between the bodies (:mod:`physanim.core.constraints.joints`).
     """
 
     body_name: tuple[str, ...]
@@ -153,6 +155,7 @@ class RigidBodyModel:
     body_hull_count: np.ndarray
     body_mesh: tuple = ()
     initial: tuple = field(repr=False, default=())  # (x, q, P, L) at the start
+    joints: JointModel = field(default_factory=JointModel)
 
     @property
     def body_count(self) -> int:
@@ -160,7 +163,7 @@ class RigidBodyModel:
 
     def state(self) -> RigidBodyState:
         x, q, p, l_ = (a.copy() for a in self.initial)
-        return RigidBodyState(x, q, p, l_)
+        return RigidBodyState(x, q, p, l_, joints=self.joints.state())
 
 
 @dataclass
@@ -179,6 +182,7 @@ class RigidBodyState:
     body_asleep: np.ndarray | None = None  # (n,) bool: resting, not simulated (:mod:`.sleep`)
     body_slow: np.ndarray | None = None  # (n,) int: consecutive slow frames
     body_island: np.ndarray | None = None  # (n,) int: the island a sleeping body sleeps in
+    joints: JointState | None = None  # the joints' impulses and breaks
 
     def __post_init__(self):
         n = len(self.body_x)
@@ -195,14 +199,21 @@ class RigidBodyState:
 
 
 class RigidBodyBuilder:
-    """Collects bodies (:meth:`add_body` returns the index); :meth:`finalize` freezes them."""
+    """Collects bodies and the joints between them (:meth:`add_body`, :meth:`add_joint`
+    return their index); :meth:`finalize` freezes them."""
 
     def __init__(self):
         self._bodies: list[RigidBodySettings] = []
+        self._joints: list[JointSettings] = []
 
     def add_body(self, settings: RigidBodySettings) -> int:
         self._bodies.append(settings)
         return len(self._bodies) - 1
+
+    def add_joint(self, settings: JointSettings) -> int:
+        """A joint between bodies already added (or a body and a frame)."""
+        self._joints.append(settings)
+        return len(self._joints) - 1
 
     def finalize(self) -> RigidBodyModel:
         b = self._bodies
@@ -222,6 +233,8 @@ class RigidBodyBuilder:
         inertia = np.array([s.mass_properties.inertia for s in b], dtype=np.float64).reshape(n, 3, 3)
         inv_inertia = np.linalg.inv(inertia) if n else inertia.copy()
         bound = np.array([_bound(s, o, h) for s, o, h in zip(b, offset, hulls)])
+        initial = self._initial(com, mass, inertia)
+        joints = joint_model(self._joints, initial[0], quat.to_matrix(initial[1]))
         return RigidBodyModel(
             tuple(s.name for s in b), frozen([SHAPES.index(s.shape) for s in b], np.int8),
             frozen(half), frozen(radius), frozen(offset), frozen(com), frozen(bound),
@@ -230,8 +243,7 @@ class RigidBodyBuilder:
             *(frozen([getattr(s, k) for s in b]) for k in (
                 "restitution", "friction", "linear_damping", "angular_damping")),
             frozen(kinematic, bool), frozen(np.concatenate(hulls) if n else np.zeros((0, 3))),
-            frozen(starts, np.int64), frozen(counts, np.int64), meshes,
-            self._initial(com, mass, inertia))
+            frozen(starts, np.int64), frozen(counts, np.int64), meshes, initial, joints)
 
     def _initial(self, com, mass, inertia) -> tuple:
         b = self._bodies

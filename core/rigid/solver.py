@@ -21,7 +21,9 @@ from ..transforms import TransformPath
 from ..world import SolverSystem, World, WorldFrame
 from . import contact_solver as cs_
 from .contact_set import ContactSet, tangents
-from . import as_colliders, dynamics, sleep, warm
+from . import as_colliders, dynamics, joint_step, sleep, warm
+from . import joint_solver as js_
+from .joints import FRAME
 from . import quaternion as quat
 from .bodies import Posed, collider_bodies, frame_bodies, mesh_shapes
 from .collide import SPECULATIVE, Bodies, Found, find_contacts
@@ -49,6 +51,8 @@ class RigidFrameInputs:
             of the object of a body that follows its animation over this interval (k >= 1);
             the others are simulated. A body leaves its path with the path's velocity (an
             arm lets a box go), and joins a path where it starts.
+        joint_paths: joint index -> (k + 1, 4, 4) world frames of a joint's FRAME side over
+            this interval (an animated object holding it); others stay where they were placed.
     """
 
     frame: int
@@ -57,15 +61,31 @@ class RigidFrameInputs:
     gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
     colliders: Sequence[ColliderFrame] = ()
     kinematic: dict = field(default_factory=dict)
+    joint_paths: dict = field(default_factory=dict)
 
     @classmethod
-    def of(cls, frame: WorldFrame, kinematic: dict | None) -> RigidFrameInputs:
+    def of(cls, frame: WorldFrame, paths: RigidPaths | None) -> RigidFrameInputs:
+        paths = paths or RigidPaths()
         return cls(frame.frame, frame.t0, frame.frame_dt, frame.gravity, frame.colliders,
-                   kinematic or {})
+                   paths.kinematic, paths.joints)
+
+    @property
+    def paths(self) -> RigidPaths:
+        return RigidPaths(self.kinematic, self.joint_paths)
 
     @property
     def world(self) -> WorldFrame:
         return WorldFrame(self.frame, self.t0, self.frame_dt, self.gravity, self.colliders)
+
+
+@dataclass
+class RigidPaths:
+    """The rigid bodies' own input for a frame interval: the paths of the bodies that follow
+    their animation (``kinematic``) and of the joints' animated frames (``joints``), as in
+    :class:`RigidFrameInputs`."""
+
+    kinematic: dict = field(default_factory=dict)
+    joints: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -77,6 +97,7 @@ class RigidReport:
     overlap: float = 0.0
     moving: int = 0
     sleeping: int = 0
+    broken: list = field(default_factory=list)  # names of the joints that broke this frame
 
 
 @dataclass
@@ -99,16 +120,17 @@ class _FrameStep:
     separation: np.ndarray | None = None
     awake: np.ndarray | None = None  # indices of the dynamic bodies simulated this frame
     driven: np.ndarray | None = None  # indices of the bodies on their paths this frame
+    joints: joint_step.JointStep | None = None
 
     @property
     def v(self) -> np.ndarray:
-        """(N, 3) linear velocities (a view of ``vel``)."""
-        return self.vel[:, :3]
+        """(N, 3) linear velocities of the bodies (a view of ``vel``)."""
+        return self.vel[:len(self.bodies), :3]
 
     @property
     def w(self) -> np.ndarray:
-        """(N, 3) angular velocities (a view of ``vel``)."""
-        return self.vel[:, 3:]
+        """(N, 3) angular velocities of the bodies (a view of ``vel``)."""
+        return self.vel[:len(self.bodies), 3:]
 
 
 class RigidBodySolver:
@@ -135,7 +157,7 @@ class RigidBodySolver:
         """Advance ``state`` (in place) by one frame interval: a world of this one system."""
         system = RigidBodySystem(self, state)
         world = World([system], self.colliders)
-        return world.advance(inputs.world, {system: inputs.kinematic}).reports[system]
+        return world.advance(inputs.world, {system: inputs.paths}).reports[system]
 
     def begin_frame(self, state: RigidBodyState, inputs: RigidFrameInputs, paths) -> _FrameStep:
         """Pose, find and prepare the frame's contacts."""
@@ -167,9 +189,15 @@ class RigidBodySolver:
         rows = np.concatenate([kin, n + np.arange(len(colliders[0]))]).astype(np.int64)
         inv_mass = np.concatenate([model.body_inv_mass, np.zeros(len(colliders[0]))])
         inv_mass[kin] = 0.0
+        if state.joints is None:
+            state.joints = model.joints.state()
+        live = np.nonzero(~state.joints.joint_broken)[0]
+        framed = live[model.joints.joint_b[live] == FRAME]
+        vel = np.concatenate([bodies.v, bodies.w], axis=1)
         step = _FrameStep(state, inputs, inputs.frame_dt / self.substeps, g, posed, rows, bodies,
-                          np.concatenate([bodies.v, bodies.w], axis=1), inv_mass, RigidReport(),
-                          driven=kin)
+                          np.concatenate([vel, np.zeros((len(framed), 6))]), inv_mass,
+                          RigidReport(), driven=kin)
+        bodies.excluded = model.joints.excluded_pairs(len(bodies))
         fast = np.linalg.norm(bodies.v, axis=1) + np.linalg.norm(bodies.w, axis=1) * \
             bodies.bound > sleep.WAKE_SPEED
         self._wake_state(step, moving=fast)
@@ -182,6 +210,7 @@ class RigidBodySolver:
             self._wake_state(step, bodies.moving)
             self._collide(step, inputs.frame_dt, state.contacts,
                           forced=np.concatenate([woken, np.zeros(len(bodies) - n, bool)]))
+        joint_step.begin(self.model, step, live, framed)
         return step
 
     def _wake_state(self, step: _FrameStep, moving: np.ndarray) -> None:
@@ -298,22 +327,37 @@ class RigidBodySolver:
             self._collide(step, (1.0 - s0) * step.inputs.frame_dt)
         cs, vel = step.contacts, step.vel
         self._move_posed(step, s0, s1)
+        joint_step.pose(self.model, step, self._inverse_inertia)
         self._forces(step)
         soft = cs_.Softness.of(min(cs_.CONTACT_HERTZ, 0.25 / h), cs_.DAMPING_RATIO, h)
         hard = cs_.Softness.of(min(cs_.STATIC_HERTZ, 0.5 / h), cs_.DAMPING_RATIO, h)
+        js = step.joints
         cs_.record_approach(vel, cs, step.rows)
         cs_.warm_start(vel, cs, step.rows)
+        if js.solve is not None:
+            js_.warm_start(vel, js.solve, js.impulse)
+            js_.solve(vel, js.solve, js.impulse, h, use_bias=True)
         cs_.solve(vel, cs, step.rows, cs_.Scales.of(cs, step.separation, h, soft, hard, True))
         self._integrate(step)
+        joint_step.project(self.model, step, self._inverse_inertia)
         self._pose_contacts(step)  # the bodies moved: arms, inertias and gaps at the new poses
+        joint_step.pose(self.model, step, self._inverse_inertia)
+        if js.solve is not None:
+            js_.solve(vel, js.solve, js.impulse, h, use_bias=False)
         cs_.solve(vel, cs, step.rows, cs_.Scales.of(cs, step.separation, h, soft, hard, False))
         cs_.restitution(vel, cs, step.rows)
+        joint_step.break_over(self.model, step, self._inverse_inertia)
         self._store(step, last=k == self.substeps - 1)
 
     # -- passes ---------------------------------------------------------------------------------
     def _move_posed(self, step: _FrameStep, s0: float, s1: float) -> None:
-        """Kinematic bodies and colliders to the sub-step's end, with the velocity that takes
-        them there (what they impart to the bodies they push)."""
+        """Kinematic bodies, colliders and joints' animated frames to the sub-step's end, with
+        the velocity that takes them there (what they impart to the bodies they push or hold)."""
+        js = step.joints
+        if len(js.rows):
+            x, q = js.frames.pose(s1)
+            js.x, js.rot = x, quat.to_matrix(q)
+            step.vel[js.rows] = np.concatenate(js.frames.velocity(s0, s1, step.h), axis=1)
         if not len(step.posed):
             return
         x, q = step.posed.pose(s1)
@@ -370,6 +414,7 @@ class RigidBodySolver:
         # let go leaves with them)
         state.body_P[d] = m.body_mass[d, None] * step.v[d]
         state.body_L[d] = dynamics.angular_momentum(b.q[d], m.body_inertia[d], step.w[d])
+        state.joints.joint_impulse[step.joints.ids] = step.joints.impulse
         self._check(step)
         if last:
             self._sleep(step)
@@ -386,7 +431,12 @@ class RigidBodySolver:
         speed = np.linalg.norm(step.v[:n], axis=1) + np.linalg.norm(step.w[:n], axis=1) * \
             m.body_bound
         pinned = np.zeros(n, bool)
-        ca, cb = cs.ab[:, 0], cs.ab[:, 1]
+        js = step.joints
+        held = js.ab[:, 1] >= len(b)  # held by a frame: pinned while an animated one moves
+        moving = np.array([not p.static for p in js.frames.paths], bool)
+        pinned[js.ab[held, 0][moving[js.ab[held, 1] - len(b)]]] = True
+        ca = np.concatenate([cs.ab[:, 0], js.ab[~held, 0]])  # joints join islands as contacts
+        cb = np.concatenate([cs.ab[:, 1], js.ab[~held, 1]])
         for this, other in ((ca, cb), (cb, ca)):
             touch = (this < n) & b.moving[other]
             pinned[this[touch]] = True
@@ -440,8 +490,8 @@ class RigidBodySystem(SolverSystem):
         return as_colliders.frames(self.solver.model, self._shapes, self._start,
                                    (self.state.body_x, self.state.body_q))
 
-    def inputs(self, frame: WorldFrame, kinematic: dict | None) -> RigidFrameInputs:
-        return RigidFrameInputs.of(frame, kinematic)
+    def inputs(self, frame: WorldFrame, paths: RigidPaths | None) -> RigidFrameInputs:
+        return RigidFrameInputs.of(frame, paths)
 
     def report(self, step: _FrameStep) -> RigidReport:
         return step.report

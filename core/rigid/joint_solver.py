@@ -1,0 +1,418 @@
+"""Joint rows at the bodies' current poses and their soft-step solve, vectorised over joints.
+
+Every joint has 6 equality rows (what it holds: the pivot's three directions, then three
+turning directions; unused ones empty) and 4 clamped rows (lower and upper limit, motor,
+spring). Each row is 12 numbers over [v_a, w_a, v_b, w_b] of its two bodies, as the contact
+rows (:mod:`physanim.core.rigid.contact_solver`): a linear row along u is
+[-u, -(r_a x u), u, r_b x u] with both lever arms to the midpoint of the two pivots (the impulse
+and its reaction act at one point: angular momentum is conserved); an angular row about u is
+[0, -u, 0, u].
+
+A pass (:func:`solve`) goes colour by colour (no dynamic body twice in a colour): per joint,
+the clamped rows one after another (a limit pushes only, like a contact; a motor is bounded by
+its torque or force; a spring is Catto's soft constraint, exactly an implicit damped spring),
+then the equality rows together, as one block (their coupling inverted once per sub-step: a
+joint's directions do not fight each other). The soft step (Box2D v3's) runs it twice per
+sub-step: with position feedback (a stiff, damped spring of JOINT_HERTZ pulling drift back),
+then, after the positions moved, without it (relax).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .joints import CONE_TWIST, FRAME, HINGE, ROWS, SLIDER, JointModel
+
+JOINT_BIAS = 0.2  # fraction of a joint's drift taken back per sub-step (with position feedback)
+MAX_CORRECTION = 4.0  # [m/s], [rad/s] fastest drift correction
+CG_TOLERANCE = 1e-8  # relative residual of the joints' equality solve
+CG_ITERATIONS_PER_JOINT = 4
+EQ = 6  # equality rows per joint
+NONE, LIMIT, MOTOR, SPRING = range(4)  # what a clamped row is
+LOWER_ROW, UPPER_ROW, MOTOR_ROW, SPRING_ROW = range(4)  # hinges' and sliders' clamped rows
+# equality rows each kind holds: 3 pivot directions (the joint's x, y, z), 3 turning ones
+_HOLDS = np.array([[1, 1, 1, 1, 1, 1],  # FIXED
+                   [1, 1, 1, 0, 0, 0],  # BALL
+                   [1, 1, 1, 1, 1, 0],  # HINGE (turning about x and y: z is free)
+                   [1, 1, 0, 1, 1, 1],  # SLIDER (z is free)
+                   [1, 1, 1, 0, 0, 0]], bool)  # CONE_TWIST
+
+
+@dataclass
+class JointRows:
+    """The rows of the joints being solved (ordered by colour), at the current poses.
+
+    Attributes:
+        joint: (J,) model index of each. ab: (J, 2) rows of its two sides in the velocity
+            array. colours: [(start, stop)] slices with no dynamic body twice.
+        j, mj: (J, ROWS, 12) rows and the same times the inverse masses.
+        holds: (J, EQ) active equality rows. block: (J, EQ, EQ) the inverse of their coupling.
+        c: (J, ROWS) position errors: equality rows' drift [m], [rad]; a limit's gap (>= 0:
+            within it); a spring's stretch.
+        mass: (J, ROWS) 1 / (J M^-1 J^T) of each row (0 for an empty one).
+        kind: (J, 4) NONE, LIMIT, MOTOR or SPRING of each clamped row. target: (J, 4) a
+            motor's velocity. bound: (J, 4) a motor's largest impulse in a sub-step.
+        gamma, beta: (J, 4) a spring's softness (Catto: J v + beta / h C + gamma lambda = 0).
+    """
+
+    joint: np.ndarray
+    ab: np.ndarray
+    colours: list
+    j: np.ndarray
+    mj: np.ndarray
+    holds: np.ndarray
+    block: np.ndarray
+    c: np.ndarray
+    mass: np.ndarray
+    kind: np.ndarray
+    target: np.ndarray
+    bound: np.ndarray
+    gamma: np.ndarray
+    beta: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.joint)
+
+
+def rows(model: JointModel, joints: np.ndarray, ab: np.ndarray, colours: list, x: np.ndarray,
+         rot: np.ndarray, inv_mass: np.ndarray, inv_inertia: np.ndarray, h: float) -> JointRows:
+    """The rows of ``joints`` (model indices, in colour order) whose sides are the rows ``ab``
+    (J, 2) of arrays over every row: centre x (N, 3), rotation rot (N, 3, 3) (a FRAME side's
+    row holds the joint's world frame itself), inverse mass (N,) and world inverse inertia
+    (N, 3, 3) (0 for rows impulses do not move); h [s] the sub-step."""
+    n = len(joints)
+    kind = model.joint_kind[joints]
+    a, b = ab[:, 0], ab[:, 1]
+    frame = model.joint_b[joints] == FRAME
+    la, lb = model.joint_local_a[joints], model.joint_local_b[joints].copy()
+    lb[frame] = np.eye(4)  # the row is the joint's frame
+    wa = rot[a] @ la[:, :3, :3]  # (J, 3, 3) the joint's axes on each side
+    wb = rot[b] @ lb[:, :3, :3]
+    pa = x[a] + np.einsum("jik,jk->ji", rot[a], la[:, :3, 3])
+    pb = x[b] + np.einsum("jik,jk->ji", rot[b], lb[:, :3, 3])
+    mid = 0.5 * (pa + pb)
+    ra, rb, gap = mid - x[a], mid - x[b], pb - pa
+    axis_a, axis_b = wa[:, :, 2], wb[:, :, 2]
+
+    j = np.zeros((n, ROWS, 12))
+    c = np.zeros((n, ROWS))
+    for i in range(3):  # the pivot along the joint's axes (on A)
+        u = wa[:, :, i]
+        j[:, i] = _linear(u, ra, rb)
+        c[:, i] = np.einsum("ji,ji->j", u, gap)
+    turn = _rotation_vector(wb @ wa.transpose(0, 2, 1))
+    swing = np.cross(axis_a, axis_b)
+    hinge = kind == HINGE
+    for i in range(3):  # turning about the joint's axes
+        u = wa[:, :, i]
+        j[:, 3 + i] = _angular(u)
+        c[:, 3 + i] = np.where(hinge, np.einsum("ji,ji->j", u, swing),
+                               np.einsum("ji,ji->j", u, turn))
+    holds = _HOLDS[kind]
+    j[:, :EQ] *= holds[:, :, None]
+    c[:, :EQ] *= holds
+
+    clamped = _clamped(model, joints, kind, wa, wb, axis_a, axis_b, swing, gap, ra, rb, h)
+    j[:, EQ:], c[:, EQ:] = clamped[0], clamped[1]
+    ma, mb = inv_mass[a, None], inv_mass[b, None]
+    mj = np.empty_like(j)
+    mj[..., :3] = ma[:, None] * j[..., :3]
+    mj[..., 3:6] = np.einsum("jrk,jik->jri", j[..., 3:6], inv_inertia[a])
+    mj[..., 6:9] = mb[:, None] * j[..., 6:9]
+    mj[..., 9:] = np.einsum("jrk,jik->jri", j[..., 9:], inv_inertia[b])
+    k = np.einsum("jri,jri->jr", j, mj)
+    mass = np.where(k > 1e-300, 1.0 / np.maximum(k, 1e-300), 0.0)
+    coupling = np.einsum("jri,jsi->jrs", j[:, :EQ], mj[:, :EQ])
+    block = _pinv(np.where(holds[:, :, None] & holds[:, None, :], coupling, np.eye(EQ))) * \
+        (holds[:, :, None] & holds[:, None, :])
+    return JointRows(joints, ab, colours, j, mj, holds, block, c, mass, *clamped[2:])
+
+
+def _clamped(model, joints, kind, wa, wb, axis_a, axis_b, swing, gap, ra, rb, h):
+    """The 4 clamped rows of each joint: (rows (J, 4, 12), errors (J, 4), kind (J, 4),
+    target, bound, gamma, beta (J, 4))."""
+    n = len(joints)
+    j = np.zeros((n, 4, 12))
+    c = np.zeros((n, 4))
+    what = np.zeros((n, 4), np.int64)
+    limits = model.joint_use_limits[joints]
+    lower, upper = model.joint_lower[joints], model.joint_upper[joints]
+    # the free coordinate of hinges (angle about z) and sliders (distance along z)
+    angle = np.arctan2(np.einsum("ji,ji->j", wb[:, :, 0], wa[:, :, 1]),
+                       np.einsum("ji,ji->j", wb[:, :, 0], wa[:, :, 0]))
+    slide = np.einsum("ji,ji->j", axis_a, gap)
+    driven = (kind == HINGE) | (kind == SLIDER)
+    # side A's coordinate relative to side B (the base: the world, a frame or the second
+    # body): a hinged door turns by its angle, its motor turns it that way
+    free = -np.where(kind == SLIDER, slide, angle)
+    row = -np.where((kind == SLIDER)[:, None], _linear(axis_a, ra, rb), _angular(axis_a))
+    on = driven & limits
+    j[on, 0], c[on, 0], what[on, 0] = row[on], (free - lower)[on], LIMIT
+    j[on, 1], c[on, 1], what[on, 1] = -row[on], (upper - free)[on], LIMIT
+    motor = driven & model.joint_use_motor[joints]
+    j[motor, 2], what[motor, 2] = row[motor], MOTOR
+    spring = driven & model.joint_use_spring[joints] & \
+        ((model.joint_stiffness[joints] > 0.0) | (model.joint_damping[joints] > 0.0))
+    j[spring, 3], c[spring, 3], what[spring, 3] = row[spring], free[spring], SPRING
+    # cone-twist: B's axis within the cone, its twist within [lower, upper]
+    cone = kind == CONE_TWIST
+    if cone.any():
+        sin = np.linalg.norm(swing, axis=1)
+        phi = np.arctan2(sin, np.einsum("ji,ji->j", axis_a, axis_b))
+        normal = np.where((sin > 1e-9)[:, None], swing / np.maximum(sin, 1e-300)[:, None],
+                          wa[:, :, 0])
+        j[cone, 0], c[cone, 0], what[cone, 0] = _angular(-normal)[cone], \
+            (model.joint_cone[joints] - phi)[cone], LIMIT
+        twist = -_twist(wa, wb, axis_b, normal, phi)  # A's relative to B's
+        on = cone & limits
+        j[on, 1], c[on, 1], what[on, 1] = _angular(-axis_a)[on], (twist - lower)[on], LIMIT
+        j[on, 2], c[on, 2], what[on, 2] = _angular(axis_a)[on], (upper - twist)[on], LIMIT
+    target = np.zeros((n, 4))
+    target[:, 2] = model.joint_motor_velocity[joints]
+    bound = np.zeros((n, 4))
+    bound[:, 2] = model.joint_motor_max[joints] * h
+    k, d = model.joint_stiffness[joints], model.joint_damping[joints]
+    gamma, beta = np.zeros((n, 4)), np.zeros((n, 4))
+    soft = d + h * k
+    gamma[:, 3] = np.where(soft > 0.0, 1.0 / (h * np.where(soft > 0.0, soft, 1.0)), 0.0)
+    beta[:, 3] = np.where(soft > 0.0, h * k / np.where(soft > 0.0, soft, 1.0), 0.0)
+    return j, c, what, target, bound, gamma, beta
+
+
+def _twist(wa, wb, axis_b, normal, phi) -> np.ndarray:
+    """(J,) B's turn about A's z axis once its swing is undone [rad]: B's x axis taken back
+    along the shortest rotation from B's z to A's, measured from A's x about A's z."""
+    k = -normal  # the swing turns A's axis to B's about +normal: undo it
+    x = wb[:, :, 0]
+    cos, sin = np.cos(phi)[:, None], np.sin(phi)[:, None]
+    back = x * cos + np.cross(k, x) * sin + k * np.einsum("ji,ji->j", k, x)[:, None] * (1 - cos)
+    return np.arctan2(np.einsum("ji,ji->j", back, wa[:, :, 1]),
+                      np.einsum("ji,ji->j", back, wa[:, :, 0]))
+
+
+def _linear(u, ra, rb) -> np.ndarray:
+    """(J, 12) rows along u (J, 3) with lever arms ra, rb."""
+    return np.concatenate([-u, -np.cross(ra, u), u, np.cross(rb, u)], axis=1)
+
+
+def _angular(u) -> np.ndarray:
+    """(J, 12) rows turning about u (J, 3)."""
+    z = np.zeros_like(u)
+    return np.concatenate([z, -u, z, u], axis=1)
+
+
+def _rotation_vector(m: np.ndarray) -> np.ndarray:
+    """(J, 3) axis * angle of rotation matrices (J, 3, 3)."""
+    v = 0.5 * np.stack([m[:, 2, 1] - m[:, 1, 2], m[:, 0, 2] - m[:, 2, 0],
+                        m[:, 1, 0] - m[:, 0, 1]], axis=1)
+    s = np.linalg.norm(v, axis=1)
+    cos = 0.5 * (np.trace(m, axis1=1, axis2=2) - 1.0)
+    angle = np.arctan2(s, cos)
+    return v * np.where(s > 1e-12, angle / np.maximum(s, 1e-300), 1.0)[:, None]
+
+
+def _pinv(k: np.ndarray) -> np.ndarray:
+    """Pseudo-inverses of symmetric positive semi-definite matrices (g, n, n)."""
+    if not len(k):
+        return k.copy()
+    value, vector = np.linalg.eigh(k)
+    keep = value > 1e-12 * np.maximum(value[:, -1:], 1e-300)
+    inverse = np.where(keep, 1.0 / np.where(keep, value, 1.0), 0.0)
+    return np.einsum("gik,gk,gjk->gij", vector, inverse, vector)
+
+
+def warm_start(vel: np.ndarray, r: JointRows, impulse: np.ndarray) -> None:
+    """Apply the joints' accumulated impulses (J, ROWS) (from the last sub-step)."""
+    if not len(r):
+        return
+    _apply(vel, r, impulse, slice(None))
+
+
+def _apply(vel: np.ndarray, r: JointRows, impulse: np.ndarray, rows: slice) -> None:
+    """Add the velocity changes of impulses (J, R) along the rows ``rows`` to ``vel``."""
+    d = np.einsum("jr,jri->ji", impulse, r.mj[:, rows])
+    np.add.at(vel, r.ab[:, 0], d[:, :6])
+    np.add.at(vel, r.ab[:, 1], d[:, 6:])
+
+
+def solve(vel: np.ndarray, r: JointRows, impulse: np.ndarray, h: float, use_bias: bool) -> None:
+    """One pass over the joints (module docstring); ``impulse`` (J, ROWS) accumulated, updated
+    in place. The clamped rows colour by colour, then every joint's equality rows at once."""
+    for s, e in r.colours:
+        if not (r.kind[s:e] != NONE).any():
+            continue
+        ab = r.ab[s:e]
+        local = vel[ab].reshape(e - s, 12)
+        for k in (MOTOR_ROW, SPRING_ROW, LOWER_ROW, UPPER_ROW):  # limits last: they hold
+            _clamped_row(local, r, impulse, s, e, k, h, use_bias)
+        vel[ab[:, 0]] = local[:, :6]
+        vel[ab[:, 1]] = local[:, 6:]
+    local = vel[r.ab].reshape(len(r), 12)
+    bias = np.clip(JOINT_BIAS / h * r.c[:, :EQ], -MAX_CORRECTION, MAX_CORRECTION) if use_bias \
+        else 0.0
+    rel = np.einsum("jri,ji->jr", r.j[:, :EQ], local)
+    delta = _conjugate_gradient(vel, r, -(rel + bias) * r.holds)
+    impulse[:, :EQ] += delta
+    _apply(vel, r, delta, slice(0, EQ))
+
+
+def displacement(r: JointRows, count: int, momentum: np.ndarray | None = None,
+                 inv_mass: np.ndarray | None = None, group: np.ndarray | None = None
+                 ) -> np.ndarray:
+    """(count, 6) the smallest moves [dx, dtheta] of the rows (by their inverse masses) that
+    take every joint's equality errors to zero, to first order (post-stabilisation, Cline &
+    Pai: the positions are put back on the joints without touching the momenta).
+
+    Moving bodies at fixed momenta changes the angular momentum about the origin by
+    sum dx x P; a group of free bodies joined only to each other keeps it to first order:
+    ``group`` (count,) labels such groups (-1: none), ``momentum`` (count, 3) and
+    ``inv_mass`` (count,) of the rows, and their moves satisfy sum P x dx = 0 per group too."""
+    move = np.zeros((count, 6))
+    if not len(r):
+        return move
+    passed = (r.kind == LIMIT) & (r.c[:, EQ:] < 0.0)  # limits passed: put back on them too
+    op = _Projection(r, count, momentum, inv_mass, group, passed)
+    x = _pcg(op, op.pack(-r.c, 0.0))
+    return op.moves(x)
+
+
+def drift(r: JointRows) -> float:
+    """The largest equality error or passed limit of the joints [m], [rad]."""
+    if not len(r):
+        return 0.0
+    passed = np.where(r.kind == LIMIT, np.maximum(-r.c[:, EQ:], 0.0), 0.0)
+    return float(max(np.abs(r.c[:, :EQ]).max(), passed.max()))
+
+
+class _Projection:
+    """The position projection's linear system over the joints' equality rows and, per group
+    of free joined bodies, 3 rows keeping its angular momentum (see :func:`displacement`)."""
+
+    def __init__(self, r, count, momentum, inv_mass, group, limits=None):
+        self.r, self.count = r, count
+        self.use = np.concatenate([r.holds, np.zeros((len(r), ROWS - EQ), bool)
+                                   if limits is None else limits], axis=1)  # (J, ROWS)
+        self.rows_ = ROWS if limits is not None and limits.any() else EQ
+        self.rows = np.nonzero(group >= 0)[0] if group is not None else np.zeros(0, np.int64)
+        if len(self.rows):
+            labels, self.member = np.unique(group[self.rows], return_inverse=True)
+            self.groups = len(labels)
+            self.p = momentum[self.rows]
+            self.w = inv_mass[self.rows]
+            pp = np.einsum("ki,kj->kij", self.p, self.p)
+            cross = self.w[:, None, None] * (np.einsum("ki,ki->k", self.p, self.p)[:, None,
+                                                                                    None]
+                                             * np.eye(3) - pp)  # m^-1 [P]x [P]x^T
+            diag = np.zeros((self.groups, 3, 3))
+            np.add.at(diag, self.member, cross)
+            self.group_block = _pinv(diag)
+        else:
+            self.groups = 0
+        self.size = len(r) * self.rows_ + 3 * self.groups
+        self.use = self.use[:, :self.rows_]
+
+    def pack(self, joint, group):
+        out = np.zeros(self.size)
+        n = len(self.r) * self.rows_
+        out[:n] = (np.asarray(joint)[:, :self.rows_] * self.use).ravel()
+        out[n:] = np.broadcast_to(group, (3 * self.groups,))
+        return out
+
+    def split(self, x):
+        n = len(self.r) * self.rows_
+        return x[:n].reshape(len(self.r), self.rows_), x[n:].reshape(self.groups, 3)
+
+    def moves(self, x):
+        mu, nu = self.split(x)
+        move = np.zeros((self.count, 6))
+        _apply(move, self.r, mu * self.use, slice(0, self.rows_))
+        if self.groups:
+            move[self.rows, :3] += self.w[:, None] * np.cross(nu[self.member], self.p)
+        return move
+
+    def __call__(self, x):
+        move = self.moves(x)
+        joint = np.einsum("jri,ji->jr", self.r.j[:, :self.rows_],
+                          move[self.r.ab].reshape(len(self.r), 12))
+        group = np.zeros((self.groups, 3))
+        if self.groups:
+            np.add.at(group, self.member, np.cross(self.p, move[self.rows, :3]))
+        return self.pack(joint, group.ravel())
+
+    def precondition(self, x):
+        mu, nu = self.split(x)
+        inner = np.zeros_like(mu)
+        inner[:, :EQ] = np.einsum("jrs,js->jr", self.r.block, mu[:, :EQ])
+        inner[:, EQ:] = self.r.mass[:, EQ:self.rows_] * mu[:, EQ:]
+        out = self.pack(inner, 0.0)
+        if self.groups:
+            out[len(self.r) * EQ:] = np.einsum("gij,gj->gi", self.group_block, nu).ravel()
+        return out
+
+
+def _pcg(op, b: np.ndarray) -> np.ndarray:
+    """x with op(x) = b by conjugate gradients preconditioned by op.precondition, to a
+    residual of CG_TOLERANCE of b, at most CG_ITERATIONS_PER_JOINT per unknown block + 10."""
+    x = np.zeros_like(b)
+    norm_b = np.linalg.norm(b)
+    if norm_b == 0.0:
+        return x
+    res = b.copy()
+    z = op.precondition(res)
+    p = z.copy()
+    rz = res @ z
+    for _ in range(CG_ITERATIONS_PER_JOINT * (len(b) // EQ + 1) + 10):
+        ap = op(p)
+        pap = p @ ap
+        if pap <= 0.0:
+            break
+        alpha = rz / pap
+        x += alpha * p
+        res -= alpha * ap
+        if np.linalg.norm(res) <= CG_TOLERANCE * norm_b:
+            break
+        z = op.precondition(res)
+        rz, old = res @ z, rz
+        p = z + (rz / old) * p
+    return x
+
+
+def _conjugate_gradient(vel: np.ndarray, r: JointRows, b: np.ndarray) -> np.ndarray:
+    """The equality impulses x (J, EQ) with J M^-1 J^T x = b over every joint together (the
+    joints sharing a body couple), preconditioned with each joint's own block."""
+    op = _Projection(r, len(vel), None, None, None)
+    return op.split(_pcg(op, op.pack(np.pad(b, ((0, 0), (0, ROWS - EQ))), 0.0)))[0]
+
+
+def _clamped_row(local, r, impulse, s, e, k, h, use_bias) -> None:
+    """Clamped row k of joints s:e against their velocities ``local`` (updated)."""
+    what = r.kind[s:e, k]
+    if not (what != NONE).any():
+        return
+    row = EQ + k
+    jr, mass, c = r.j[s:e, row], r.mass[s:e, row], r.c[s:e, row]
+    rel = np.einsum("ji,ji->j", jr, local)
+    old = impulse[s:e, row]
+    # a limit not reached lets the gap close within the sub-step, no further; one passed is
+    # pushed back (with position feedback) or held
+    ahead = c > 0.0
+    if use_bias:
+        bias = np.where(ahead, c / h, np.maximum(JOINT_BIAS / h * c, -MAX_CORRECTION))
+    else:
+        bias = np.where(ahead, c / h, 0.0)
+    limit = np.maximum(old - mass * (rel + bias), 0.0)
+    motor = np.clip(old - mass * (rel - r.target[s:e, k]), -r.bound[s:e, k], r.bound[s:e, k])
+    g, b = r.gamma[s:e, k], r.beta[s:e, k]
+    k_row = np.where(mass > 0.0, 1.0 / np.where(mass > 0.0, mass, 1.0), 0.0)
+    spring = old - (rel + b / h * c + g * old) / np.where(k_row + g > 0.0, k_row + g, 1.0)
+    new = np.select([what == LIMIT, what == MOTOR, what == SPRING], [limit, motor, spring], old)
+    impulse[s:e, row] = new
+    local += (new - old)[:, None] * r.mj[s:e, row]
+
+
+def pivot_force(r: JointRows, impulse: np.ndarray, h: float) -> np.ndarray:
+    """(J,) the force [N] each joint's pivot carried over the sub-step (its equality rows along
+    the pivot's directions)."""
+    return np.linalg.norm(impulse[:, :3], axis=1) / h
+

@@ -1,0 +1,277 @@
+"""Rigid-body joints against closed forms: a pendulum's period, chains that do not stretch,
+motors at their speed, limits held, breaking at the threshold, momentum kept."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from physanim.core.rigid.joints import FRAME, JointSettings
+from physanim.core.errors import PhysanimError
+from physanim.core.rigid import quaternion as quat
+from physanim.core.rigid.model import RigidBodyBuilder
+from physanim.core.rigid.solver import RigidBodySolver, RigidFrameInputs
+from physanim.tests.core.rigid_helpers import DT, box, ground, sphere
+
+G = 9.81
+
+
+def joint_frame(pivot, z=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """A joint's world matrix: origin ``pivot``, z axis ``z`` (x, y completing it)."""
+    z = np.asarray(z, float) / np.linalg.norm(z)
+    helper = (1.0, 0.0, 0.0) if abs(z[0]) < 0.9 else (0.0, 1.0, 0.0)
+    x = np.cross(helper, z)
+    x /= np.linalg.norm(x)
+    m = np.eye(4)
+    m[:3, :3] = np.column_stack([x, np.cross(z, x), z])
+    m[:3, 3] = pivot
+    return m
+
+
+def build(bodies, joints):
+    b = RigidBodyBuilder()
+    for body in bodies:
+        b.add_body(body)
+    for j in joints:
+        b.add_joint(j)
+    model = b.finalize()
+    return model, RigidBodySolver(model), model.state()
+
+
+def run(solver, state, frames, colliders=(), gravity=(0.0, 0.0, -G), each=None, paths=None):
+    reports = []
+    for f in range(frames):
+        inputs = RigidFrameInputs(f, f * DT, DT, gravity, list(colliders),
+                                  joint_paths=paths(f) if paths else {})
+        reports.append(solver.advance(state, inputs))
+        if each is not None:
+            each(f + 1, state)
+    return reports
+
+
+def test_a_ball_joint_pendulum_swings_with_the_physical_pendulums_period():
+    """A 5 cm ball 1 m below a ball joint, let go 0.1 rad out: T = 2 pi sqrt(I / (m g L)),
+    I = m (L^2 + 2/5 r^2) about the pivot, times 1 + theta^2 / 16 for the amplitude; the
+    joint holds the ball at L to 1e-6 L."""
+    length, r, theta = 1.0, 0.05, 0.1
+    _, solver, state = build(
+        [sphere("Bob", r, (length * math.sin(theta), 0.0, -length * math.cos(theta)),
+                linear_damping=0.0, angular_damping=0.0)],
+        [JointSettings("Pivot", "BALL", 0)])
+    xs = []
+    run(solver, state, int(10 / DT), each=lambda f, s: xs.append(s.body_x[0].copy()))
+    xs = np.array(xs)
+    assert np.abs(np.linalg.norm(xs, axis=1) - length).max() < 1e-6 * length
+    t = (np.arange(len(xs)) + 1) * DT
+    x = xs[:, 0]
+    down = np.nonzero((x[:-1] > 0) & (x[1:] <= 0))[0]
+    crossing = t[down] + DT * x[down] / (x[down] - x[down + 1])
+    period = np.diff(crossing).mean()
+    expected = 2 * math.pi * math.sqrt((length ** 2 + 0.4 * r ** 2) / (G * length)) * \
+        (1 + theta ** 2 / 16)
+    assert period == pytest.approx(expected, rel=1e-3)
+
+
+@pytest.mark.parametrize("kind", ["BALL", "HINGE"])
+def test_a_twenty_link_chain_swung_hard_never_stretches(kind):
+    """20 links of 0.3 m hang from the world and are swung at 8 m/s: the chain whips round,
+    and no joint opens by more than 0.1 % of a link in 5 s (the whole chain: less)."""
+    n, link = 20, 0.3
+    top = np.array([0.0, 0.0, 7.0])
+    down = tuple(quat.from_rotation_vector(np.array([[0.0, math.pi / 2, 0.0]]))[0])
+    bodies = [box(f"Link{i}", (link / 2, 0.03, 0.03), top - (0, 0, (i + 0.5) * link),
+                  orientation=down, velocity=(8.0, 0.0, 0.0)) for i in range(n)]
+    axis = (0.0, 1.0, 0.0)
+    joints = [JointSettings("Top", kind, 0, matrix=joint_frame(top, axis))] + \
+        [JointSettings(f"J{i}", kind, i - 1, i, matrix=joint_frame(top - (0, 0, i * link), axis))
+         for i in range(1, n)]
+    _, solver, state = build(bodies, joints)
+    worst = []
+
+    def gaps(f, s):
+        ends = s.body_x[:, None] + quat.to_matrix(s.body_q)[:, None, :, 0] * \
+            np.array([-1.0, 1.0])[None, :, None] * link / 2  # (n, 2, 3): top end, bottom end
+        worst.append(max(np.linalg.norm(ends[0, 0] - top),
+                         np.linalg.norm(ends[1:, 0] - ends[:-1, 1], axis=1).max()))
+    run(solver, state, int(5 / DT), each=gaps)
+    assert max(worst) < 1e-3 * link
+    assert state.body_x[-1, 2] < top[2] - 1.0  # it swung (it did not freeze)
+
+
+def door(use_motor=True, use_limits=False, upper=1.0):
+    """A 1 m x 2 m, 20 kg door hinged at its left edge about the vertical."""
+    hinge = JointSettings("Hinge", "HINGE", 0, matrix=joint_frame((0.0, 0.0, 1.0)),
+                          use_motor=use_motor, motor_velocity=2.0, motor_max=50.0,
+                          use_limits=use_limits, lower=-1.0, upper=upper)
+    return build([box("Door", (0.5, 0.025, 1.0), (0.5, 0.0, 1.0), mass=20.0,
+                      angular_damping=0.0)], [hinge])
+
+
+def hinge_angle(state) -> float:
+    x = quat.to_matrix(state.body_q)[0][:, 0]
+    return math.atan2(x[1], x[0])
+
+
+def test_a_hinge_motor_turns_a_door_at_its_target_speed():
+    """The motor's 50 N m spins the door (I = 20 (1 + 0.05^2) / 3 about its hinge) up to
+    2 rad/s, which it then holds within 2 %; the hinge keeps the door upright."""
+    _, solver, state = door()
+    run(solver, state, int(1.5 / DT))
+    w = quat.rotate(state.body_q, np.zeros((1, 3)))  # noqa: F841 (orientation is unit)
+    inertia = solver.model.body_inertia[0]
+    world_w = quat.to_matrix(state.body_q)[0] @ np.linalg.solve(
+        inertia, quat.to_matrix(state.body_q)[0].T @ state.body_L[0])
+    assert world_w[2] == pytest.approx(2.0, rel=0.02)
+    assert np.abs(world_w[:2]).max() < 1e-3
+    z = quat.to_matrix(state.body_q)[0][:, 2]
+    assert z[2] > 1 - 1e-6  # upright
+
+
+def test_a_hinge_limit_stops_the_door_and_is_never_passed():
+    _, solver, state = door(use_limits=True, upper=1.0)
+    angles = []
+    run(solver, state, int(3 / DT), each=lambda f, s: angles.append(hinge_angle(s)))
+    assert max(angles) < 1.0 + 1e-3
+    assert angles[-1] == pytest.approx(1.0, abs=1e-2)  # pushed against it by the motor
+
+
+@pytest.mark.parametrize("factor, breaks", [(1.01, False), (0.99, True)])
+def test_a_joint_breaks_at_its_threshold(factor, breaks):
+    """A 3 kg box hangs from a ball joint: the joint carries m g. A threshold 1 % above holds
+    it; 1 % below, it breaks in the first frame and the box falls freely from there."""
+    m = 3.0
+    _, solver, state = build([box("Box", (0.1, 0.1, 0.1), (0.0, 0.0, -0.1), mass=m,
+                                  linear_damping=0.0)],
+                             [JointSettings("Hook", "BALL", 0, break_force=factor * m * G)])
+    reports = run(solver, state, int(2 / DT))
+    assert bool(state.joints.joint_broken[0]) == breaks
+    if breaks:
+        assert state.joints.joint_broken_frame[0] == 0 and reports[0].broken == ["Hook"]
+        fall = -0.1 - 0.5 * G * 2.0 ** 2
+        assert state.body_x[0, 2] == pytest.approx(fall, rel=0.02)
+    else:
+        assert np.abs(state.body_x[0] - (0.0, 0.0, -0.1)).max() < 1e-6
+
+
+def test_joined_bodies_keep_their_momentum_with_gravity_off():
+    """Two boxes on a hinge, thrown and spun in zero gravity: the joint's impulses are equal
+    and opposite at one point, and putting them back on the joint after each move keeps the
+    pair's angular momentum too: both to 1e-9."""
+    bodies = [box("A", (0.2, 0.1, 0.1), (0.0, 0.0, 0.0), mass=2.0, velocity=(1.0, 0.5, 0.0),
+                  angular_velocity=(0.0, 0.0, 3.0), linear_damping=0.0, angular_damping=0.0),
+              box("B", (0.2, 0.1, 0.1), (0.4, 0.0, 0.0), mass=1.0, velocity=(0.0, -1.0, 0.5),
+                  angular_velocity=(1.0, 0.0, 0.0), linear_damping=0.0, angular_damping=0.0)]
+    _, solver, state = build(bodies, [JointSettings("Hinge", "HINGE", 0, 1,
+                                                    matrix=joint_frame((0.2, 0.0, 0.0),
+                                                                       (0.0, 1.0, 0.0)))])
+
+    def momenta(s):
+        return s.body_P.sum(axis=0), (np.cross(s.body_x, s.body_P) + s.body_L).sum(axis=0)
+    p0, l0 = momenta(state)
+    run(solver, state, 48, gravity=(0.0, 0.0, 0.0))
+    p1, l1 = momenta(state)
+    assert np.abs(p1 - p0).max() < 1e-9 * np.linalg.norm(p0)
+    assert np.abs(l1 - l0).max() < 1e-9 * np.linalg.norm(l0)
+
+
+def test_a_fixed_joint_welds_two_boxes_into_one():
+    """Welded boxes thrown spinning: they keep their relative pose to 1e-6."""
+    bodies = [box("A", (0.2, 0.1, 0.1), (0.0, 0.0, 0.0), angular_velocity=(0.0, 2.0, 3.0)),
+              box("B", (0.1, 0.1, 0.3), (0.3, 0.0, 0.0))]
+    _, solver, state = build(bodies, [JointSettings("Weld", "FIXED", 0, 1,
+                                                    matrix=joint_frame((0.2, 0.0, 0.0)))])
+
+    def relative(s):
+        r = quat.to_matrix(s.body_q)
+        return r[0].T @ r[1], r[0].T @ (s.body_x[1] - s.body_x[0])
+    r0, d0 = relative(state)
+    run(solver, state, 48, gravity=(0.0, 0.0, 0.0))
+    r1, d1 = relative(state)
+    assert np.abs(r1 - r0).max() < 1e-6 and np.abs(d1 - d0).max() < 1e-6
+
+
+def test_a_slider_with_a_motor_moves_along_its_axis_only_and_stops_at_its_limits():
+    """A box on a slider along x from the world, gravity pulling down: the motor drives it at
+    0.5 m/s to the upper limit 0.3 m, which holds; it never drops."""
+    slider = JointSettings("Rail", "SLIDER", 0, matrix=joint_frame((0.0, 0.0, 1.0),
+                                                                  (1.0, 0.0, 0.0)),
+                           use_motor=True, motor_velocity=0.5, motor_max=100.0,
+                           use_limits=True, lower=-0.3, upper=0.3)
+    _, solver, state = build([box("Cart", (0.1, 0.1, 0.1), (0.0, 0.0, 1.0))], [slider])
+    xs = []
+    run(solver, state, int(0.3 / DT), each=lambda f, s: xs.append(s.body_x[0].copy()))
+    speed = (xs[-1][0] - xs[-3][0]) / (2 * DT)
+    assert speed == pytest.approx(0.5, rel=0.02)
+    run(solver, state, int(1.5 / DT), each=lambda f, s: xs.append(s.body_x[0].copy()))
+    xs = np.array(xs)
+    assert xs[:, 0].max() < 0.3 + 1e-3 and xs[-1, 0] == pytest.approx(0.3, abs=1e-2)
+    assert np.abs(xs[:, 1:] - (0.0, 1.0)).max() < 1e-6
+
+
+def test_a_cone_twist_joint_keeps_the_swing_within_its_cone():
+    """A pendulum on a cone-twist joint with a 0.3 rad cone, let go 1 rad out: it swings no
+    further than the cone (to 0.01 rad)."""
+    cone = JointSettings("Shoulder", "CONE_TWIST", 0, matrix=joint_frame((0.0, 0.0, 0.0),
+                                                                        (0.0, 0.0, -1.0)),
+                         cone=0.3)
+    theta = 0.3
+    _, solver, state = build([box("Arm", (0.05, 0.05, 0.3), (0.0, 0.0, -0.3), mass=1.0,
+                                  velocity=(3.0, 0.0, 0.0))], [cone])
+    swing = []
+    run(solver, state, int(2 / DT), each=lambda f, s: swing.append(math.acos(np.clip(
+        quat.to_matrix(s.body_q)[0][2, 2], -1.0, 1.0))))
+    assert max(swing) < theta + 0.01
+    assert max(swing) > theta - 0.05  # it reached the cone
+
+
+def test_a_joint_between_overlapping_bodies_keeps_them_from_pushing_apart():
+    """Two boxes overlapping by 10 cm joined by a ball joint (collisions between them off by
+    default) float in zero gravity without moving."""
+    bodies = [box("A", (0.2, 0.2, 0.2), (0.0, 0.0, 0.0)), box("B", (0.2, 0.2, 0.2),
+                                                               (0.3, 0.0, 0.0))]
+    _, solver, state = build(bodies, [JointSettings("Pin", "BALL", 0, 1,
+                                                    matrix=joint_frame((0.15, 0.0, 0.0)))])
+    run(solver, state, 24, gravity=(0.0, 0.0, 0.0))
+    assert np.abs(state.body_P).max() < 1e-9
+
+
+def test_a_body_hangs_from_an_animated_frame_and_follows_it():
+    """A ball joint's frame side moves 1 m along x in a second (the caller's path, frame by
+    frame): the box hanging from it follows, its pivot on the frame to 1e-6 m."""
+    _, solver, state = build([box("Box", (0.1, 0.1, 0.1), (0.0, 0.0, 1.0))],
+                             [JointSettings("Hook", "BALL", 0, matrix=joint_frame(
+                                 (0.0, 0.0, 1.1)))])
+
+    def paths(f):
+        out = []
+        for k in range(3):
+            m = joint_frame((min(1.0, (f + k / 2) * DT), 0.0, 1.1))
+            out.append(m)
+        return {0: np.array(out)}
+    run(solver, state, int(1.5 / DT), paths=paths)
+    pivot = state.body_x[0] + quat.to_matrix(state.body_q)[0] @ np.array([0.0, 0.0, 0.1])
+    assert np.abs(pivot - (1.0, 0.0, 1.1)).max() < 1e-6
+
+
+def test_joint_settings_errors_name_the_joint_and_the_value():
+    with pytest.raises(PhysanimError, match='"Hinge".*lower limit 1 is above the upper 0'):
+        JointSettings("Hinge", "HINGE", 0, use_limits=True, lower=1.0, upper=0.0)
+    with pytest.raises(PhysanimError, match='"J".*unknown type'):
+        JointSettings("J", "ROPE", 0)
+    with pytest.raises(PhysanimError, match="itself"):
+        JointSettings("J", "BALL", 1, 1)
+    with pytest.raises(PhysanimError, match="names body 3 of 1"):
+        build([box("A", (0.1,) * 3, (0.0, 0.0, 0.0))], [JointSettings("J", "BALL", 0, 3)])
+    assert FRAME == -1
+
+
+def test_a_chain_resting_on_the_ground_sleeps():
+    """A 5-link chain lying on the ground comes to rest and falls asleep with its joints."""
+    links = [box(f"L{i}", (0.15, 0.03, 0.03), (0.3 * i, 0.0, 0.03)) for i in range(5)]
+    joints = [JointSettings(f"J{i}", "BALL", i - 1, i, matrix=joint_frame((0.3 * i - 0.15,
+                                                                           0.0, 0.03)))
+              for i in range(1, 5)]
+    _, solver, state = build(links, joints)
+    run(solver, state, 48, colliders=[ground()])
+    assert state.body_asleep.all()
