@@ -55,6 +55,7 @@ class BakeJob:
         self.particles: ParticleBake | None = None
         self.meshes: list[springs.SpringMeshBake] = []
         self.rigid: rigid.RigidBake | None = None
+        self.breaks: list[str] = []  # which constraints broke, at which frames
         from . import results
 
         results.suspend_refresh(self.scene)  # our own frame changes must not reload old bakes
@@ -116,7 +117,8 @@ class BakeJob:
     def _prepare_rigid(self, depsgraph) -> None:
         """The rigid bodies step first: the others may meet them within the same frame."""
         self._unprepared += 1
-        bake = rigid.RigidBake(self.scene, self.roles.rigid_bodies, self.rigid_hash)
+        bake = rigid.RigidBake(self.scene, self.roles.rigid_bodies, self.rigid_hash,
+                               self.roles.constraints)
         self.rigid = bake
         with self._system(bake):
             bake.prepare(depsgraph, self.frame_start, self.colliders)
@@ -311,6 +313,7 @@ class BakeJob:
                                   self.frame_end, self.rigid.simulated)
             for ob in self.rigid.objects:
                 ob.physanim.rigid_body.bake_hash = self.rigid_hash
+            self.breaks = self.rigid.record_breaks()
             self.rigid_suspended.clear()
         for ob in emitters:
             results.attach(context, self.scene, ob,
@@ -337,10 +340,14 @@ class BakeJob:
         if self.rigid is not None:
             count = len(self.rigid.objects)
             parts.append(f"{count} rigid bod{'y' if count == 1 else 'ies'}")
+            if self.rigid.constraints:
+                parts.append(f"{len(self.rigid.constraints)} constraint(s)")
         births = (f": {stats['births']:,} births, peak {stats['peak']:,} alive" if emitters
                   else "")
         info = (f"baked {', '.join(parts)}, frames {self.frame_start}-{self.frame_end}"
                 f"{births}, {took:.2f} s")
+        if self.breaks:
+            info += "; " + "; ".join(self.breaks)
         self.settings.bake_info = info
         return info
 

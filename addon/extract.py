@@ -29,6 +29,7 @@ class Roles:
     forces: list = field(default_factory=list)
     spring_meshes: list = field(default_factory=list)
     rigid_bodies: list = field(default_factory=list)
+    constraints: list = field(default_factory=list)  # joining rigid bodies (baked with them)
 
     def __bool__(self) -> bool:
         """Whether anything bakes."""
@@ -58,7 +59,8 @@ def gather(scene, only: set[str] | None = None) -> Roles:
         rigid = rigid if any(o.name in only for o in rigid) else []
     return Roles(emitters,
                  [o for o in objects if o.physanim.collider.enabled],
-                 [o for o in objects if o.physanim.force.enabled], meshes, rigid)
+                 [o for o in objects if o.physanim.force.enabled], meshes, rigid,
+                 [o for o in objects if o.physanim.constraint.enabled] if rigid else [])
 
 
 def emitter_chain(ob) -> list:

@@ -26,7 +26,8 @@ def _rna_dump(pg, prefix: str = "", animated: frozenset = frozenset()) -> dict:
     out = {}
     for prop in pg.bl_rna.properties:
         key = prop.identifier
-        if key in ("rna_type", "result", "bake_hash", "bake_info", "enabled", *RIGID_BAKE_PROPS):
+        if key in ("rna_type", "result", "bake_hash", "bake_info", "enabled", "broken_frame",
+                   *RIGID_BAKE_PROPS):
             continue
         path = f"{prefix}{key}"
         if path in animated:
@@ -175,7 +176,7 @@ def scene_hash(hashes: list[str]) -> str:
 
 def rigid_hash(scene, objects: list, roles: Roles | None = None) -> str:
     """Digest of what the rigid bodies' bake depends on: scene settings, every rigid body, every
-    collider (they all push each other, so one hash covers them all)."""
+    collider, every constraint (they all push each other, so one hash covers them all)."""
     roles = roles if roles is not None else gather(scene)
     h = hashlib.sha256()
     settings = _rna_dump(scene.physanim)
@@ -183,5 +184,11 @@ def rigid_hash(scene, objects: list, roles: Roles | None = None) -> str:
                     anim=_animation_dump(scene), role="rigid_body")
     records = [_object_record(o, "rigid_body") for o in objects]
     records += [_object_record(o, "collider") for o in roles.colliders]
+    names = {o.name for o in objects}
+    for c in roles.constraints:  # the joints, and the animated objects holding them
+        records.append(_object_record(c, "constraint"))
+        holder = c.physanim.constraint.object2
+        if holder is not None and holder.name not in names:
+            records.append(_object_record(holder, None))
     h.update(json.dumps([settings, records], sort_keys=True).encode())
     return h.hexdigest()

@@ -77,6 +77,7 @@ class PHYSANIM_PT_object(_PhysicsPanel, bpy.types.Panel):
         if context.object.type == 'MESH':
             row.prop(p.spring_mesh, "enabled", toggle=True, icon='MOD_CLOTH')
             row.prop(p.rigid_body, "enabled", toggle=True, icon='RIGID_BODY')
+        row.prop(p.constraint, "enabled", toggle=True, icon='CONSTRAINT')
         draw_bake_buttons(self.layout.box(), context.scene)
 
 

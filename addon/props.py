@@ -334,6 +334,79 @@ class PHYSANIM_PG_rigid_body(bpy.types.PropertyGroup):
     bake_hash: StringProperty(name="Bake Hash", options={'HIDDEN'})
 
 
+CONSTRAINT_TYPE_ITEMS = [
+    ('FIXED', "Fixed", "The two move as one (welded)"),
+    ('BALL', "Ball", "Held at the pivot (this object's origin), free to turn about it"),
+    ('HINGE', "Hinge", "Turns about this object's Z axis through its origin only (a door)"),
+    ('SLIDER', "Slider", "Slides along this object's Z axis only, without turning (a drawer)"),
+    ('CONE_TWIST', "Cone Twist", "Held at the pivot; this object's Z axis on the second object "
+     "stays within a cone around it on the first (a shoulder, a rope's link)"),
+]
+
+
+def _is_rigid_body(self, ob) -> bool:
+    return ob.physanim.rigid_body.enabled
+
+
+class PHYSANIM_PG_constraint(bpy.types.PropertyGroup):
+    """A joint between two rigid bodies, or a rigid body and another object (which holds it
+    where it is animated) or the world, placed by this object's origin and axes at the first
+    frame (as Blender's rigid body constraints)."""
+
+    enabled: BoolProperty(name="Constraint", options=STATIC,
+                          description="Join two objects at this object's origin")
+    type: EnumProperty(name="Type", items=CONSTRAINT_TYPE_ITEMS, default='BALL', options=STATIC)
+    object1: PointerProperty(name="First", type=bpy.types.Object, poll=_is_rigid_body,
+                             options=STATIC, description="The rigid body held")
+    object2: PointerProperty(name="Second", type=bpy.types.Object, options=STATIC,
+                             description="What holds it: a rigid body, any other object "
+                                         "(which holds it where it is animated to be), or "
+                                         "nothing (the world)")
+    use_limits: BoolProperty(name="Limits", options=STATIC,
+                             description="Limit the hinge's angle, the slider's distance or "
+                                         "the cone twist's twist")
+    angle_lower: FloatProperty(name="Lower", min=-3.14159, max=3.14159, default=-0.785398,
+                               unit='ROTATION', options=STATIC,
+                               description="Smallest angle of the first object about Z "
+                                           "(hinge) or twist (cone twist)")
+    angle_upper: FloatProperty(name="Upper", min=-3.14159, max=3.14159, default=0.785398,
+                               unit='ROTATION', options=STATIC,
+                               description="Largest angle")
+    distance_lower: FloatProperty(name="Lower", min=-1.0e5, max=1.0e5, default=-1.0,
+                                  unit='LENGTH', options=STATIC,
+                                  description="Smallest distance along Z (slider)")
+    distance_upper: FloatProperty(name="Upper", min=-1.0e5, max=1.0e5, default=1.0,
+                                  unit='LENGTH', options=STATIC,
+                                  description="Largest distance along Z (slider)")
+    cone_angle: FloatProperty(name="Cone", min=0.001, max=3.1, default=0.785398,
+                              unit='ROTATION', options=STATIC,
+                              description="Largest angle between the two objects' Z axes")
+    use_motor: BoolProperty(name="Motor", options=STATIC,
+                            description="Drive the hinge or slider at a speed")
+    motor_velocity: FloatProperty(name="Speed", min=-1.0e4, max=1.0e4, default=1.0,
+                                  options=STATIC, description="rad/s (hinge) or m/s (slider) of the first "
+                                              "object relative to the second")
+    motor_max: FloatProperty(name="Max Torque / Force", min=0.0, max=1.0e9, default=10.0,
+                             options=STATIC, description="The motor's strength: N m (hinge) or N (slider)")
+    use_spring: BoolProperty(name="Spring", options=STATIC,
+                             description="A damped spring pulls the hinge or slider back to "
+                                         "where it started")
+    spring_stiffness: FloatProperty(name="Stiffness", min=0.0, max=1.0e9, default=10.0,
+                                    options=STATIC, description="N m/rad (hinge) or N/m (slider)")
+    spring_damping: FloatProperty(name="Damping", min=0.0, max=1.0e9, default=0.5,
+                                  options=STATIC, description="N m s/rad (hinge) or N s/m (slider)")
+    use_breaking: BoolProperty(name="Breakable", options=STATIC,
+                               description="Let go when the force it carries exceeds a "
+                                           "threshold")
+    break_force: FloatProperty(name="Breaking Force", min=1.0e-6, max=1.0e12, default=100.0,
+                               unit='NONE', options=STATIC, description="Newtons")
+    disable_collisions: BoolProperty(name="Disable Collisions", default=True, options=STATIC,
+                                     description="The two objects do not collide with each "
+                                                 "other")
+    broken_frame: IntProperty(name="Broke at Frame", default=-1, options={'HIDDEN'},
+                              description="Set by the bake: the frame it broke at (-1: held)")
+
+
 class PHYSANIM_PG_result(bpy.types.PropertyGroup):
     """Set on the points object a bake makes: where its per-frame cache lives."""
 
@@ -350,6 +423,7 @@ class PHYSANIM_PG_object(bpy.types.PropertyGroup):
     force: PointerProperty(type=PHYSANIM_PG_force)
     spring_mesh: PointerProperty(type=PHYSANIM_PG_spring_mesh)
     rigid_body: PointerProperty(type=PHYSANIM_PG_rigid_body)
+    constraint: PointerProperty(type=PHYSANIM_PG_constraint)
     result: PointerProperty(type=PHYSANIM_PG_result)
 
 
@@ -384,7 +458,7 @@ class PHYSANIM_PG_scene(bpy.types.PropertyGroup):
 
 CLASSES = (PHYSANIM_PG_stop, PHYSANIM_PG_emitter, PHYSANIM_PG_collider, PHYSANIM_PG_force,
            PHYSANIM_PG_virtual, PHYSANIM_PG_spring_mesh, PHYSANIM_PG_rigid_body,
-           PHYSANIM_PG_result, PHYSANIM_PG_object,
+           PHYSANIM_PG_constraint, PHYSANIM_PG_result, PHYSANIM_PG_object,
            PHYSANIM_PG_scene)
 
 

@@ -17,6 +17,7 @@ from ..core.errors import PhysanimError
 from ..core.rigid import quaternion as quat
 from ..core.rigid.mass import (box_mass, capsule_mass, polyhedron_mass, sphere_mass,
                                with_override)
+from ..core.rigid.joints import FRAME, JointSettings
 from ..core.rigid.model import RigidBodyBuilder, RigidBodySettings
 from ..core.rigid.solver import RigidBodySolver, RigidBodySystem, RigidPaths
 from ..core.transforms import decompose
@@ -153,13 +154,47 @@ def body_settings(ob, depsgraph, frame: int) -> RigidBodySettings:
         raise PhysanimError(str(exc), obj=ob.name, frame=frame, kind="rigid body") from exc
 
 
-class RigidBake:
-    """All rigid bodies of a bake, simulated as one system; one cache stream for all."""
+LIMITED = {"HINGE": "angle", "CONE_TWIST": "angle", "SLIDER": "distance"}
 
-    def __init__(self, scene, objects: list, inputs_hash: str):
+
+def joint_settings(ob, index: dict, frame: int) -> JointSettings:
+    """Core settings of a constraint object (its origin and axes place the joint) joining the
+    rigid bodies ``index`` (name -> body index)."""
+    p = ob.physanim.constraint
+
+    def fail(message: str):
+        raise PhysanimError(message, obj=ob.name, frame=frame, kind="constraint")
+
+    if p.object1 is None or p.object1.name not in index:
+        fail("its First object must be a rigid body — choose one in the Constraint panel")
+    if p.object2 is not None and p.object2 == p.object1:
+        fail("its First and Second objects are the same — choose two different objects")
+    body_b = index.get(p.object2.name, FRAME) if p.object2 is not None else FRAME
+    limits = LIMITED.get(p.type)
+    try:
+        return JointSettings(
+            ob.name, p.type, index[p.object1.name], body_b,
+            world_matrix(ob, frame, "constraint"), use_limits=p.use_limits and limits is not None,
+            lower=getattr(p, f"{limits}_lower") if limits else 0.0,
+            upper=getattr(p, f"{limits}_upper") if limits else 0.0, cone=p.cone_angle,
+            use_motor=p.use_motor, motor_velocity=p.motor_velocity, motor_max=p.motor_max,
+            use_spring=p.use_spring, stiffness=p.spring_stiffness, damping=p.spring_damping,
+            break_force=p.break_force if p.use_breaking else float("inf"),
+            disable_collisions=p.disable_collisions)
+    except PhysanimError as exc:
+        raise PhysanimError(exc.detail, obj=ob.name, frame=frame, kind="constraint") from exc
+
+
+class RigidBake:
+    """All rigid bodies of a bake and the constraints joining them, simulated as one system;
+    one cache stream for all."""
+
+    def __init__(self, scene, objects: list, inputs_hash: str, constraints: list = ()):
         self.scene, self.objects, self.inputs_hash = scene, objects, inputs_hash
+        self.constraints = list(constraints)
         self.writer = CacheWriter(rigid_cache_dir(scene))
         self.system: RigidBodySystem | None = None
+        self.holders: dict = {}  # joint -> (holding object, the joint's frame in it)
 
     @property
     def label(self) -> str:
@@ -170,6 +205,13 @@ class RigidBake:
         builder = RigidBodyBuilder()
         for ob in self.objects:
             builder.add_body(body_settings(ob, depsgraph, frame))
+        index = {ob.name: i for i, ob in enumerate(self.objects)}
+        for ob in self.constraints:
+            j = builder.add_joint(joint_settings(ob, index, frame))
+            holder = ob.physanim.constraint.object2
+            if holder is not None and holder.name not in index:  # an animated object holds it
+                self.holders[j] = (holder, np.linalg.inv(world_matrix(holder, frame, "constraint"))
+                                   @ world_matrix(ob, frame, "constraint"))
         self.model = builder.finalize()
         self.kinematic = self._animated()
         self.simulated = set(range(len(self.objects))) - set(self.kinematic)
@@ -185,21 +227,39 @@ class RigidBake:
         return [i for i, ob in enumerate(self.objects) if ob.physanim.rigid_body.kinematic]
 
     def kinematic_matrices(self, frame: float) -> dict:
-        """The animated bodies' world matrices at ``frame`` (the scene is there)."""
-        return {i: world_matrix(self.objects[i], frame, "rigid body") for i in self.kinematic}
+        """The world matrices at ``frame`` (the scene is there) of the animated bodies (by
+        body index) and of the joints' frames held by animated objects (by ("joint", index))."""
+        out = {i: world_matrix(self.objects[i], frame, "rigid body") for i in self.kinematic}
+        for j, (holder, local) in self.holders.items():
+            out["joint", j] = world_matrix(holder, frame, "constraint") @ local
+        return out
 
     def begin(self, frame: int, between: list[dict]) -> RigidPaths:
-        """The animated bodies' paths over the interval to ``frame`` (the scene is there;
-        ``between``: their matrices at the sub-frames, read by the bake). A body is animated
-        over an interval when its switch is on at the interval's start; the switch read at
-        ``frame`` decides the next interval."""
+        """The animated bodies' and held joints' paths over the interval to ``frame`` (the
+        scene is there; ``between``: their matrices at the sub-frames, read by the bake). A
+        body is animated over an interval when its switch is on at the interval's start; the
+        switch read at ``frame`` decides the next interval."""
         now = self.kinematic_matrices(frame)
-        paths = {i: np.stack([self._last[i], *(b[i] for b in between), now[i]])
-                 for i in self.kinematic}
+
+        def path(key):
+            return np.stack([self._last[key], *(b[key] for b in between), now[key]])
+        paths = {i: path(i) for i in self.kinematic}
+        joints = {j: path(("joint", j)) for j in self.holders}
         self.kinematic = self._animated()
         self.simulated |= set(range(len(self.objects))) - set(self.kinematic)
         self._last = {**now, **self.kinematic_matrices(frame)}
-        return RigidPaths(paths)
+        return RigidPaths(paths, joints)
+
+    def record_breaks(self) -> list[str]:
+        """Each constraint's frame of breaking (-1: it held) onto its object; the lines that
+        say which broke."""
+        broken = self.system.state.joints.joint_broken_frame
+        lines = []
+        for ob, frame in zip(self.constraints, broken.tolist()):  # frame: the interval's start
+            ob.physanim.constraint.broken_frame = frame + 1 if frame >= 0 else -1
+            if frame >= 0:
+                lines.append(f'constraint "{ob.name}" broke at frame {frame + 1}')
+        return lines
 
     def write_frame(self, frame: int) -> None:
         state = self.system.state

@@ -93,5 +93,65 @@ class PHYSANIM_PT_rigid_body(_PhysicsPanel, bpy.types.Panel):
             col.label(text="Inertia: " + ", ".join(f"{v:.4g}" for v in moments) + " kg m²")
 
 
-CLASSES = (PHYSANIM_PT_rigid_body,)  # registered by panels.py, after its parent panel
+class PHYSANIM_PT_constraint(_PhysicsPanel, bpy.types.Panel):
+    """A joint placed at this object's origin and axes, as Blender's rigid body constraints."""
+
+    bl_label = "Constraint"
+    bl_parent_id = "PHYSANIM_PT_object"
+
+    @classmethod
+    def poll(cls, context):
+        ob = context.object
+        return ob is not None and ob.physanim.constraint.enabled
+
+    def draw(self, context):
+        p = context.object.physanim.constraint
+        layout = self.layout
+        layout.use_property_split = True
+        layout.prop(p, "type")
+        col = layout.column(align=True)
+        col.prop(p, "object1")
+        col.prop(p, "object2")
+        if p.object1 is None:
+            layout.label(text="Choose the rigid body it holds (First)", icon='ERROR')
+        elif p.object2 is None:
+            layout.label(text="Held by the world", icon='INFO')
+        elif not p.object2.physanim.rigid_body.enabled:
+            layout.label(text=f"Held by \"{p.object2.name}\" where it is animated", icon='INFO')
+        layout.prop(p, "disable_collisions")
+        if p.type in ('HINGE', 'SLIDER', 'CONE_TWIST'):
+            self._limits(layout, p)
+        if p.type in ('HINGE', 'SLIDER'):
+            col = layout.column(align=True)
+            col.prop(p, "use_motor")
+            if p.use_motor:
+                col.prop(p, "motor_velocity")
+                col.prop(p, "motor_max")
+            col = layout.column(align=True)
+            col.prop(p, "use_spring")
+            if p.use_spring:
+                col.prop(p, "spring_stiffness")
+                col.prop(p, "spring_damping")
+        col = layout.column(align=True)
+        col.prop(p, "use_breaking")
+        if p.use_breaking:
+            col.prop(p, "break_force")
+        if p.broken_frame >= 0:
+            layout.label(text=f"Broke at frame {p.broken_frame} in the last bake",
+                         icon='UNLINKED')
+
+    @staticmethod
+    def _limits(layout, p) -> None:
+        col = layout.column(align=True)
+        if p.type == 'CONE_TWIST':
+            col.prop(p, "cone_angle")
+        col.prop(p, "use_limits", text="Twist Limits" if p.type == 'CONE_TWIST' else "Limits")
+        if p.use_limits:
+            kind = "distance" if p.type == 'SLIDER' else "angle"
+            col.prop(p, f"{kind}_lower")
+            col.prop(p, f"{kind}_upper")
+
+
+CLASSES = (PHYSANIM_PT_rigid_body, PHYSANIM_PT_constraint)  # registered by panels.py, after
+# their parent panel
 

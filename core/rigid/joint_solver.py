@@ -8,13 +8,13 @@ rows (:mod:`physanim.core.rigid.contact_solver`): a linear row along u is
 and its reaction act at one point: angular momentum is conserved); an angular row about u is
 [0, -u, 0, u].
 
-A pass (:func:`solve`) goes colour by colour (no dynamic body twice in a colour): per joint,
-the clamped rows one after another (a limit pushes only, like a contact; a motor is bounded by
-its torque or force; a spring is Catto's soft constraint, exactly an implicit damped spring),
-then the equality rows together, as one block (their coupling inverted once per sub-step: a
-joint's directions do not fight each other). The soft step (Box2D v3's) runs it twice per
-sub-step: with position feedback (a stiff, damped spring of JOINT_HERTZ pulling drift back),
-then, after the positions moved, without it (relax).
+A pass (:func:`solve`) solves every row of every joint together — joints sharing a body
+couple, so a chain is solved as a whole, not link by link — by conjugate gradients, with the
+clamped rows in or out as they must be: a limit pushes only, like a contact; a motor is
+bounded by its torque or force; a spring is Catto's soft constraint (exactly an implicit
+damped spring). The soft step (Box2D v3's) runs it twice per sub-step: with position feedback
+(JOINT_BIAS of the drift taken back), then, after the positions moved, without it (relax);
+between the two the bodies are put back on their joints (:func:`displacement`).
 """
 from __future__ import annotations
 
@@ -28,9 +28,9 @@ JOINT_BIAS = 0.2  # fraction of a joint's drift taken back per sub-step (with po
 MAX_CORRECTION = 4.0  # [m/s], [rad/s] fastest drift correction
 CG_TOLERANCE = 1e-8  # relative residual of the joints' equality solve
 CG_ITERATIONS_PER_JOINT = 4
+ACTIVE_SET_STEPS = 4  # solves per pass as limits let go or take part and motors saturate
 EQ = 6  # equality rows per joint
 NONE, LIMIT, MOTOR, SPRING = range(4)  # what a clamped row is
-LOWER_ROW, UPPER_ROW, MOTOR_ROW, SPRING_ROW = range(4)  # hinges' and sliders' clamped rows
 # equality rows each kind holds: 3 pivot directions (the joint's x, y, z), 3 turning ones
 _HOLDS = np.array([[1, 1, 1, 1, 1, 1],  # FIXED
                    [1, 1, 1, 0, 0, 0],  # BALL
@@ -41,11 +41,11 @@ _HOLDS = np.array([[1, 1, 1, 1, 1, 1],  # FIXED
 
 @dataclass
 class JointRows:
-    """The rows of the joints being solved (ordered by colour), at the current poses.
+    """The rows of the joints being solved, at the current poses.
 
     Attributes:
         joint: (J,) model index of each. ab: (J, 2) rows of its two sides in the velocity
-            array. colours: [(start, stop)] slices with no dynamic body twice.
+            array.
         j, mj: (J, ROWS, 12) rows and the same times the inverse masses.
         holds: (J, EQ) active equality rows. block: (J, EQ, EQ) the inverse of their coupling.
         c: (J, ROWS) position errors: equality rows' drift [m], [rad]; a limit's gap (>= 0:
@@ -58,7 +58,6 @@ class JointRows:
 
     joint: np.ndarray
     ab: np.ndarray
-    colours: list
     j: np.ndarray
     mj: np.ndarray
     holds: np.ndarray
@@ -75,9 +74,9 @@ class JointRows:
         return len(self.joint)
 
 
-def rows(model: JointModel, joints: np.ndarray, ab: np.ndarray, colours: list, x: np.ndarray,
+def rows(model: JointModel, joints: np.ndarray, ab: np.ndarray, x: np.ndarray,
          rot: np.ndarray, inv_mass: np.ndarray, inv_inertia: np.ndarray, h: float) -> JointRows:
-    """The rows of ``joints`` (model indices, in colour order) whose sides are the rows ``ab``
+    """The rows of ``joints`` (model indices) whose sides are the rows ``ab``
     (J, 2) of arrays over every row: centre x (N, 3), rotation rot (N, 3, 3) (a FRAME side's
     row holds the joint's world frame itself), inverse mass (N,) and world inverse inertia
     (N, 3, 3) (0 for rows impulses do not move); h [s] the sub-step."""
@@ -126,7 +125,7 @@ def rows(model: JointModel, joints: np.ndarray, ab: np.ndarray, colours: list, x
     coupling = np.einsum("jri,jsi->jrs", j[:, :EQ], mj[:, :EQ])
     block = _pinv(np.where(holds[:, :, None] & holds[:, None, :], coupling, np.eye(EQ))) * \
         (holds[:, :, None] & holds[:, None, :])
-    return JointRows(joints, ab, colours, j, mj, holds, block, c, mass, *clamped[2:])
+    return JointRows(joints, ab, j, mj, holds, block, c, mass, *clamped[2:])
 
 
 def _clamped(model, joints, kind, wa, wb, axis_a, axis_b, swing, gap, ra, rb, h):
@@ -237,32 +236,83 @@ def _apply(vel: np.ndarray, r: JointRows, impulse: np.ndarray, rows: slice) -> N
 
 
 def solve(vel: np.ndarray, r: JointRows, impulse: np.ndarray, h: float, use_bias: bool) -> None:
-    """One pass over the joints (module docstring); ``impulse`` (J, ROWS) accumulated, updated
-    in place. The clamped rows colour by colour, then every joint's equality rows at once."""
-    for s, e in r.colours:
-        if not (r.kind[s:e] != NONE).any():
-            continue
-        ab = r.ab[s:e]
-        local = vel[ab].reshape(e - s, 12)
-        for k in (MOTOR_ROW, SPRING_ROW, LOWER_ROW, UPPER_ROW):  # limits last: they hold
-            _clamped_row(local, r, impulse, s, e, k, h, use_bias)
-        vel[ab[:, 0]] = local[:, :6]
-        vel[ab[:, 1]] = local[:, 6:]
-    local = vel[r.ab].reshape(len(r), 12)
-    bias = np.clip(JOINT_BIAS / h * r.c[:, :EQ], -MAX_CORRECTION, MAX_CORRECTION) if use_bias \
-        else 0.0
-    rel = np.einsum("jri,ji->jr", r.j[:, :EQ], local)
-    delta = _conjugate_gradient(vel, r, -(rel + bias) * r.holds)
-    impulse[:, :EQ] += delta
-    _apply(vel, r, delta, slice(0, EQ))
+    """One pass over every joint together; ``impulse`` (J, ROWS) accumulated, updated in place.
+
+    Each row's velocity target: the equality rows' drift taken back (JOINT_BIAS of it per
+    sub-step, with position feedback) or held; a limit's gap closed within the sub-step and
+    no further (a passed one pushed back like a drift); a motor's speed; a spring's soft
+    equation. They are solved together (conjugate gradients on J M^-1 J^T plus the springs'
+    softness), then the clamped rows are checked — a limit that would pull lets go, a motor
+    beyond its strength pushes with all of it, a limit left approaching takes part — and the
+    others solved again, at most ACTIVE_SET_STEPS times."""
+    n = len(r)
+    if not n:
+        return
+    gap = r.c[:, EQ:]
+    passed = np.maximum(JOINT_BIAS / h * gap, -MAX_CORRECTION) if use_bias else 0.0 * gap
+    target = np.zeros((n, ROWS))
+    if use_bias:
+        target[:, :EQ] = -np.clip(JOINT_BIAS / h * r.c[:, :EQ], -MAX_CORRECTION, MAX_CORRECTION)
+    limit, motor, spring = r.kind == LIMIT, r.kind == MOTOR, r.kind == SPRING
+    target[:, EQ:] = np.select([limit, motor, spring],
+                               [-np.where(gap > 0.0, gap / h, passed), r.target,
+                                -r.beta / h * gap], 0.0)
+    soft = np.concatenate([np.zeros((n, EQ)), np.where(spring, r.gamma, 0.0)], axis=1)
+    rel0 = np.einsum("jri,ji->jr", r.j, vel[r.ab].reshape(n, 12))
+    bound = np.concatenate([np.zeros((n, EQ)), r.bound], axis=1)
+    is_limit = np.concatenate([np.zeros((n, EQ), bool), limit], axis=1)
+    is_motor = np.concatenate([np.zeros((n, EQ), bool), motor], axis=1)
+    active = np.concatenate([r.holds, motor | spring | (limit & (
+        (impulse[:, EQ:] > 0.0) | (rel0[:, EQ:] < target[:, EQ:])))], axis=1)
+    let_go = np.zeros((n, ROWS), bool)  # limits that would pull: their impulse goes to 0
+    saturated = np.zeros((n, ROWS), bool)  # motors beyond their strength: at it
+    held = np.zeros((n, ROWS))  # the impulse change of rows at a bound
+    # a motor driving into a limit on its own axis pushes with all its strength (the two rows
+    # are one direction: solved together they would contradict each other)
+    push = np.sign(target - rel0) * bound - impulse
+    delta = np.zeros((n, ROWS))
+    for _ in range(ACTIVE_SET_STEPS):
+        stopped = (is_limit & active & ~let_go).any(axis=1)
+        into = is_motor & stopped[:, None]
+        fixed = let_go | saturated | into
+        known = np.where(into, push, np.where(fixed, held, 0.0))
+        free = active & ~fixed
+        trial = vel.copy()
+        _apply(trial, r, known, slice(None))
+        rel = np.einsum("jri,ji->jr", r.j, trial[r.ab].reshape(n, 12))
+        b = target - rel - soft * (impulse + known)
+        op = _Rows(r, len(vel), free, soft)
+        delta = known + op.split(_pcg(op, op.pack(b, 0.0)))[0] * free
+        total = impulse + delta
+        after = rel + np.einsum("jri,ji->jr", r.j, _moved(r, len(vel), delta - known))
+        pull = is_limit & free & (total < 0.0)
+        beyond = is_motor & free & (np.abs(total) > bound)
+        approach = is_limit & ~active & (after < target - 1e-9 * (np.abs(target) + 1e-3))
+        if not (pull.any() or beyond.any() or approach.any()):
+            break
+        held = np.where(pull, -impulse, np.where(beyond, np.clip(total, -bound, bound) -
+                                                   impulse, held))
+        let_go |= pull
+        saturated |= beyond
+        active |= approach
+    impulse += delta
+    _apply(vel, r, delta, slice(None))
+
+
+def _moved(r: JointRows, count: int, delta: np.ndarray) -> np.ndarray:
+    """(J, 12) the velocity changes at each joint's two sides of the impulses ``delta``."""
+    move = np.zeros((count, 6))
+    _apply(move, r, delta, slice(None))
+    return move[r.ab].reshape(len(r), 12)
 
 
 def displacement(r: JointRows, count: int, momentum: np.ndarray | None = None,
                  inv_mass: np.ndarray | None = None, group: np.ndarray | None = None
                  ) -> np.ndarray:
     """(count, 6) the smallest moves [dx, dtheta] of the rows (by their inverse masses) that
-    take every joint's equality errors to zero, to first order (post-stabilisation, Cline &
-    Pai: the positions are put back on the joints without touching the momenta).
+    take every joint's equality errors and passed limits to zero, to first order
+    (post-stabilisation, Cline & Pai: the positions are put back on the joints without
+    touching the momenta).
 
     Moving bodies at fixed momenta changes the angular momentum about the origin by
     sum dx x P; a group of free bodies joined only to each other keeps it to first order:
@@ -271,10 +321,10 @@ def displacement(r: JointRows, count: int, momentum: np.ndarray | None = None,
     move = np.zeros((count, 6))
     if not len(r):
         return move
-    passed = (r.kind == LIMIT) & (r.c[:, EQ:] < 0.0)  # limits passed: put back on them too
-    op = _Projection(r, count, momentum, inv_mass, group, passed)
-    x = _pcg(op, op.pack(-r.c, 0.0))
-    return op.moves(x)
+    passed = (r.kind == LIMIT) & (r.c[:, EQ:] < 0.0)
+    use = np.concatenate([r.holds, passed], axis=1)
+    op = _Rows(r, count, use, None, momentum, inv_mass, group)
+    return op.moves(_pcg(op, op.pack(-r.c, 0.0)))
 
 
 def drift(r: JointRows) -> float:
@@ -285,15 +335,15 @@ def drift(r: JointRows) -> float:
     return float(max(np.abs(r.c[:, :EQ]).max(), passed.max()))
 
 
-class _Projection:
-    """The position projection's linear system over the joints' equality rows and, per group
-    of free joined bodies, 3 rows keeping its angular momentum (see :func:`displacement`)."""
+class _Rows:
+    """The linear system J M^-1 J^T x (+ softness) = b over the rows ``use`` (J, ROWS) of every
+    joint, and, per group of free joined bodies, 3 rows keeping its angular momentum (see
+    :func:`displacement`); preconditioned by each joint's equality block and each other row's
+    own effective mass."""
 
-    def __init__(self, r, count, momentum, inv_mass, group, limits=None):
-        self.r, self.count = r, count
-        self.use = np.concatenate([r.holds, np.zeros((len(r), ROWS - EQ), bool)
-                                   if limits is None else limits], axis=1)  # (J, ROWS)
-        self.rows_ = ROWS if limits is not None and limits.any() else EQ
+    def __init__(self, r, count, use, soft=None, momentum=None, inv_mass=None, group=None):
+        self.r, self.count, self.use = r, count, use
+        self.soft = np.zeros(use.shape) if soft is None else soft
         self.rows = np.nonzero(group >= 0)[0] if group is not None else np.zeros(0, np.int64)
         if len(self.rows):
             labels, self.member = np.unique(group[self.rows], return_inverse=True)
@@ -309,32 +359,34 @@ class _Projection:
             self.group_block = _pinv(diag)
         else:
             self.groups = 0
-        self.size = len(r) * self.rows_ + 3 * self.groups
-        self.use = self.use[:, :self.rows_]
+        k = np.where(r.mass > 0.0, 1.0 / np.where(r.mass > 0.0, r.mass, 1.0), 0.0)
+        self.inverse = np.where(k + self.soft > 0.0, 1.0 / np.where(k + self.soft > 0.0,
+                                                                    k + self.soft, 1.0), 0.0)
+        self.size = len(r) * ROWS + 3 * self.groups
 
     def pack(self, joint, group):
         out = np.zeros(self.size)
-        n = len(self.r) * self.rows_
-        out[:n] = (np.asarray(joint)[:, :self.rows_] * self.use).ravel()
+        n = len(self.r) * ROWS
+        out[:n] = (np.asarray(joint) * self.use).ravel()
         out[n:] = np.broadcast_to(group, (3 * self.groups,))
         return out
 
     def split(self, x):
-        n = len(self.r) * self.rows_
-        return x[:n].reshape(len(self.r), self.rows_), x[n:].reshape(self.groups, 3)
+        n = len(self.r) * ROWS
+        return x[:n].reshape(len(self.r), ROWS), x[n:].reshape(self.groups, 3)
 
     def moves(self, x):
         mu, nu = self.split(x)
         move = np.zeros((self.count, 6))
-        _apply(move, self.r, mu * self.use, slice(0, self.rows_))
+        _apply(move, self.r, mu * self.use, slice(None))
         if self.groups:
             move[self.rows, :3] += self.w[:, None] * np.cross(nu[self.member], self.p)
         return move
 
     def __call__(self, x):
         move = self.moves(x)
-        joint = np.einsum("jri,ji->jr", self.r.j[:, :self.rows_],
-                          move[self.r.ab].reshape(len(self.r), 12))
+        joint = np.einsum("jri,ji->jr", self.r.j, move[self.r.ab].reshape(len(self.r), 12)) + \
+            self.soft * self.split(x)[0]
         group = np.zeros((self.groups, 3))
         if self.groups:
             np.add.at(group, self.member, np.cross(self.p, move[self.rows, :3]))
@@ -342,18 +394,19 @@ class _Projection:
 
     def precondition(self, x):
         mu, nu = self.split(x)
-        inner = np.zeros_like(mu)
-        inner[:, :EQ] = np.einsum("jrs,js->jr", self.r.block, mu[:, :EQ])
-        inner[:, EQ:] = self.r.mass[:, EQ:self.rows_] * mu[:, EQ:]
+        inner = self.inverse * mu
+        eq = self.use[:, :EQ] & self.r.holds
+        inner[:, :EQ] = np.where(eq, np.einsum("jrs,js->jr", self.r.block, mu[:, :EQ] * eq),
+                                 inner[:, :EQ])
         out = self.pack(inner, 0.0)
         if self.groups:
-            out[len(self.r) * EQ:] = np.einsum("gij,gj->gi", self.group_block, nu).ravel()
+            out[len(self.r) * ROWS:] = np.einsum("gij,gj->gi", self.group_block, nu).ravel()
         return out
 
 
 def _pcg(op, b: np.ndarray) -> np.ndarray:
     """x with op(x) = b by conjugate gradients preconditioned by op.precondition, to a
-    residual of CG_TOLERANCE of b, at most CG_ITERATIONS_PER_JOINT per unknown block + 10."""
+    residual of CG_TOLERANCE of b, at most CG_ITERATIONS_PER_JOINT per row block + 10."""
     x = np.zeros_like(b)
     norm_b = np.linalg.norm(b)
     if norm_b == 0.0:
@@ -376,39 +429,6 @@ def _pcg(op, b: np.ndarray) -> np.ndarray:
         rz, old = res @ z, rz
         p = z + (rz / old) * p
     return x
-
-
-def _conjugate_gradient(vel: np.ndarray, r: JointRows, b: np.ndarray) -> np.ndarray:
-    """The equality impulses x (J, EQ) with J M^-1 J^T x = b over every joint together (the
-    joints sharing a body couple), preconditioned with each joint's own block."""
-    op = _Projection(r, len(vel), None, None, None)
-    return op.split(_pcg(op, op.pack(np.pad(b, ((0, 0), (0, ROWS - EQ))), 0.0)))[0]
-
-
-def _clamped_row(local, r, impulse, s, e, k, h, use_bias) -> None:
-    """Clamped row k of joints s:e against their velocities ``local`` (updated)."""
-    what = r.kind[s:e, k]
-    if not (what != NONE).any():
-        return
-    row = EQ + k
-    jr, mass, c = r.j[s:e, row], r.mass[s:e, row], r.c[s:e, row]
-    rel = np.einsum("ji,ji->j", jr, local)
-    old = impulse[s:e, row]
-    # a limit not reached lets the gap close within the sub-step, no further; one passed is
-    # pushed back (with position feedback) or held
-    ahead = c > 0.0
-    if use_bias:
-        bias = np.where(ahead, c / h, np.maximum(JOINT_BIAS / h * c, -MAX_CORRECTION))
-    else:
-        bias = np.where(ahead, c / h, 0.0)
-    limit = np.maximum(old - mass * (rel + bias), 0.0)
-    motor = np.clip(old - mass * (rel - r.target[s:e, k]), -r.bound[s:e, k], r.bound[s:e, k])
-    g, b = r.gamma[s:e, k], r.beta[s:e, k]
-    k_row = np.where(mass > 0.0, 1.0 / np.where(mass > 0.0, mass, 1.0), 0.0)
-    spring = old - (rel + b / h * c + g * old) / np.where(k_row + g > 0.0, k_row + g, 1.0)
-    new = np.select([what == LIMIT, what == MOTOR, what == SPRING], [limit, motor, spring], old)
-    impulse[s:e, row] = new
-    local += (new - old)[:, None] * r.mj[s:e, row]
 
 
 def pivot_force(r: JointRows, impulse: np.ndarray, h: float) -> np.ndarray:

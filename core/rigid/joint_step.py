@@ -1,4 +1,4 @@
-"""The rigid bodies' joints within a frame: which hold (ordered by colour), their FRAME
+"""The rigid bodies' joints within a frame: which hold, their FRAME
 sides as extra rows after the bodies' (posed along the paths the caller gives), their rows
 at the current poses, putting the bodies back on them after each move (post-stabilisation)
 and breaking. The solve itself is :mod:`.joint_solver`; the frame's step is the solver's
@@ -15,7 +15,6 @@ from . import dynamics, sleep
 from . import joint_solver as js_
 from . import quaternion as quat
 from .bodies import Posed
-from .contact_set import colour
 from .joints import FRAME
 
 PROJECTIONS = 2  # Newton steps putting bodies back on their joints after each sub-step's move
@@ -24,12 +23,11 @@ PROJECTION_TOLERANCE = 1e-7  # [m], [rad]: joints closer than this are left as t
 
 @dataclass
 class JointStep:
-    """The frame's unbroken joints, ordered by colour. Their FRAME sides are extra rows of
+    """The frame's unbroken joints. Their FRAME sides are extra rows of
     the velocity array after the bodies' (``rows``), posed along ``frames``."""
 
     ids: np.ndarray  # (J,) model indices
     ab: np.ndarray  # (J, 2) rows of their sides
-    colours: list
     impulse: np.ndarray  # (J, ROWS) accumulated impulses
     frames: Posed  # the FRAME sides' paths over the frame
     rows: np.ndarray  # (F,) their rows
@@ -41,7 +39,7 @@ class JointStep:
 
 def begin(model, step, live: np.ndarray, framed: np.ndarray) -> None:
     """The frame's joints: their FRAME sides posed along the given paths (or where they
-    were placed), as rows after the bodies'; ordered by colour."""
+    were placed), as rows after the bodies'."""
     joints = model.joints
     given = step.inputs.joint_paths
     paths = []
@@ -53,23 +51,19 @@ def begin(model, step, live: np.ndarray, framed: np.ndarray) -> None:
     x, q = frames.pose(0.0)
     row_of = np.full(joints.joint_count, -1, np.int64)
     row_of[framed] = len(step.bodies) + np.arange(len(framed))
-    step.joints = JointStep(np.zeros(0, np.int64), np.zeros((0, 2), np.int64), [],
+    step.joints = JointStep(np.zeros(0, np.int64), np.zeros((0, 2), np.int64),
                              np.zeros((0, js_.ROWS)), frames, row_of[framed], row_of, x,
                              quat.to_matrix(q))
     order(model, step, live)
 
 def order(model, step, live: np.ndarray) -> None:
-    """Joints ``live`` ordered by colour, their impulses taken from the State."""
+    """The joints ``live`` of the frame, their impulses taken from the State."""
     joints, js = model.joints, step.joints
     a = joints.joint_a[live]
     b = np.where(joints.joint_b[live] == FRAME, js.row_of[live], joints.joint_b[live])
-    dynamic = np.concatenate([step.bodies.dynamic, np.zeros(len(js.rows), bool)])
-    groups = colour(a, b, dynamic)
-    order = np.concatenate(groups) if groups else np.zeros(0, np.int64)
-    ends = np.cumsum([len(g_) for g_ in groups]).tolist()
-    js.ids, js.ab = live[order], np.stack([a[order], b[order]], axis=1)
-    js.colours = list(zip([0] + ends[:-1], ends))
+    js.ids, js.ab = live, np.stack([a, b], axis=1)
     js.impulse = step.state.joints.joint_impulse[js.ids].copy()
+
 
 def pose(model, step, inverse_inertia) -> None:
     """The joints' rows at the bodies' current poses."""
@@ -81,7 +75,7 @@ def pose(model, step, inverse_inertia) -> None:
     f = len(js.rows)
     inv_inertia = inverse_inertia(step, b.q)
     js.solve = js_.rows(
-        model.joints, js.ids, js.ab, js.colours, np.concatenate([b.x, js.x]),
+        model.joints, js.ids, js.ab, np.concatenate([b.x, js.x]),
         np.concatenate([quat.to_matrix(b.q), js.rot]),
         np.concatenate([step.inv_mass, np.zeros(f)]),
         np.concatenate([inv_inertia, np.zeros((f, 3, 3))]), step.h)

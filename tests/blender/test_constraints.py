@@ -1,0 +1,190 @@
+"""Constraints seen from Blender: an object with the Constraint role joins a rigid body to the
+world, another rigid body or an animated object at its origin and axes; the bake keys the
+bodies as they hang, swing and turn, records where a breakable one broke, and marks the bake
+outdated when a constraint changes."""
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+import bpy
+import numpy as np
+import pytest
+from mathutils import Vector
+
+FRAME_START, FRAME_END = 1, 48
+
+
+def _addon(ext, name: str):
+    return sys.modules[f"{ext.__name__}.addon.{name}"]
+
+
+def _scene(tmp_path: Path, end: int = FRAME_END):
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end = FRAME_START, end
+    scene.physanim.frame_start, scene.physanim.frame_end = FRAME_START, end
+    scene.render.fps, scene.render.fps_base = 24, 1.0
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "constraints.blend"))
+    return scene
+
+
+def _cube(location=(0.0, 0.0, 3.0), **props):
+    bpy.ops.mesh.primitive_cube_add(location=location)
+    ob = bpy.context.object
+    ob.physanim.rigid_body.enabled = True
+    for key, value in props.items():
+        setattr(ob.physanim.rigid_body, key, value)
+    return ob
+
+
+def _empty(name: str, location, rotation=(0.0, 0.0, 0.0)):
+    ob = bpy.data.objects.new(name, None)
+    bpy.context.scene.collection.objects.link(ob)
+    ob.location, ob.rotation_euler = location, rotation
+    return ob
+
+
+def _constraint(name, location, first, second=None, kind=None, **props):
+    ob = _empty(name, location)
+    c = ob.physanim.constraint
+    c.enabled = True
+    c.object1 = first
+    if second is not None:
+        c.object2 = second
+    if kind is not None:
+        c.type = kind
+    for key, value in props.items():
+        setattr(c, key, value)
+    return ob
+
+
+def _pivot_track(scene, body, local, frames) -> np.ndarray:
+    """World positions of the body's point ``local`` (its own axes) at ``frames``."""
+    out = []
+    for f in frames:
+        scene.frame_set(f)
+        out.append(np.array(body.matrix_world @ Vector(local)))
+    return np.array(out)
+
+
+def test_a_cube_hangs_and_swings_from_a_default_constraint(physanim_ext, tmp_path):
+    """Enable the role and choose the body (its First object), nothing else: a ball joint to
+    the world at the Empty. The cube, its corner at the Empty, swings down and its corner stays
+    on the Empty."""
+    scene = _scene(tmp_path)
+    cube = _cube(location=(0.0, 0.0, 3.0))
+    _constraint("Hook", (1.0, 1.0, 4.0), cube)
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    frames = range(FRAME_START, FRAME_END + 1)
+    corner = _pivot_track(scene, cube, (1.0, 1.0, 1.0), frames)
+    assert np.abs(corner - (1.0, 1.0, 4.0)).max() < 1e-3
+    centre = _pivot_track(scene, cube, (0.0, 0.0, 0.0), frames)
+    assert centre[:, 2].min() < 4.0 - 0.95 * math.sqrt(3.0)  # it swung down under its corner
+    assert "1 constraint(s)" in scene.physanim.bake_info
+
+
+def test_a_constraint_without_its_body_names_itself_and_keeps_the_previous_bake(physanim_ext,
+                                                                               tmp_path):
+    scene = _scene(tmp_path)
+    cube = _cube()
+    hook = _constraint("Hook", (1.0, 1.0, 4.0), cube)
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    scene.frame_set(24)
+    before = np.array(cube.matrix_world)
+    hook.physanim.constraint.object1 = None
+    with pytest.raises(RuntimeError, match='constraint "Hook".*First object must be a rigid body'):
+        bpy.ops.physanim.bake()
+    scene.frame_set(24)
+    np.testing.assert_allclose(np.array(cube.matrix_world), before, atol=1e-7)
+
+
+def test_a_hinge_motor_turns_a_door_and_a_limit_stops_it(physanim_ext, tmp_path):
+    """A 2 m door hinged at its edge about the vertical (the Empty's Z), its motor at 1 rad/s
+    and limits of +-45 degrees: it turns at the motor's speed and stops at 45 degrees."""
+    scene = _scene(tmp_path)
+    door = _cube(location=(1.0, 0.0, 1.0), angular_damping=0.0)
+    door.scale = (1.0, 0.05, 1.0)
+    _constraint("Hinge", (0.0, 0.0, 1.0), door, kind='HINGE', use_motor=True,
+                motor_velocity=1.0, motor_max=200.0, use_limits=True,
+                angle_lower=-math.pi / 4, angle_upper=math.pi / 4)
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    angles = []
+    for f in range(FRAME_START, FRAME_END + 1):
+        scene.frame_set(f)
+        x = door.matrix_world.to_3x3().col[0]
+        angles.append(math.atan2(x.y, x.x))
+    angles = np.array(angles)
+    speed = (angles[13] - angles[11]) * 12.0  # frames 12 -> 14, 24 fps
+    assert speed == pytest.approx(1.0, rel=0.03)
+    assert angles.max() < math.pi / 4 + 2e-3 and angles[-1] == pytest.approx(math.pi / 4,
+                                                                              abs=1e-2)
+    scene.frame_set(FRAME_END)
+    assert door.matrix_world.to_3x3().col[2].z > 1 - 1e-5  # upright
+
+
+def test_a_breakable_constraint_breaks_and_says_when(physanim_ext, tmp_path):
+    """A 1 kg cube hangs from a ball joint that breaks above 5 N (it carries 9.81 N): it
+    breaks at once, the frame is recorded on the constraint and in the bake's report, and the
+    cube falls."""
+    scene = _scene(tmp_path, end=24)
+    cube = _cube(location=(0.0, 0.0, 3.0))
+    hook = _constraint("Hook", (0.0, 0.0, 4.0), cube, use_breaking=True, break_force=5.0)
+    held = _constraint("Held", (5.0, 0.0, 4.0), _cube(location=(5.0, 0.0, 3.0)))
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    assert hook.physanim.constraint.broken_frame == FRAME_START + 1
+    assert held.physanim.constraint.broken_frame == -1
+    assert 'constraint "Hook" broke at frame 2' in scene.physanim.bake_info
+    scene.frame_set(24)
+    assert cube.matrix_world.translation.z < 3.0 - 0.5 * 9.81 * (23 / 24) ** 2 * 0.95
+
+
+def test_two_bodies_on_a_hinge_swing_together(physanim_ext, tmp_path):
+    """Two cubes joined by a hinge at their shared edge, the first hung from the world: the
+    shared edge's points stay together on both."""
+    scene = _scene(tmp_path)
+    a = _cube(location=(0.0, 0.0, 3.0))
+    b = _cube(location=(2.0, 0.0, 3.0))
+    _constraint("Top", (-1.0, 0.0, 4.0), a)
+    _constraint("Edge", (1.0, 0.0, 4.0), a, b, kind='HINGE')
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    frames = range(FRAME_START, FRAME_END + 1)
+    on_a = _pivot_track(scene, a, (1.0, 0.0, 1.0), frames)
+    on_b = _pivot_track(scene, b, (-1.0, 0.0, 1.0), frames)
+    assert np.abs(on_a - on_b).max() < 1e-3
+    assert np.abs(on_a[-1] - on_a[0]).max() > 0.5  # they swung
+
+
+def test_an_animated_empty_carries_the_body_it_holds(physanim_ext, tmp_path):
+    """A crane hook: the cube hangs from an animated Empty (the constraint's Second object)
+    that moves 3 m along X; the cube's top stays on the hook."""
+    scene = _scene(tmp_path)
+    cube = _cube(location=(0.0, 0.0, 3.0))
+    crane = _empty("Crane", (0.0, 0.0, 4.0))
+    crane.keyframe_insert("location", frame=1)
+    crane.location.x = 3.0
+    crane.keyframe_insert("location", frame=FRAME_END)
+    _constraint("Hook", (0.0, 0.0, 4.0), cube, crane)
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    top = _pivot_track(scene, cube, (0.0, 0.0, 1.0), range(FRAME_START, FRAME_END + 1))
+    hook = []
+    for f in range(FRAME_START, FRAME_END + 1):
+        scene.frame_set(f)
+        hook.append(np.array(crane.matrix_world.translation))
+    assert np.abs(top - np.array(hook)).max() < 1e-3
+    assert top[-1, 0] == pytest.approx(3.0, abs=1e-3)
+
+
+def test_editing_a_constraint_makes_the_bake_outdated(physanim_ext, tmp_path):
+    scene = _scene(tmp_path, end=12)
+    cube = _cube()
+    hook = _constraint("Hook", (1.0, 1.0, 4.0), cube)
+    panels = _addon(physanim_ext, "panels")
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    assert panels.bake_status(scene)[1] == 'CHECKMARK'
+    hook.physanim.constraint.type = 'HINGE'
+    assert "outdated" in panels.bake_status(scene)[0]
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    assert panels.bake_status(scene)[1] == 'CHECKMARK'
+    hook.location.x = 0.5
+    assert "outdated" in panels.bake_status(scene)[0]
