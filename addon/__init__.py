@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import importlib
 
-_MODULES = ("props", "ops", "panels", "results", "cli")
+_MODULES = ("props", "ops", "connect", "panels", "results", "cli")
 
 
 def _modules():

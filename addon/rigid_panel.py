@@ -75,6 +75,7 @@ class PHYSANIM_PT_rigid_body(_PhysicsPanel, bpy.types.Panel):
         col.prop(p, "initial_velocity")
         col.prop(p, "initial_angular_velocity")
         self._mass_overrides(layout, p, shape, props)
+        layout.operator("physanim.connect", icon='CONSTRAINT')
 
     @staticmethod
     def _mass_overrides(layout, p, shape, props) -> None:

@@ -188,3 +188,40 @@ def test_editing_a_constraint_makes_the_bake_outdated(physanim_ext, tmp_path):
     assert panels.bake_status(scene)[1] == 'CHECKMARK'
     hook.location.x = 0.5
     assert "outdated" in panels.bake_status(scene)[0]
+
+
+@pytest.mark.parametrize("pattern, expected", [("CHAIN", 3), ("ACTIVE", 3), ("NEIGHBOURS", 3)])
+def test_connect_selected_builds_chains_stars_and_walls(physanim_ext, tmp_path, pattern, expected):
+    """Four cubes in a row, 2 m apart (touching): a chain joins each to the next from the
+    active one, a star each to the active one, neighbours each touching pair; the pivots of
+    touching cubes lie on their shared faces. The result bakes."""
+    scene = _scene(tmp_path, end=6)
+    cubes = [_cube(location=(2.0 * i, 0.0, 1.0)) for i in range(4)]
+    for ob in bpy.context.view_layer.objects:
+        ob.select_set(ob in cubes)
+    bpy.context.view_layer.objects.active = cubes[0]
+    assert bpy.ops.physanim.connect(type='HINGE', pattern=pattern) == {'FINISHED'}
+    made = [ob for ob in scene.objects if ob.physanim.constraint.enabled]
+    assert len(made) == expected
+    joined = {frozenset((ob.physanim.constraint.object1.name, ob.physanim.constraint.object2.name))
+              for ob in made}
+    names = [c.name for c in cubes]
+    if pattern == "ACTIVE":
+        assert joined == {frozenset((names[0], n)) for n in names[1:]}
+    else:
+        assert joined == {frozenset(p) for p in zip(names[:-1], names[1:])}
+        for ob in made:
+            c = ob.physanim.constraint
+            mid = 0.5 * (np.array(c.object1.location) + np.array(c.object2.location))
+            np.testing.assert_allclose(np.array(ob.location), mid, atol=1e-6)
+    assert all(ob.physanim.constraint.type == 'HINGE' for ob in made)
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+
+
+def test_connect_needs_two_rigid_bodies(physanim_ext, tmp_path):
+    _scene(tmp_path, end=6)
+    cube = _cube()
+    for ob in bpy.context.view_layer.objects:
+        ob.select_set(ob == cube)
+    with pytest.raises(RuntimeError, match="at least two rigid bodies"):
+        bpy.ops.physanim.connect()
