@@ -4,6 +4,7 @@
 # Usage: tools/bench.sh [particles] [--quick] [--count N] [--frames F] [--profile] [--help]
 #        tools/bench.sh cloth [--frames F] [--grid N]      tools/bench.sh broadphase [--quick]
 #        tools/bench.sh rigid [--cubes N] [--frames F] [--stack N]
+#        tools/bench.sh chain [--links N] [--frames F]
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 venv="$("$here/tools/venv.sh" "${PHYSANIM_BLENDER:-4.5}")"
@@ -13,6 +14,7 @@ case "${1:-}" in
   broadphase) shift; exec "$venv/bin/python" bench/broadphase.py "$@" ;;
   collision) shift; exec "$venv/bin/python" bench/collision.py "$@" ;;
   rigid) shift; exec "$venv/bin/python" bench/rigid.py "$@" ;;
+  chain) shift; exec "$venv/bin/python" bench/chain.py "$@" ;;
   particles) shift; exec "$venv/bin/python" bench/particles.py "$@" ;;
   *) exec "$venv/bin/python" bench/particles.py "$@" ;;
 esac

@@ -26,7 +26,7 @@ from .joints import CONE_TWIST, FRAME, HINGE, ROWS, SLIDER, JointModel
 
 JOINT_BIAS = 0.2  # fraction of a joint's drift taken back per sub-step (with position feedback)
 MAX_CORRECTION = 4.0  # [m/s], [rad/s] fastest drift correction
-CG_TOLERANCE = 1e-8  # relative residual of the joints' equality solve
+CG_TOLERANCE = 1e-6  # relative residual of the joints' equality solve
 CG_ITERATIONS_PER_JOINT = 4
 ACTIVE_SET_STEPS = 4  # solves per pass as limits let go or take part and motors saturate
 EQ = 6  # equality rows per joint
