@@ -333,6 +333,7 @@ class RigidBodySolver:
         hard = cs_.Softness.of(min(cs_.STATIC_HERTZ, 0.5 / h), cs_.DAMPING_RATIO, h)
         js = step.joints
         cs_.record_approach(vel, cs, step.rows)
+        cs_.impacts(vel, cs, step.rows, step.separation, h)
         cs_.warm_start(vel, cs, step.rows)
         if js.solve is not None:
             js_.warm_start(vel, js.solve, js.impulse)

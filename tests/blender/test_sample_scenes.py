@@ -13,7 +13,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 SCENES = ("fountain", "fireworks", "robot_arm", "jelly_cube", "flag", "cloth_drape",
-          "mesh_pour", "rigid_bodies", "dominoes", "t_handle", "rings_peg", "bowl_pile", "arm_throw", "wrecking_ball")
+          "mesh_pour", "rigid_bodies", "dominoes", "t_handle", "rings_peg", "bowl_pile", "arm_throw", "wrecking_ball", "newtons_cradle")
 
 
 def test_every_sample_scene_is_tested():

@@ -275,3 +275,31 @@ def test_a_chain_resting_on_the_ground_sleeps():
     _, solver, state = build(links, joints)
     run(solver, state, 48, colliders=[ground()])
     assert state.body_asleep.all()
+
+
+def test_newtons_cradle_one_in_one_out():
+    """Five 10 cm balls (restitution 1) hang 1 m below hinges, 1 mm apart; the first is let go
+    0.5 rad out. It stops dead on the row and the last one flies out carrying its momentum to
+    2 % (it rises to (0.98)^2 of the first one's drop), the middle three barely stir (1 mm);
+    then it swings back and the first one goes out again."""
+    r, length, n, gap, theta = 0.1, 1.0, 5, 0.001, 0.5
+    bodies, joints = [], []
+    for i in range(n):
+        x = i * (2 * r + gap)
+        out = -theta if i == 0 else 0.0
+        bodies.append(sphere(f"Ball{i}", r, (x + length * math.sin(out), 0.0,
+                                               2.0 - length * math.cos(out)),
+                             restitution=1.0, linear_damping=0.0, angular_damping=0.0))
+        joints.append(JointSettings(f"Hinge{i}", "HINGE", i,
+                                    matrix=joint_frame((x, 0.0, 2.0), (0.0, 1.0, 0.0))))
+    _, solver, state = build(bodies, joints)
+    z = []
+    run(solver, state, int(2.2 / DT), each=lambda f, s: z.append(s.body_x[:, 2].copy()))
+    rise = np.array(z) - (2.0 - length)
+    drop = length * (1 - math.cos(theta))
+    hit, first = int(0.6 / DT), int(1.0 / DT)  # after the impact (a quarter period, 0.5 s);
+    # the last ball's swing out and back
+    assert rise[:first, -1].max() > 0.98 ** 2 * drop
+    assert np.abs(rise[:first, 1:-1]).max() < 1e-3
+    assert rise[hit:first, 0].max() < 0.05 * drop  # the first ball stopped on the row
+    assert rise[first:, 0].max() > 0.9 * drop  # ... and goes out again when it swings back
