@@ -163,6 +163,9 @@ class PHYSANIM_OT_free_bake(bpy.types.Operator):
                      and (chosen is None or ob.name in chosen)]
             for ob in rigid:  # rigid bodies: their keys go, their own animation comes back
                 freed += rigid_keys.free_keys(ob)
+            if rigid:  # ... and what the bake said of the constraints joining them
+                for ob in scene.objects:
+                    ob.physanim.constraint.broken_frame = -1
             if rigid and not any(ob.physanim.rigid_body.baked_action is not None
                                  for ob in scene.objects) and bpy.data.filepath:
                 remove_cache(cache_paths.rigid_cache_dir(scene))

@@ -137,6 +137,8 @@ def test_a_breakable_constraint_breaks_and_says_when(physanim_ext, tmp_path):
     assert 'constraint "Hook" broke at frame 2' in scene.physanim.bake_info
     scene.frame_set(24)
     assert cube.matrix_world.translation.z < 3.0 - 0.5 * 9.81 * (23 / 24) ** 2 * 0.95
+    assert bpy.ops.physanim.free_bake() == {'FINISHED'}  # the record goes with the bake
+    assert hook.physanim.constraint.broken_frame == -1
 
 
 def test_two_bodies_on_a_hinge_swing_together(physanim_ext, tmp_path):
