@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .joint_chains import ChainSolver, chains
 from .joints import CONE_TWIST, FRAME, HINGE, ROWS, SLIDER, JointModel
 
 JOINT_BIAS = 0.2  # fraction of a joint's drift taken back per sub-step (with position feedback)
@@ -69,6 +70,7 @@ class JointRows:
     bound: np.ndarray
     gamma: np.ndarray
     beta: np.ndarray
+    paths: list | None = None  # the joints along chains (a direct solve), None: not chains
 
     def __len__(self) -> int:
         return len(self.joint)
@@ -125,7 +127,9 @@ def rows(model: JointModel, joints: np.ndarray, ab: np.ndarray, x: np.ndarray,
     coupling = np.einsum("jri,jsi->jrs", j[:, :EQ], mj[:, :EQ])
     block = _pinv(np.where(holds[:, :, None] & holds[:, None, :], coupling, np.eye(EQ))) * \
         (holds[:, :, None] & holds[:, None, :])
-    return JointRows(joints, ab, j, mj, holds, block, c, mass, *clamped[2:])
+    moved = np.stack([inv_mass[a] > 0.0, inv_mass[b] > 0.0], axis=1)
+    return JointRows(joints, ab, j, mj, holds, block, c, mass, *clamped[2:],
+                     chains(ab, moved))
 
 
 def _clamped(model, joints, kind, wa, wb, axis_a, axis_b, swing, gap, ra, rb, h):
@@ -282,7 +286,7 @@ def solve(vel: np.ndarray, r: JointRows, impulse: np.ndarray, h: float, use_bias
         rel = np.einsum("jri,ji->jr", r.j, trial[r.ab].reshape(n, 12))
         b = target - rel - soft * (impulse + known)
         op = _Rows(r, len(vel), free, soft)
-        delta = known + op.split(_pcg(op, op.pack(b, 0.0)))[0] * free
+        delta = known + op.split(_linear_solve(op, op.pack(b, 0.0)))[0] * free
         total = impulse + delta
         after = rel + np.einsum("jri,ji->jr", r.j, _moved(r, len(vel), delta - known))
         pull = is_limit & free & (total < 0.0)
@@ -324,7 +328,7 @@ def displacement(r: JointRows, count: int, momentum: np.ndarray | None = None,
     passed = (r.kind == LIMIT) & (r.c[:, EQ:] < 0.0)
     use = np.concatenate([r.holds, passed], axis=1)
     op = _Rows(r, count, use, None, momentum, inv_mass, group)
-    return op.moves(_pcg(op, op.pack(-r.c, 0.0)))
+    return op.moves(_linear_solve(op, op.pack(-r.c, 0.0)))
 
 
 def drift(r: JointRows) -> float:
@@ -402,6 +406,17 @@ class _Rows:
         if self.groups:
             out[len(self.r) * ROWS:] = np.einsum("gij,gj->gi", self.group_block, nu).ravel()
         return out
+
+
+def _linear_solve(op, b: np.ndarray) -> np.ndarray:
+    """x with op(x) = b: directly along chains (:mod:`.joint_chains`) where the joints form
+    them, else by conjugate gradients."""
+    if op.r.paths is not None:
+        try:
+            return ChainSolver(op, op.r.paths).solve(b)
+        except np.linalg.LinAlgError:  # redundant joints (two hinges on one axis): iterate
+            pass
+    return _pcg(op, b)
 
 
 def _pcg(op, b: np.ndarray) -> np.ndarray:
