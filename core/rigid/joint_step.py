@@ -17,7 +17,7 @@ from . import quaternion as quat
 from .bodies import Posed
 from .joints import FRAME
 
-PROJECTIONS = 2  # Newton steps putting bodies back on their joints after each sub-step's move
+PROJECTIONS = 4  # Newton steps (at most) putting bodies back on their joints after a move
 PROJECTION_TOLERANCE = 1e-7  # [m], [rad]: joints closer than this are left as they are
 
 
