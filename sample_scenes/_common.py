@@ -153,6 +153,19 @@ def arm_segment(scene, name: str, length: float, parent, color) -> bpy.types.Obj
     return ob
 
 
+ARM_COLORS = ((0.3, 0.3, 0.35), (0.9, 0.45, 0.1), (0.95, 0.6, 0.15))
+
+
+def robot_arm(scene, segments) -> list:
+    """A robot arm of ``segments`` ((name, length) from the base up), each jointed to the top
+    of the one before (:func:`arm_segment`), in the arm's colours; its segment objects."""
+    parent, joints = None, []
+    for (name, length), color in zip(segments, ARM_COLORS):
+        parent = arm_segment(scene, name, length, parent, color)
+        joints.append(parent)
+    return joints
+
+
 def key_values(ob, path: str, index: int, frames_values) -> None:
     """Keys on ``ob.<path>[index]``: (frame, value) pairs."""
     for frame, value in frames_values:

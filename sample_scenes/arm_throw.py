@@ -60,12 +60,7 @@ def build(scene) -> None:
 
     _common.stage(scene, (2.4, -13.0, 3.0), (2.4, 0.0, 1.8), frame_end=FRAMES)
     _common.ground(scene)
-    colors = ((0.3, 0.3, 0.35), (0.9, 0.45, 0.1), (0.95, 0.6, 0.15))
-    parent = None
-    joints = []
-    for (name, length), color in zip(SEGMENTS, colors):
-        parent = _common.arm_segment(scene, name, length, parent, color)
-        joints.append(parent)
+    joints = _common.robot_arm(scene, SEGMENTS)
     _base, upper, fore = joints
     # wind up slowly (frames 1-20), swing forward (20-50), the crate let go mid-swing
     _common.key_values(upper, "rotation_euler", 1,

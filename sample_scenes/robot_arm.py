@@ -22,12 +22,7 @@ README_FRAME = 70
 def build(scene) -> None:
     _common.stage(scene, (6.0, -14.0, 5.0), (3.0, 0.0, 2.0), frame_end=120)
     _common.ground(scene)
-    colors = ((0.3, 0.3, 0.35), (0.9, 0.45, 0.1), (0.95, 0.6, 0.15))
-    parent = None
-    joints = []
-    for (name, length), color in zip(SEGMENTS, colors):
-        parent = _common.arm_segment(scene, name, length, parent, color)
-        joints.append(parent)
+    joints = _common.robot_arm(scene, SEGMENTS)
     base, upper, fore = joints
     # a throwing motion, repeated: wind up slowly, whip forward fast
     cycle = 40

@@ -86,7 +86,6 @@ class ChainSolver:
                                   mj[:, 1:, :, 6 * sb:6 * sb + 6])
                 upper += np.where(shared[..., None, None], block, 0.0)
         self.u = upper * (use[:, :-1, :, None] & use[:, 1:, None, :])
-        self.use = use
         self._factor()
         self.groups = op.groups
         if self.groups:  # the groups' rows: their coupling to the joints (B) and each other
@@ -135,6 +134,6 @@ class ChainSolver:
         bj, bg = b[:n, None], b[n:]
         if not self.groups:
             return self._joint_solve(bj)[:, 0]
-        y = np.linalg.lstsq(self.schur, bg - (self.b_.T @ self._joint_solve(bj))[:, 0],
-                            rcond=None)[0]
-        return np.concatenate([self._joint_solve(bj)[:, 0] - self.a_inv_b @ y, y])
+        inner = self._joint_solve(bj)[:, 0]
+        y = np.linalg.lstsq(self.schur, bg - self.b_.T @ inner, rcond=None)[0]
+        return np.concatenate([inner - self.a_inv_b @ y, y])

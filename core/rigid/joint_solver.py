@@ -253,7 +253,8 @@ def solve(vel: np.ndarray, r: JointRows, impulse: np.ndarray, h: float, use_bias
     if not n:
         return
     gap = r.c[:, EQ:]
-    passed = np.maximum(JOINT_BIAS / h * gap, -MAX_CORRECTION) if use_bias else 0.0 * gap
+    passed = np.maximum(JOINT_BIAS / h * gap, -MAX_CORRECTION) if use_bias \
+        else np.zeros_like(gap)
     target = np.zeros((n, ROWS))
     if use_bias:
         target[:, :EQ] = -np.clip(JOINT_BIAS / h * r.c[:, :EQ], -MAX_CORRECTION, MAX_CORRECTION)
