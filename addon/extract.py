@@ -243,7 +243,8 @@ class Extractor:
                 parent = self.index[p.parent.name]
             link = None
             if p.link:
-                link = SpringLink(p.link_stiffness, p.link_damping, p.link_rest_length)
+                link = SpringLink(p.link_stiffness, p.link_damping, p.link_rest_length,
+                                  p.link_hard)
             builder.add_emitter(EmitterSettings(
                 name=ob.name, source=p.source, direction=p.direction,
                 axis=convert.AXES[p.axis], seed=p.seed, parent=parent, triangles=tris,

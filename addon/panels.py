@@ -166,8 +166,11 @@ class PHYSANIM_PT_emitter_springs(_PhysicsPanel, bpy.types.Panel):
         layout = self.layout
         layout.use_property_split = True
         layout.active = p.link
-        layout.prop(p, "link_stiffness")
-        layout.prop(p, "link_damping")
+        layout.prop(p, "link_hard")
+        springs = layout.column()
+        springs.active = not p.link_hard
+        springs.prop(p, "link_stiffness")
+        springs.prop(p, "link_damping")
         layout.prop(p, "link_rest_length")
 
 

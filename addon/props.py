@@ -144,6 +144,10 @@ class PHYSANIM_PG_emitter(bpy.types.PropertyGroup):
                                 description="Spring damping kd, N s/m", options=STATIC)
     link_rest_length: FloatProperty(name="Rest Length", min=-1.0, max=1.0e4, default=-1.0,
                                     unit='LENGTH', description="Negative: distance at birth", options=STATIC)
+    link_hard: BoolProperty(name="Rigid Links",
+                            description="Links are rods of fixed length (hard constraints): a "
+                                        "rope that never stretches; stiffness and damping unused",
+                            options=STATIC)
     output: EnumProperty(name="Output", items=OUTPUT_ITEMS, default='POINTS', options=STATIC)
     instance_object: PointerProperty(name="Instance", type=bpy.types.Object,
                                      description="Object drawn at each particle (default: a "

@@ -26,11 +26,14 @@ class SpringLink:
     Args:
         stiffness: ks [N/m]. damping: kd [N s/m]. rest_length: r [m]; negative means "the
         distance at birth".
+        hard: rods of fixed length r instead (hard constraints: a rope that never stretches;
+        stiffness and damping unused).
     """
 
     stiffness: float
     damping: float
     rest_length: float = -1.0
+    hard: bool = False
 
     def __post_init__(self):
         non_negative("particle springs", stiffness=self.stiffness, damping=self.damping)

@@ -3,8 +3,11 @@
 Per sub-step, in order (each a named pass below):
     collide   find particles resting on colliders (for the contact force)
     forces    the force list: gravity, force objects, particle springs, contact (last)
-    integrate the chosen ODE integrator on the flat state y = [x, v]
+    integrate the chosen ODE integrator on the flat state y = [x, v]; hard links (rods)
+              add Witkin's constraint forces last in every derivative
     respond   continuous collision response on each particle's path (no tunnelling)
+    constrain hard links back to their lengths (RATTLE after a first-order step, post-
+              stabilisation after a higher-order one: :mod:`physanim.core.forces.constraints`)
     check     every value finite, or an error naming emitter, frame and particle
     age/kill  particles whose age reaches their life span die (sub-emitters burst there)
     emit      births of this sub-step, placed at their sub-frame time and advanced to its end;
@@ -21,13 +24,14 @@ import numpy as np
 from ..bounds import DEFAULT_BOUNDS, StateBounds
 from ..contact import ColliderFrame, ColliderPaths, ContactForce, respond, resting_contacts
 from ..errors import PhysanimError, SimulationError
-from ..forces import DampedSprings, Force, Gravity, ParticleView
+from ..forces import DampedSprings, Force, Gravity, HardConstraints, ParticleView, Rods
 from ..integrators import make_integrator
 from ..world import SolverSettings, SolverSystem, World, WorldFrame
 from .emit import Births, sample_births, sample_bursts
 from .model import ParticleModel, ParticleState
 from .settings import EmitterFrame
 
+FIRST_ORDER = ("EULER", "SYMPLECTIC_EULER", "IMPLICIT")  # integrators whose rods take RATTLE
 MAX_PARTICLES = 50_000_000  # hard limit that keeps a bake inside memory (~5 GB of state)
 
 
@@ -119,10 +123,12 @@ class ParticleSystem(SolverSystem):
 class _ParticleOde:
     """Witkin & Baraff's particle system seen by an integrator: dim, get/set state, derivative."""
 
-    def __init__(self, state: ParticleState, forces: list, contact: ContactForce):
+    def __init__(self, state: ParticleState, forces: list, contact: ContactForce,
+                 constraints: HardConstraints | None = None):
         self.state = state
         self.forces = forces
         self.contact = contact
+        self.constraints = constraints
         n = state.particle_count
         self.dim = 6 * n
         self._n = n
@@ -142,7 +148,9 @@ class _ParticleOde:
         f = np.zeros((n, 3))  # clear the accumulator, then every force adds in
         for force in self.forces:
             force.apply(view, f)
-        self.contact.constrain(view, f)  # last: it cancels what the forces push into surfaces
+        self.contact.constrain(view, f)  # it cancels what the forces push into surfaces
+        if self.constraints is not None:  # last: holds the rods against every other force
+            self.constraints.constrain(view, f)
         return np.concatenate([y[3 * n:], (f / self.state.particle_mass[:, None]).ravel()])
 
 
@@ -203,12 +211,15 @@ class ParticleSolver:
         contact = ContactForce(resting_contacts(step.paths, state.particle_x, state.particle_v,
                                                 s0, step.rest_speed), h)
         x0, v0 = state.particle_x, state.particle_v
+        rods = self._rods(state)
         step.report.integrator_steps += self._integrate(
-            state, self._forces(state, inputs, step.g), contact, t, h, inputs)
+            state, self._forces(state, inputs, step.g), contact, rods, t, h, inputs)
         done = respond(step.paths, x0, state.particle_x, v0, state.particle_v, s0, s1, h,
                        step.rest_speed)
         state.particle_x, state.particle_v = done.x, done.v
         step.report.collisions += done.count
+        if rods is not None:
+            self._constrain(state, rods, x0, t + h, h)
         self._check(state, inputs, t + h)
         deaths = self._age_kill(state, h)
         step.report.deaths += sum(len(d[0]) for d in deaths)
@@ -235,7 +246,7 @@ class ParticleSolver:
         if len(state.link_a):
             for e, settings in enumerate(self.model.emitters):
                 sel = state.link_emitter == e
-                if settings.link is None or not sel.any():
+                if settings.link is None or settings.link.hard or not sel.any():
                     continue
                 forces.append(DampedSprings(state.index_of(state.link_a[sel]),
                                             state.index_of(state.link_b[sel]),
@@ -243,10 +254,33 @@ class ParticleSolver:
                                             settings.link.damping))
         return forces
 
-    def _integrate(self, state, forces, contact, t, h, inputs) -> int:
+    def _rods(self, state) -> HardConstraints | None:
+        """The hard links (rods) between living particles, or None."""
+        if not len(state.link_a):
+            return None
+        hard = np.array([e.link is not None and e.link.hard for e in self.model.emitters])
+        sel = np.nonzero(hard[state.link_emitter])[0]
+        if not len(sel):
+            return None
+        # each emitter's links in birth order: a chain's rods side by side, so their system is
+        # tridiagonal (solved directly by cyclic reduction)
+        sel = sel[np.argsort(state.link_emitter[sel], kind="stable")]
+        return HardConstraints([Rods(state.index_of(state.link_a[sel]),
+                                     state.index_of(state.link_b[sel]), state.link_rest[sel])])
+
+    def _constrain(self, state, rods: HardConstraints, x0, t, h) -> None:
+        """Rods back to their lengths: after a first-order step along the gradients of its start
+        (RATTLE: bounded energy error), after a higher-order one along their own."""
+        first_order = self.settings.integrator in FIRST_ORDER
+        x, v = state.particle_x.copy(), state.particle_v.copy()
+        rods.project(x, v, t, 1.0 / state.particle_mass,
+                     start=x0 if first_order and len(x0) == len(x) else None, h=h)
+        state.particle_x, state.particle_v = x, v
+
+    def _integrate(self, state, forces, contact, rods, t, h, inputs) -> int:
         if state.particle_count == 0:
             return 0
-        ode = _ParticleOde(state, forces, contact)
+        ode = _ParticleOde(state, forces, contact, rods)
         try:
             return self.integrator.step(ode, t, h).steps
         except SimulationError as exc:

@@ -283,3 +283,36 @@ def test_automatic_collider_shape_is_what_the_mesh_is(physanim_ext):
     # the fitted box matches the cube's corners in its own space
     fit = extract.automatic_collider(_primitive("cube", size=0.5, location=(1.0, 0.0, 0.0)))[1]
     np.testing.assert_allclose(np.diag(fit)[:3], [0.25, 0.25, 0.25], atol=1e-6)
+
+
+def test_rigid_particle_links_at_their_defaults_make_ropes_that_keep_their_length(physanim_ext,
+                                                                                 tmp_path):
+    # A default plane emitter with its chain switched on and made rigid, nothing else: every
+    # particle is tied to the one born before it by a rod of their distance at birth. The ropes
+    # fly and fall; between any two consecutive ids the distance stays what it was at the first
+    # frame both were cached, in every later frame (to 1e-6 of it, plus the float32 spacing of
+    # the cached coordinates at their size, twice: both ends are rounded).
+    ob = _primitive("plane")
+    p = ob.physanim.emitter
+    p.enabled, p.link, p.link_hard = True, True, True
+    _save(tmp_path)
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    first: dict[int, float] = {}
+    checked, lowest = 0, 0.0
+    for f, a in _frames(physanim_ext, ob).items():
+        ids, x = a["id"], a["position"]
+        lowest = min(lowest, float(x[:, 2].min())) if len(x) else lowest
+        where = {int(i): k for k, i in enumerate(ids)}
+        for i, k in where.items():
+            if i + 1 not in where:
+                continue
+            d = float(np.linalg.norm(x[where[i + 1]] - x[k]))
+            if i not in first:
+                first[i] = d
+            else:
+                size = float(np.abs(x[[k, where[i + 1]]]).max())
+                rounding = 4.0 * float(np.spacing(np.float32(size)))
+                assert abs(d - first[i]) <= 1e-6 * first[i] + rounding, (f, i, d, first[i])
+                checked += 1
+    assert checked > 10_000
+    assert lowest < -5.0  # ropes under gravity: they fell

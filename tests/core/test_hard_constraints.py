@@ -1,0 +1,272 @@
+"""Hard constraints on point sets (Witkin & Baraff's constrained dynamics + projection) against
+closed forms: the pendulum's period, a bead on a circular wire, a chain that never stretches,
+momentum of a free chain, the constraint force of a body at rest, and hard particle links."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from physanim.core.forces import (
+    Feedback, Gravity, HardConstraints, OnPlanes, ParticleView, Pins, Rods, Tethers, on_circles,
+)
+from physanim.core.forces import constraints as hard
+from physanim.core.integrators import make_integrator
+from physanim.core.particles import EmitterFrame, EmitterSettings, ParticleSolver, SpringLink
+from physanim.tests.core.helpers import particle_model, translation
+from physanim.tests.core.test_particles_closed_forms import _inputs
+
+G = 9.81
+FIRST_ORDER = ("SYMPLECTIC_EULER", "EULER", "IMPLICIT")
+
+
+class PointOde:
+    """Point masses under gravity and hard constraints, as an integrator sees them (the same
+    derivative the particle solver builds: forces, then constraint forces last)."""
+
+    def __init__(self, x, v, mass, constraints, gravity=(0.0, 0.0, -G)):
+        self.x, self.v = np.array(x, float), np.array(v, float)
+        self.mass = np.asarray(mass, float)
+        self.constraints = constraints
+        self.forces = [Gravity(gravity)] if any(gravity) else []
+        self.n = len(self.mass)
+        self.dim = 6 * self.n
+
+    def get_state(self):
+        return np.concatenate([self.x.ravel(), self.v.ravel()])
+
+    def set_state(self, y):
+        self.x = y[:3 * self.n].reshape(self.n, 3).copy()
+        self.v = y[3 * self.n:].reshape(self.n, 3).copy()
+
+    def derivative(self, t, y):
+        x, v = y[:3 * self.n].reshape(self.n, 3), y[3 * self.n:].reshape(self.n, 3)
+        view = ParticleView(x, v, self.mass, t)
+        f = np.zeros((self.n, 3))
+        for force in self.forces:
+            force.apply(view, f)
+        self.constraints.constrain(view, f)
+        return np.concatenate([v.ravel(), (f / self.mass[:, None]).ravel()])
+
+    def run(self, integrator, h, seconds, each=None):
+        """Step, projecting after each step as the particle solver does."""
+        method = make_integrator(integrator)
+        t = 0.0
+        for _ in range(int(round(seconds / h))):
+            x0 = self.x.copy()
+            method.step(self, t, h)
+            t += h
+            self.constraints.project(self.x, self.v, t, 1.0 / self.mass,
+                                     start=x0 if integrator in FIRST_ORDER else None, h=h)
+            if each is not None:
+                each(t, self)
+
+
+@pytest.mark.parametrize("integrator", ["SYMPLECTIC_EULER", "RK4"])
+def test_pendulum_on_a_rod_keeps_its_period_and_length(integrator):
+    # A point on a rigid massless rod of length L from a fixed pivot, released at 0.05 rad:
+    # T = 2 pi sqrt(L/g) (1 + theta^2/16 + ...) (the amplitude term is 1.6e-4: kept). The issue
+    # asks 0.5 %; at h = 1/240 s both first- and fourth-order steps land within 0.05 %. The
+    # rod's length is held by the projection to its tolerance (1e-10 m): asserted < 1e-6 L over
+    # 10 s.
+    length, theta = 1.0, 0.05
+    ode = PointOde([[length * math.sin(theta), 0.0, -length * math.cos(theta)]], [[0, 0, 0]],
+                   [1.0], HardConstraints([Tethers([0], (0, 0, 0), length)]))
+    crossings, drift, last = [], [0.0], [ode.x[0, 0]]
+
+    def each(t, s):
+        drift[0] = max(drift[0], abs(np.linalg.norm(s.x[0]) - length))
+        x = s.x[0, 0]
+        if last[0] > 0.0 >= x:
+            crossings.append(t - (1 / 240) * x / (x - last[0]))
+        last[0] = x
+
+    ode.run(integrator, 1 / 240, 10.0, each)
+    period = float(np.mean(np.diff(crossings)))
+    closed = 2 * math.pi * math.sqrt(length / G) * (1 + theta ** 2 / 16)
+    assert len(crossings) >= 4
+    assert abs(period / closed - 1.0) < 5e-4
+    assert drift[0] < 1e-6 * length
+
+
+def _bead(integrator, h, seconds=10.0):
+    """A 0.2 kg bead on a vertical circular wire (radius 0.5 m), started at the height of the
+    centre going up at 1 m/s: it swings over the bottom. Returns (largest distance off the wire,
+    largest energy error / (m g R))."""
+    radius, m = 0.5, 0.2
+    ode = PointOde([[radius, 0, 0]], [[0, 0, 1.0]], [m],
+                   HardConstraints(on_circles([0], (0, 0, 0), (0, 1, 0), radius)))
+    energy = lambda s: 0.5 * m * float(s.v[0] @ s.v[0]) + m * G * s.x[0, 2]  # noqa: E731
+    e0, off, de = energy(ode), [0.0], [0.0]
+
+    def each(t, s):
+        off[0] = max(off[0], abs(np.linalg.norm(s.x[0]) - radius), abs(s.x[0, 1]))
+        de[0] = max(de[0], abs(energy(s) - e0))
+
+    ode.run(integrator, h, seconds, each)
+    return off[0], de[0] / (m * G * radius)
+
+
+def test_bead_on_a_wire_stays_on_it_and_keeps_energy_to_the_methods_order():
+    # On the wire to 1e-6 m (projection tolerance 1e-10) for every method. Energy: RK4's error
+    # falls ~2^4 (measured ~33) when h halves; symplectic Euler's stays bounded and first order
+    # (RATTLE: halves with h; without it, the projected symplectic Euler gained 1.2 m g R at
+    # h = 1/240 s and 370 m g R at 1/120 s); midpoint's falls ~2^2 or better.
+    results = {(m, h): _bead(m, h) for m in ("SYMPLECTIC_EULER", "MIDPOINT", "RK4")
+               for h in (1 / 120, 1 / 240)}
+    for off, _ in results.values():
+        assert off < 1e-6
+    rk4 = results["RK4", 1 / 120][1] / results["RK4", 1 / 240][1]
+    assert rk4 > 12.0 and results["RK4", 1 / 240][1] < 1e-6
+    mid = results["MIDPOINT", 1 / 120][1] / results["MIDPOINT", 1 / 240][1]
+    assert mid > 3.0
+    se_coarse, se_fine = results["SYMPLECTIC_EULER", 1 / 120][1], \
+        results["SYMPLECTIC_EULER", 1 / 240][1]
+    assert se_coarse < 0.06 and 1.6 < se_coarse / se_fine < 2.4
+
+
+def _chain(links, spacing=0.1):
+    x = np.zeros((links + 1, 3))
+    x[:, 0] = np.arange(links + 1) * spacing
+    return x
+
+
+@pytest.mark.parametrize("integrator, h", [("SYMPLECTIC_EULER", 1 / 48), ("RK4", 1 / 240)])
+def test_twenty_link_chain_never_stretches(integrator, h):
+    # A chain of 20 rods hung by its first point from a pivot, released horizontal: it whips
+    # down and swings for 5 s, symplectic Euler at the product's default step (24 fps, 2
+    # sub-steps). The issue asks < 0.1 % stretch; the projection holds 1e-10 m. RK4 needs the
+    # smaller step: its stages leave the constraints while the free end whips at 20 m/s on
+    # 10 cm links (a link turning ~5 rad per 1/48 s step), and it blows up there.
+    links = 20
+    x = _chain(links)[1:]  # point k at (0.1 (k + 1), 0, 0); the pivot at the origin
+    rods = Rods(np.arange(0, links - 1), np.arange(1, links), np.full(links - 1, 0.1))
+    ode = PointOde(x, np.zeros_like(x), np.full(links, 0.05),
+                   HardConstraints([rods, Tethers([0], (0, 0, 0), 0.1)]))
+    worst, lowest = [0.0], [0.0]
+
+    def each(t, s):
+        lengths = np.linalg.norm(np.diff(np.vstack([np.zeros(3), s.x]), axis=0), axis=1)
+        worst[0] = max(worst[0], float(np.max(np.abs(lengths / 0.1 - 1.0))))
+        lowest[0] = min(lowest[0], float(np.min(s.x[:, 2])))
+
+    ode.run(integrator, h, 5.0, each)
+    assert worst[0] < 1e-3 * 1e-3  # a millionth, a thousand times inside the issue's 0.1 %
+    assert lowest[0] < -1.5  # it did swing down (the chain is 2 m long)
+
+
+@pytest.mark.parametrize("integrator", ["SYMPLECTIC_EULER", "RK4"])
+def test_free_chain_conserves_linear_momentum(integrator):
+    # Rods are internal: every impulse they make (forces and projections alike) is equal and
+    # opposite along the rod, so the momentum of a free chain with random masses and velocities
+    # stays put to rounding with gravity off, while the chain whirls (links turn up to 0.5 rad a
+    # step, so symplectic Euler's RATTLE falls back to the current gradients: still momentum-
+    # exact).
+    rng = np.random.default_rng(1)
+    n = 21
+    x = _chain(n - 1)
+    x[:, 1] = rng.normal(0.0, 0.02, n)
+    v = rng.normal(0.0, 1.0, (n, 3))
+    m = rng.uniform(0.5, 2.0, n)
+    lengths = np.linalg.norm(x[1:] - x[:-1], axis=1)
+    constraints = HardConstraints([Rods(np.arange(1, n), np.arange(n - 1), lengths)])
+    constraints.project(x, v, 0.0, 1.0 / m)
+    ode = PointOde(x, v, m, constraints, gravity=(0.0, 0.0, 0.0))
+    p0 = (m[:, None] * ode.v).sum(axis=0)
+    ode.run(integrator, 1 / 48, 2.0)
+    p1 = (m[:, None] * ode.v).sum(axis=0)
+    assert np.max(np.abs(p1 - p0)) < 1e-9 * np.max(np.abs(p0))
+    stretch = np.linalg.norm(ode.x[1:] - ode.x[:-1], axis=1) / lengths - 1.0
+    assert np.max(np.abs(stretch)) < 1e-6
+
+
+def test_constraint_force_holds_a_point_at_rest():
+    # A 2 kg point hanging at rest on a tether, and one resting on a tilted plane (normal n):
+    # Witkin's force is exactly the reaction — gravity cancelled for the hanging one, and for
+    # the plane only gravity's normal part (m g . n) n, the tangential part left to slide.
+    hc = HardConstraints([Tethers([0], (0, 0, 1.0), 1.0)])
+    f = np.array([[0.0, 0.0, -2.0 * G]])
+    lam = hc.force(np.zeros((1, 3)), np.zeros((1, 3)), 0.0, np.array([0.5]), f)
+    np.testing.assert_allclose(f, 0.0, atol=1e-9)
+    assert lam.shape == (1,)
+    n = np.array([0.0, 0.6, 0.8])
+    plane = HardConstraints([OnPlanes([0], (0, 0, 0), n)])
+    weight = np.array([0.0, 0.0, -2.0 * G])
+    f = weight[None].copy()
+    plane.force(np.zeros((1, 3)), np.zeros((1, 3)), 0.0, np.array([0.5]), f)
+    np.testing.assert_allclose(f[0], weight - (weight @ n) * n, atol=1e-12)
+
+
+def test_pins_follow_a_moving_target_and_feedback_pulls_back():
+    # A pinned point whose target moves at 2 m/s along y: after each step it is on the target
+    # and moves with it. Witkin's feedback (ks, kd) turns a displaced pin into a critically
+    # damped return when the projection is not run.
+    pins = HardConstraints([Pins([0], (0, 0, 0), (0, 2.0, 0))])
+    ode = PointOde([[0, 0, 0]], [[0, 2.0, 0]], [1.0], pins)
+    seen = []
+    ode.run("RK4", 0.01, 0.5, lambda t, s: seen.append((t, s.x[0].copy(), s.v[0].copy())))
+    for t, x, v in seen:
+        np.testing.assert_allclose(x, (0, 2.0 * t, 0), atol=1e-9)
+        np.testing.assert_allclose(v, (0, 2.0, 0), atol=1e-9)
+    w = 20.0
+    soft = HardConstraints([Pins([0], (0, 0, 0))], Feedback(w * w, 2 * w))
+    ode = PointOde([[0.1, 0, 0]], [[0, 0, 0]], [1.0], soft)
+    method = make_integrator("RK4")
+    for k in range(100):
+        method.step(ode, k * 0.001, 0.001)
+    t = 0.1  # x(t) = 0.1 (1 + w t) exp(-w t) for a critically damped return
+    np.testing.assert_allclose(ode.x[0, 0], 0.1 * (1 + w * t) * math.exp(-w * t), rtol=1e-6)
+
+
+def test_large_systems_solve_iteratively_like_small_ones(monkeypatch):
+    # The same 40-rod chain's constraint forces from the direct solve and from conjugate
+    # gradients (forced by lowering the direct limit) agree.
+    rng = np.random.default_rng(3)
+    x = _chain(40) + rng.normal(0, 0.01, (41, 3))
+    v = rng.normal(0, 1, (41, 3))
+    inverse = rng.uniform(0.5, 2, 41)
+    rods = Rods(np.arange(1, 41), np.arange(40), np.linalg.norm(x[1:] - x[:-1], axis=1))
+    direct = np.zeros((41, 3))
+    HardConstraints([rods]).force(x, v, 0.0, inverse, direct)
+    monkeypatch.setattr(hard, "DENSE_ROWS", 0)
+    iterative = np.zeros((41, 3))
+    HardConstraints([rods]).force(x, v, 0.0, inverse, iterative)
+    np.testing.assert_allclose(iterative, direct, rtol=1e-8, atol=1e-8)
+
+
+def test_bad_constraints_are_named():
+    with pytest.raises(ValueError, match="joins point 3 to itself"):
+        Rods([3], [3], [1.0])
+    with pytest.raises(ValueError, match="length must be finite and >= 0"):
+        Tethers([0], (0, 0, 0), -1.0)
+    with pytest.raises(ValueError, match="normal must not be zero"):
+        OnPlanes([0], (0, 0, 0), (0, 0, 0))
+
+
+def test_hard_particle_links_make_a_rope_that_never_stretches():
+    # An emitter moving along x drops one particle a frame, each linked to the previous by a
+    # hard link (rods at the distance at birth), under gravity at the product's defaults
+    # (symplectic Euler, 2 sub-steps): the free rope falls and folds, and no link ever differs
+    # from its length at birth by more than 1e-6 of it; with gravity off, momentum stays.
+    for gravity in ((0.0, 0.0, -G), (0.0, 0.0, 0.0)):
+        model = particle_model(EmitterSettings("Rope", link=SpringLink(0.0, 0.0, hard=True)))
+        state = model.state()
+        solver = ParticleSolver(model, substeps=2)
+        worst, momentum = 0.0, []
+        for f in range(48):
+            ef = EmitterFrame(rate=1, speed=1.0 if f % 2 else 0.3, lifetime=1000.0,
+                              matrix0=translation(0.1 * f), matrix1=translation(0.1 * (f + 1))
+                              ) if f < 20 else EmitterFrame(active=False)
+            solver.advance(state, _inputs(f, gravity=gravity, emitters=[ef]))
+            if len(state.link_a) > 1:
+                a, b = state.index_of(state.link_a), state.index_of(state.link_b)
+                length = np.linalg.norm(state.particle_x[a] - state.particle_x[b], axis=1)
+                worst = max(worst, float(np.max(np.abs(length / state.link_rest - 1.0))))
+            if f >= 20:
+                momentum.append((state.particle_mass[:, None] * state.particle_v).sum(axis=0))
+        assert len(state.link_a) == 19 and worst < 1e-6
+        if not any(gravity):
+            np.testing.assert_allclose(momentum, [momentum[0]] * len(momentum), atol=1e-9)
+        else:
+            assert np.ptp(state.particle_x[:, 2]) > 0.05  # it is a rope, not a rigid rod
