@@ -11,12 +11,20 @@ One frame interval, as a table of contents (:meth:`World.advance`):
     sub-steps            every system's sub-steps in time order; one sub-step of a system runs
                          its passes: forces -> integrate -> contacts -> response -> checks
     end frame            each system's report of the interval
+    reactions            what the followers' constraints did to the leaders' bodies (a cloth
+                         attached to a rigid body) goes back to those bodies as impulses
 
 Systems plug in through :class:`WorldSystem`: adding a kind of system (rigid bodies) adds a
 class, not a branch in this loop. A system that fails (bad input, a blow-up) is dropped and
 reported; the others go on, and only when no system is left does the failure stop the run.
 Systems may take different numbers of sub-steps per frame: their sub-steps interleave by end
 time (with the same count, all systems finish sub-step k before any starts k + 1).
+
+Two-way coupling between a leader and a follower is an exchange of impulses: the follower holds
+its points on the leader's bodies along the paths they took this frame, and hands back the
+impulses that took (:class:`Reaction`); the leader adds them to its bodies' momenta at the
+frame's end, so the coupled momentum is conserved exactly and the bodies feel the pull from the
+next frame on (a lag of one frame in position, none in momentum).
 """
 from __future__ import annotations
 
@@ -24,6 +32,8 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
+
+import numpy as np
 
 from .bounds import DEFAULT_BOUNDS, StateBounds
 from .contact import ColliderFrame, ColliderPath, ColliderPaths
@@ -73,6 +83,8 @@ class WorldFrame:
         gravity: (3,) [m/s^2], from the caller (the scene's).
         colliders: colliders with their motion over the interval.
         forces: force objects (drag, wind, attractors, ...) for the interval.
+        bodies: the leaders' dynamic bodies at the interval's end, by name (what a follower
+            coupled to them needs to move them implicitly).
     """
 
     frame: int
@@ -81,6 +93,38 @@ class WorldFrame:
     gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
     colliders: Sequence[ColliderFrame] = ()
     forces: Sequence[Any] = ()
+    bodies: Mapping[str, BodyInertia] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class BodyInertia:
+    """A leader's body as a follower coupled to it sees it at the frame's end.
+
+    Attributes: mass [kg]; inertia: (3, 3) world inertia tensor about the centre of mass
+    [kg m^2]; centre: (3,) centre of mass [m].
+    """
+
+    mass: float
+    inertia: np.ndarray
+    centre: np.ndarray
+
+
+@dataclass(frozen=True)
+class Reaction:
+    """Impulses a follower's constraints give to a leader's body over one frame interval.
+
+    Attributes:
+        body: the body's name. point: (k, 3) where they act, world, at the interval's end [m].
+        impulse: (k, 3) the impulses on the body [N s] (the follower took the opposite).
+        move: (6,) how far the body moved meanwhile in the follower's implicit steps: its
+            centre [m] and a rotation vector about it [rad] (backward Euler moves a body by
+            h times the velocity change it solves for; the leader puts it there).
+    """
+
+    body: str
+    point: np.ndarray
+    impulse: np.ndarray
+    move: np.ndarray = field(default_factory=lambda: np.zeros(6))
 
 
 class WorldSystem(Protocol):
@@ -98,6 +142,9 @@ class WorldSystem(Protocol):
         """A leading system's bodies as colliders over the frame it just finished ([] if it
         does not lead)."""
 
+    def frame_bodies(self) -> dict[str, BodyInertia]:
+        """A leading system's dynamic bodies at the end of the frame it just finished."""
+
     def begin_frame(self, frame: WorldFrame, paths: Sequence[ColliderPath], own: Any) -> None:
         """Take the interval's inputs: ``paths`` are the colliders' motion over it, ``own`` what
         only this system reads (None when the caller gave nothing)."""
@@ -107,6 +154,13 @@ class WorldSystem(Protocol):
 
     def end_frame(self) -> Any:
         """Finish the interval; returns the system's report of it."""
+
+    def reactions(self) -> list[Reaction]:
+        """A follower's impulses on leaders' bodies during the interval just ended."""
+
+    def absorb(self, reactions: Sequence[Reaction]) -> None:
+        """A leader takes the followers' impulses on its bodies (those it does not simulate it
+        ignores)."""
 
 
 class SolverSystem:
@@ -125,6 +179,9 @@ class SolverSystem:
     def frame_colliders(self) -> list[ColliderFrame]:
         return []
 
+    def frame_bodies(self) -> dict[str, BodyInertia]:
+        return {}
+
     def inputs(self, frame: WorldFrame, own: Any):
         raise NotImplementedError
 
@@ -139,7 +196,17 @@ class SolverSystem:
 
     def end_frame(self) -> Any:
         step, self._step = self._step, None
+        self._last = step
         return self.report(step)
+
+    def reactions(self) -> list[Reaction]:
+        last = getattr(self, "_last", None)
+        return list(getattr(last, "reactions", ())) if last is not None else []
+
+    def absorb(self, reactions: Sequence[Reaction]) -> None:
+        absorb = getattr(self.solver, "absorb", None)
+        if absorb is not None:
+            absorb(self.state, reactions)
 
 
 @dataclass
@@ -177,10 +244,22 @@ class World:
         if leaders:
             self._stage(report, leaders, frame, own or {})
         if others:  # they meet the leaders' bodies where those went this frame
-            moving = [c for s in leaders if s in self.systems for c in s.frame_colliders()]
-            staged = replace(frame, colliders=(*frame.colliders, *moving)) if moving else frame
+            led = [s for s in leaders if s in self.systems]
+            moving = [c for s in led for c in s.frame_colliders()]
+            bodies = {name: b for s in led for name, b in s.frame_bodies().items()}
+            staged = replace(frame, colliders=(*frame.colliders, *moving),
+                             bodies={**frame.bodies, **bodies}) if moving else frame
             self._stage(report, others, staged, own or {})
+            self._react(report, leaders, others)
         return report
+
+    def _react(self, report: WorldReport, leaders: list, others: list) -> None:
+        """The followers' impulses on the leaders' bodies, to the leaders."""
+        reactions = [r for s in others if s in self.systems for r in s.reactions()]
+        if reactions:
+            for system in leaders:
+                if system in self.systems:
+                    self._guarded(report, system, system.absorb, reactions)
 
     def _stage(self, report: WorldReport, systems: list, frame: WorldFrame, own) -> None:
         """One stage of the frame for ``systems``: begin, sub-steps in time order, end."""

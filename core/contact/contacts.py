@@ -26,6 +26,8 @@ class Contacts:
             surface's own for a resting contact, the one that lands it for a landing one.
         held: (k,) bool: a constraint whatever the forces (a point landing during the step),
             not only while forces press the point into the surface.
+        collider: (k,) int: which of the system's collider paths each point touches (-1:
+            not known) — a collider that is another system's body takes the push back.
     """
 
     index: np.ndarray
@@ -38,6 +40,7 @@ class Contacts:
     impulse: np.ndarray
     normal_speed: np.ndarray
     held: np.ndarray
+    collider: np.ndarray
 
     @classmethod
     def none(cls) -> Contacts:
@@ -46,7 +49,7 @@ class Contacts:
 
     @classmethod
     def of(cls, index, point, normal, surface_velocity, friction, restitution, depth=None,
-           impulse=None, normal_speed=None, held=None) -> Contacts:
+           impulse=None, normal_speed=None, held=None, collider=None) -> Contacts:
         """Contacts from the arrays that always differ; the rest default to a resting contact
         (depth 0, no impulse, the surface's own normal speed, not held). Sorts by index."""
         k = len(index)
@@ -56,7 +59,9 @@ class Contacts:
                    np.zeros(k) if depth is None else depth, surface_velocity,
                    np.asarray(friction, np.float64), np.asarray(restitution, np.float64),
                    np.zeros(k) if impulse is None else impulse, normal_speed,
-                   np.zeros(k, bool) if held is None else held)
+                   np.zeros(k, bool) if held is None else held,
+                   np.full(k, -1, np.int64) if collider is None
+                   else np.asarray(collider, np.int64))
         if k > 1 and np.any(made.index[1:] < made.index[:-1]):
             return made.take(np.argsort(made.index, kind="stable"))
         return made

@@ -185,7 +185,7 @@ def _bounce(colliders: list[ColliderPath], remainder: _Remainder, active: np.nda
         impact = _impact(col, remainder, idx, nearest.take(sub), rest_speed)
         end = remainder.restart(col, idx, impact)
         first.note(idx, impact.normal, impact.surface_velocity, col, end,
-                   impact.reflected - impact.approach)
+                   impact.reflected - impact.approach, ci)
         count += len(idx)
     return count
 
@@ -226,8 +226,9 @@ class _FirstHits:
         self.seen = np.zeros(count, dtype=bool)
         self.vectors = {k: np.zeros((count, 3)) for k in _VECTORS}
         self.scalars = {k: np.zeros(count) for k in _SCALARS}
+        self.collider = np.full(count, -1, np.int64)
 
-    def note(self, idx, n_w, v_c, col, point, du) -> None:
+    def note(self, idx, n_w, v_c, col, point, du, which: int) -> None:
         """Points ``idx`` hit ``col`` (normals n_w, surface velocity v_c) and were placed at
         ``point``; ``du`` is their velocity change relative to the surface."""
         new = ~self.seen[idx]
@@ -238,12 +239,13 @@ class _FirstHits:
         self.scalars["friction"][i] = col.frame.friction
         self.scalars["restitution"][i] = col.frame.restitution
         self.scalars["impulse"][i] = np.einsum("ij,ij->i", du[new], n_w[new])
+        self.collider[i] = which
 
     def contacts(self) -> Contacts:
         idx = np.nonzero(self.seen)[0]
         v, s = ({k: a[idx] for k, a in table.items()} for table in (self.vectors, self.scalars))
         return Contacts.of(idx, v["point"], v["normal"], v["surface_velocity"], s["friction"],
-                           s["restitution"], impulse=s["impulse"])
+                           s["restitution"], impulse=s["impulse"], collider=self.collider[idx])
 
 
 def _push_out(colliders: list[ColliderPath], x: np.ndarray, v: np.ndarray, s: np.ndarray,
@@ -273,7 +275,8 @@ def resting_contacts(colliders: list[ColliderPath], x: np.ndarray, v: np.ndarray
     best_d = np.full(count, np.inf)
     point, normal, surf_v = np.zeros((count, 3)), np.zeros((count, 3)), np.zeros((count, 3))
     gap, mu, k_r = np.zeros(count), np.zeros(count), np.zeros(count)
-    for col in colliders if count else ():
+    which = np.full(count, -1, np.int64)
+    for ci, col in enumerate(colliders if count else ()):
         surf = col.near_surface(x, s)
         d = np.abs(surf.gap)
         near = d < best_d[surf.index]
@@ -287,6 +290,7 @@ def resting_contacts(colliders: list[ColliderPath], x: np.ndarray, v: np.ndarray
         gap[idx] = surf.gap[ok]
         mu[idx] = col.frame.friction
         k_r[idx] = col.frame.restitution
+        which[idx] = ci
     idx = np.nonzero(np.isfinite(best_d))[0]
     return Contacts.of(idx, point[idx], normal[idx], surf_v[idx], mu[idx], k_r[idx],
-                       depth=-gap[idx])
+                       depth=-gap[idx], collider=which[idx])

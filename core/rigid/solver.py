@@ -18,7 +18,7 @@ from ..bounds import DEFAULT_BOUNDS, StateBounds
 from ..contact import ColliderFrame, ColliderPaths
 from ..errors import SimulationError
 from ..transforms import TransformPath
-from ..world import SolverSystem, World, WorldFrame
+from ..world import BodyInertia, SolverSystem, World, WorldFrame
 from . import contact_solver as cs_
 from .contact_set import ContactSet, tangents
 from . import as_colliders, dynamics, joint_step, sleep, warm
@@ -158,6 +158,25 @@ class RigidBodySolver:
         system = RigidBodySystem(self, state)
         world = World([system], self.colliders)
         return world.advance(inputs.world, {system: inputs.paths}).reports[system]
+
+    def absorb(self, state: RigidBodyState, reactions) -> None:
+        """Impulses other systems' constraints gave the bodies over the frame just ended (a
+        cloth a body hangs from, :class:`~physanim.core.world.Reaction`): added to their
+        momenta, each at its point (about the centre before the move), and the move they made
+        to its pose; a body asleep wakes. Names of no dynamic body are ignored."""
+        model = self.model
+        index = {name: i for i, name in enumerate(model.body_name)}
+        for r in reactions:
+            i = index.get(r.body)
+            if i is None or model.body_kinematic[i]:
+                continue
+            state.body_P[i] += r.impulse.sum(axis=0)
+            state.body_L[i] += np.cross(r.point - state.body_x[i], r.impulse).sum(axis=0)
+            state.body_x[i] += r.move[:3]
+            state.body_q[i] = quat.normalized(quat.multiply(
+                quat.from_rotation_vector(r.move[3:]), state.body_q[i]))
+            if state.body_asleep[i] and np.any(r.impulse):
+                state.body_asleep[i], state.body_slow[i] = False, 0
 
     def begin_frame(self, state: RigidBodyState, inputs: RigidFrameInputs, paths) -> _FrameStep:
         """Pose, find and prepare the frame's contacts."""
@@ -490,6 +509,15 @@ class RigidBodySystem(SolverSystem):
         pose now."""
         return as_colliders.frames(self.solver.model, self._shapes, self._start,
                                    (self.state.body_x, self.state.body_q))
+
+    def frame_bodies(self) -> dict:
+        """Each dynamic body's mass, world inertia and centre of mass now."""
+        m, state = self.solver.model, self.state
+        d = np.nonzero(~m.body_kinematic)[0]
+        rot = quat.to_matrix(state.body_q[d])
+        inertia = rot @ m.body_inertia[d] @ rot.transpose(0, 2, 1)
+        return {m.body_name[i]: BodyInertia(float(m.body_mass[i]), inertia[k],
+                                            state.body_x[i].copy()) for k, i in enumerate(d)}
 
     def inputs(self, frame: WorldFrame, paths: RigidPaths | None) -> RigidFrameInputs:
         return RigidFrameInputs.of(frame, paths)

@@ -71,6 +71,8 @@ class BaraffWitkin(Integrator):
         #: what the last step's solves did: relative residual, CG iterations
         self.last_residual = 0.0
         self.last_iterations = 0
+        #: the last step's final linear system, filter and residual floor (:meth:`response`)
+        self.last_solve: tuple | None = None
 
     def _step_impl(self, system: BaraffWitkinSystem, t: float, y: np.ndarray, h: float):
         """forces -> constraints (the filter) -> Newton iterations (linearise -> assemble ->
@@ -83,16 +85,43 @@ class BaraffWitkin(Integrator):
         floor = h * float(system.weight_norm())
         newton = self._newton(system, t, h, x0, v0, f0, constraints, floor)
         v1, iterations = v0 + newton.dv, newton.iterations
+        residual = newton.residual
         if len(constraints.pressed):
-            v1, more = self._apply_friction(system, v1, constraints, newton, floor)
+            v1, more, friction = self._apply_friction(system, v1, constraints, newton, floor)
             iterations += more
+            residual = residual + friction
         self.last_iterations = iterations
+        self.last_solve = (newton.last, constraints, floor, residual)
         x1 = x0 + h * v1
         # the next step starts from here unless pins, strain limits or collisions move it
         self._memory.end = (x1.copy(), v1.copy(), newton.energy) \
             if newton.energy is not None and not len(constraints.pressed) else None
         report = StepReport(steps=1, evaluations=iterations, h_last=h)
         return np.concatenate([x1.ravel(), v1.ravel()]), report
+
+    def residual(self) -> np.ndarray:
+        """(n, 3) [N s] the last step's impulses from outside the mesh's own forces: with its
+        last linearisation's forces f, M dv = h f + residual. On pinned rows the pins' impulses,
+        on pressed rows the colliders' (normal and friction), elsewhere the solve's error. The
+        mesh's internal forces cancel in any sum over vertices, so the sum of the residual is
+        the momentum change less h times the external forces: the impulses two-way coupling
+        hands to bodies, exactly (:mod:`.attach`)."""
+        return self.last_solve[3]
+
+    def response(self, given: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """How the last step's velocity change responds, to first order, when its pinned
+        vertices' velocity changes by ``given`` (n, 3) (zero rows elsewhere): the change of dv
+        (n, 3) — ``given`` on the pinned rows, the free rows solved with the step's matrix and
+        filter — and the change of the step's residual A dv - rhs (n, 3), which on the pinned
+        rows is the change of the impulses that hold them [N s]. Two-way attachments use it
+        to move a body the mesh hangs on implicitly (:mod:`.attach`)."""
+        linear, constraints, floor, _ = self.last_solve
+        b = constraints.project(-linear.apply_a(given))
+        scale = max(float(np.sqrt(np.sum(b * b))), floor)
+        delta, _, _ = projected_pcg(linear.apply_a, b, linear.precondition, constraints.project,
+                                    self.tolerance, self.max_iterations, None, scale)
+        dv = given + delta
+        return dv, linear.apply_a(dv)
 
     # --- the passes of a step ------------------------------------------------------------------
     @staticmethod
@@ -135,9 +164,10 @@ class BaraffWitkin(Integrator):
             start = self._first_guess(out.dv.shape, t) if first else None
             delta, iterations, residual = self._solve(linear, known, constraints, start, floor)
             out.iterations += iterations
+            out.residual = linear.apply_a(delta + known) - rhs  # the constraints' impulses
             if first:
                 self._remember_solution(delta, t)
-                out.reaction = linear.apply_a(delta + known) - rhs  # the constraints' impulses
+                out.reaction = out.residual
             out.dv = out.dv + delta
             out.last = linear
             self.last_residual = residual
@@ -184,19 +214,20 @@ class BaraffWitkin(Integrator):
         """Coulomb friction is an impulse on the pressed vertices; the mesh takes it as a whole
         (one more filtered solve, with the last linearisation), so a vertex that friction slows
         drags its neighbours along instead of stretching the springs to them. Returns the new
-        velocities (n, 3) [m/s] and the CG iterations spent."""
+        velocities (n, 3) [m/s], the CG iterations spent and the impulses (n, 3) [N s] the
+        step's residual gains (friction's on the pressed vertices)."""
         mass = system.mass[:, None]
         stop = self._friction(v1, constraints.pressed, constraints.normal, constraints.contact,
                               newton.reaction, mass)
         if not np.any(stop):
-            return v1, 0
+            return v1, 0, 0.0
         b = constraints.project(mass * stop)
         scale = max(float(np.sqrt(np.vdot(b, b))), floor)
         linear = newton.last
         delta, iterations, _ = projected_pcg(linear.apply_a, b, linear.precondition,
                                              constraints.project, self.tolerance,
                                              self.max_iterations, None, scale)
-        return v1 + delta, iterations
+        return v1 + delta, iterations, linear.apply_a(delta)
 
     # --- memory between steps ------------------------------------------------------------------
     def _first_guess(self, shape, t: float):

@@ -108,6 +108,7 @@ class NewtonResult:
     Attributes:
         dv: (n, 3) velocity change [m/s]. iterations: CG iterations spent.
         reaction: (n, 3) the constraints' impulses of the first solve [N s] (None: no solve).
+        residual: (n, 3) A dv - rhs of the last solve [N s]: its constraints' impulses.
         last: the last linearisation (None: no solve). energy: the energy at the step's end
             when the Newton check computed it and accepted the step there, else None [J].
     """
@@ -115,6 +116,7 @@ class NewtonResult:
     dv: np.ndarray
     iterations: int = 0
     reaction: np.ndarray | None = None
+    residual: np.ndarray | None = None
     last: Linearisation | None = None
     energy: float | None = None
 

@@ -102,6 +102,27 @@ class VirtualSprings:
 
 
 @dataclass(frozen=True)
+class Attachment:
+    """Vertices held rigidly on the points of another object where they sat at the first frame
+    (a hard constraint: they move exactly with it). When the object is a body another system
+    simulates (a rigid body), the impulses that hold the vertices go back to it: the mesh pulls
+    the body as the body carries the mesh (two-way coupling, :mod:`..world`).
+
+    Args: index: (k,) vertices. target: the object's name; None holds them where they are in
+    the world.
+    """
+
+    index: np.ndarray
+    target: str | None = None
+
+    def __post_init__(self):
+        index = np.atleast_1d(np.asarray(self.index, np.int64))
+        if index.ndim != 1 or len(index) == 0:
+            raise ValueError(f"an attachment needs vertices (got {index.shape})")
+        object.__setattr__(self, "index", index)
+
+
+@dataclass(frozen=True)
 class SpringMeshModel:
     """Frozen arrays of a spring mesh.
 
@@ -111,6 +132,7 @@ class SpringMeshModel:
         spring_damping, spring_family: (s,) every pair spring (0 edge, 1 shear, 2 distance-2).
         hinge: (h, 4) angular springs and hinge_rest (h,) [rad]. triangles: (m, 3).
         pinned: (n,) bool, hard pins. virtual: the virtual spring groups.
+        attachments: vertices held on other objects (:class:`Attachment`).
     """
 
     settings: SpringMeshSettings
@@ -127,14 +149,23 @@ class SpringMeshModel:
     triangles: np.ndarray
     pinned: np.ndarray
     virtual: tuple[VirtualSprings, ...] = field(default_factory=tuple)
+    attachments: tuple[Attachment, ...] = field(default_factory=tuple)
 
     @property
     def vertex_count(self) -> int:
         return len(self.rest_x)
 
+    @property
+    def held(self) -> np.ndarray:
+        """(n,) bool: vertices that do not move freely (pinned or attached)."""
+        held = self.pinned.copy()
+        for a in self.attachments:
+            held[a.index] = True
+        return held
+
     def state(self) -> SpringMeshState:
         return SpringMeshState(self.rest_x.copy(), np.zeros_like(self.rest_x),
-                               [None] * len(self.virtual))
+                               [None] * len(self.virtual), [None] * len(self.attachments))
 
 
 @dataclass
@@ -143,12 +174,13 @@ class SpringMeshState:
 
     ``attached``: per virtual-spring group, for ATTACH groups the vertices' rest positions in
     the target's local space, bound by the first frame the state is advanced (None before, and
-    for other modes).
+    for other modes). ``bound``: the same per :class:`Attachment`.
     """
 
     x: np.ndarray
     v: np.ndarray
     attached: list = field(default_factory=list)
+    bound: list = field(default_factory=list)
 
 
 FAMILY_NAMES = ("edge", "shear", "bending (distance-2)")
@@ -174,10 +206,15 @@ class SpringMeshBuilder:
         self.loops = tuple(np.asarray(a, dtype=np.int64) for a in (loop_start, loop_total, loop_vertices))
         self.pin_weight = None if pin_weight is None else np.asarray(pin_weight, dtype=np.float64)
         self.virtual: list[VirtualSprings] = []
+        self.attachments: list[Attachment] = []
 
     def add_virtual(self, springs: VirtualSprings) -> int:
         self.virtual.append(springs)
         return len(self.virtual) - 1
+
+    def add_attachment(self, attachment: Attachment) -> int:
+        self.attachments.append(attachment)
+        return len(self.attachments) - 1
 
     def _fail(self, message: str, frame):
         raise PhysanimError(message, obj=self.settings.name, frame=frame, kind="spring mesh")
@@ -224,7 +261,12 @@ class SpringMeshBuilder:
                   hinge_rest, self.triangles, pinned]
         for a in arrays:
             a.setflags(write=False)
-        return SpringMeshModel(s, *arrays, virtual=tuple(self.virtual))
+        for a in self.attachments:
+            if a.index.min() < 0 or a.index.max() >= n:
+                self._fail(f"an attachment to {a.target or 'the world'} refers to vertices "
+                           f"outside 0..{n - 1}", frame)
+        return SpringMeshModel(s, *arrays, virtual=tuple(self.virtual),
+                               attachments=tuple(self.attachments))
 
     def _masses(self, frame) -> np.ndarray:
         n = len(self.rest_x)

@@ -23,6 +23,7 @@ from ..transforms import TransformPath, inverse_affine, transform_points
 from ..world import SolverSettings, SolverSystem, World, WorldFrame
 from .forces import AngularSprings, LinearDrag, MassShared
 from .implicit import BaraffWitkin
+from . import attach
 from .model import SpringMeshModel, SpringMeshState
 from .ode import MeshOde, SubstepForces
 from .strain import limit_strain
@@ -43,6 +44,8 @@ class SpringFrameInputs:
         colliders: analytic or mesh colliders. winds: wind force objects (pressure on faces).
         fields: other force objects (drag, attractor, vortex, ...): they act on the whole mesh
             as on one particle, shared by the vertices in proportion to their mass.
+        bodies: rigid bodies stepped before the mesh this frame, by name (their inertia: an
+            attachment to one moves it implicitly, :mod:`.attach`).
     """
 
     frame: int
@@ -55,6 +58,7 @@ class SpringFrameInputs:
     colliders: Sequence[ColliderFrame] = ()
     winds: Sequence[Wind] = ()
     fields: Sequence = ()
+    bodies: dict = field(default_factory=dict)
 
     @classmethod
     def of(cls, frame: WorldFrame, drive: SpringDrive | None) -> SpringFrameInputs:
@@ -64,13 +68,13 @@ class SpringFrameInputs:
         return cls(frame.frame, frame.t0, frame.frame_dt, frame.gravity, drive.rest0,
                    drive.rest1, drive.targets, frame.colliders,
                    [f for f in frame.forces if isinstance(f, Wind)],
-                   [f for f in frame.forces if not isinstance(f, Wind)])
+                   [f for f in frame.forces if not isinstance(f, Wind)], dict(frame.bodies))
 
     @property
     def world(self) -> WorldFrame:
         """What every system shares of this interval."""
         return WorldFrame(self.frame, self.t0, self.frame_dt, self.gravity, self.colliders,
-                          [*self.winds, *self.fields])
+                          [*self.winds, *self.fields], self.bodies)
 
     @property
     def drive(self) -> SpringDrive:
@@ -120,6 +124,8 @@ class _FrameStep:
     rest1: np.ndarray
     rest_speed: float  # [m/s] a bounce slower than this ends in contact
     hits: int = 0  # collisions handled
+    held: attach.Held | None = None  # the attachments' paths this frame
+    reactions: list = field(default_factory=list)  # impulses on bodies held by attachments
 
 
 class SpringMeshSystem(SolverSystem):
@@ -165,7 +171,7 @@ class SpringMeshSolver:
                                  model.spring_stiffness, model.spring_damping)
         self.bending = AngularSprings(model.hinge, model.hinge_rest, s.bend_stiffness,
                                       s.bend_damping)
-        self.free = ~model.pinned
+        self.free = ~model.held
         self._inv_mass = np.where(self.free, 1.0 / model.vertex_mass, 0.0)
         self._mass_share = model.vertex_mass / model.vertex_mass.sum()
         self.drag = LinearDrag(model.settings.drag)
@@ -202,8 +208,16 @@ class SpringMeshSolver:
         g = np.asarray(inputs.gravity, dtype=np.float64)
         rest0 = inputs.rest0 if inputs.rest0 is not None else self.model.rest_x
         rest1 = inputs.rest1 if inputs.rest1 is not None else rest0
+        held = attach.frame_paths(self.model, state, inputs.colliders, inputs.targets,
+                                  inputs.bodies, inputs.frame) \
+            if self.model.attachments or inputs.bodies else None
+        body = next((b for b in held.coupled if b), None) if held is not None else None
+        if body is not None and not isinstance(self.integrator, BaraffWitkin):
+            raise self._fail(f'an attachment to the rigid body "{body}" moves it with the '
+                             f"mesh, which needs the IMPLICIT integrator (this mesh uses "
+                             f"{self.integrator_name})", inputs.frame)
         return _FrameStep(state, inputs, paths, h, g, rest0, rest1,
-                          2.0 * float(np.linalg.norm(g)) * h + 1e-4)
+                          2.0 * float(np.linalg.norm(g)) * h + 1e-4, held=held)
 
     def substep(self, step: _FrameStep, k: int) -> None:
         """Sub-step ``k``: the passes of the module docstring."""
@@ -212,14 +226,65 @@ class SpringMeshSolver:
         t = inputs.t0 + k * h
         pin_x1 = step.rest0 + s1 * (step.rest1 - step.rest0)
         pin_v = (step.rest1 - step.rest0) / inputs.frame_dt
+        if step.held is not None:
+            attach.hold(self.model, state, step.held, s0, s1, h, pin_x1, pin_v)
         contact = resting_contacts(step.paths, state.x, state.v, s0, step.rest_speed)
         forces = self._forces(step, t, s0, s1)
         solved = self._solve(step, forces, contact, t, s0, s1, pin_x1, pin_v)
+        touched = [contact]
+        outside = self._outside(state.v, state.v)
         if solved is not None:
-            x, v, collided = solved
+            x, v, collided, touched, outside = solved
             x[~self.free], v[~self.free] = pin_x1[~self.free], pin_v[~self.free]
             state.x, state.v, step.hits = x, v, step.hits + collided
+        if outside is not None:
+            self._react(step, touched, outside, s1)
         self._check(state, inputs.frame)
+
+    def _react(self, step: _FrameStep, touched: list, outside: np.ndarray, s1: float) -> None:
+        """Two-way coupling with the bodies stepped first this frame: the attached ones move
+        with the mesh (solved implicitly), and every body takes back the impulses that held
+        the mesh's vertices on it or pushed them off it (:mod:`.attach`)."""
+        state, held, bodies = step.state, step.held, step.inputs.bodies
+        if not bodies:
+            return
+        pushed = np.zeros(self.model.vertex_count, bool)
+        hits: dict[str, list] = {}
+        for c in touched:
+            pushed[c.index] = True
+            for ci in np.unique(c.collider[c.collider >= 0]):
+                name = step.paths[ci].frame.name
+                if name in bodies:
+                    hits.setdefault(name, []).append(c.index[c.collider == ci])
+        hits = {b: np.unique(np.concatenate(i)) for b, i in hits.items()}
+        hits = {b: i[self.free[i]] for b, i in hits.items()}
+        pressed = self._pressed_on(step) if held is not None else {}
+        if held is not None and (any(b is not None for b in held.coupled) or pressed):
+            attach.couple(self.model, held, self.integrator, pressed, outside, state.x,
+                          state.v, step.h, s1)
+        elif not any(len(i) for i in hits.values()):
+            return
+        step.reactions = attach.merged([*step.reactions, *attach.react(
+            self.model, held, self.model.vertex_mass, self.free, pushed, hits, outside,
+            state.x, state.v, step.h)])
+
+    def _pressed_on(self, step: _FrameStep) -> dict:
+        """The vertices the last implicit step held on the surfaces of bodies stepped first:
+        body -> (vertices, normals)."""
+        if not isinstance(self.integrator, BaraffWitkin) or self.integrator.last_solve is None:
+            return {}
+        f = self.integrator.last_solve[1]
+        if not len(f.pressed):
+            return {}
+        rows = np.searchsorted(f.contact.index, f.pressed)
+        which = f.contact.collider[rows]
+        out = {}
+        for ci in np.unique(which[which >= 0]):
+            name = step.paths[ci].frame.name
+            if name in step.held.bodies:
+                sel = which == ci
+                out[name] = (f.pressed[sel], f.normal[sel])
+        return out
 
     # -- passes ---------------------------------------------------------------------------------
     def _forces(self, step: _FrameStep, t: float, s0: float, s1: float) -> SubstepForces:
@@ -269,8 +334,10 @@ class SpringMeshSolver:
                s0: float, s1: float, pin_x1, pin_v):
         """Integrate, then respond to collisions on the vertices' paths; with IMPLICIT, a step
         whose vertices hit a collider is solved again with them landing on it (up to
-        LANDING_ROUNDS times). Returns (x, v, collisions) after response, or None when there
-        are no colliders (the state holds the integrated step)."""
+        LANDING_ROUNDS times). Returns (x, v, collisions, the contacts of the step and of each
+        round's hits, the impulses from outside the mesh's forces (implicit only, else None:
+        :meth:`_outside`)) after response, or None when there are no colliders (the state
+        holds the integrated step)."""
         state, h, paths = step.state, step.h, step.paths
         implicit = isinstance(self.integrator, BaraffWitkin)
 
@@ -280,7 +347,7 @@ class SpringMeshSolver:
 
         ode = ode_with(contact)
         x0, v0 = state.x.copy(), state.v.copy()
-        landing, collided, first = None, 0, None
+        landing, collided, first, hits = None, 0, None, [contact]
         for round_ in range(LANDING_ROUNDS + 1):
             if round_:
                 # vertices hit a surface during the step: solve the step again with them as
@@ -290,6 +357,7 @@ class SpringMeshSolver:
                 state.x, state.v = x0.copy(), v0.copy()
                 ode = ode_with(landing)
             self._step(ode, t, h, pin_x1, pin_v, step.inputs.frame)
+            solved = state.v.copy()
             if landing is not None:
                 _bounce(state.v, landing, step.rest_speed)
             if not paths:
@@ -297,18 +365,31 @@ class SpringMeshSolver:
             x, v, count, hit = respond(paths, x0, state.x, v0, state.v, s0, s1, h,
                                        step.rest_speed)
             collided = max(collided, count)  # the first round finds the step's collisions
-            first = (x, v) if first is None else first
+            hits.append(hit)
+            outside = self._outside(v, solved)
+            first = (x, v, outside) if first is None else first
             more = None if not (implicit and round_ < LANDING_ROUNDS) else \
                 self._landing(landing if landing is not None else contact, hit, x0, h)
             if more is None:
                 break
             landing = more
-        if landing is not None and ode.energy(*first) < ode.energy(x, v):
+        if landing is not None and ode.energy(*first[:2]) < ode.energy(x, v):
             # a safeguard: landing constraints must not end with more energy than projecting
             # the hits after the first solve (a stiff mesh whose landing vertices are forced
             # apart can store more spring energy than that)
-            x, v = first
-        return x, v, collided
+            x, v, outside = first
+        return x, v, collided, hits, outside
+
+    def _outside(self, v: np.ndarray, solved: np.ndarray) -> np.ndarray | None:
+        """(n, 3) [N s] the impulses the sub-step's vertices took from outside the mesh's own
+        forces: the implicit solve's (pins, attachments, contacts: its residual) plus what the
+        bounces and collisions after it changed (``solved``: velocities the solve left; pinned
+        rows keep only the solve's). None for explicit integrators."""
+        if not isinstance(self.integrator, BaraffWitkin):
+            return None
+        bump = self.model.vertex_mass[:, None] * (v - solved)
+        bump[~self.free] = 0.0
+        return self.integrator.residual() + bump
 
     def _step(self, system, t: float, h: float, pin_x1, pin_v, frame) -> None:
         """One integrator step, then pins exactly on their targets and the strain limit."""
