@@ -51,22 +51,32 @@ def run(world, frames, gravity=-G, each=None):
             each(f)
 
 
+N, HALF = 11, 0.1  # rope vertices; the box's half size [m]
+
+
+def box_on_rope(mass):
+    """A box of ``mass`` hung by its top from the bottom vertex of :func:`rope`, run 10 s:
+    (its heights per frame, the mesh model and state)."""
+    builder = rope(N)
+    builder.add_attachment(Attachment([N - 1], "Box"))
+    world, rstate, model, mstate = coupled(builder, box("Box", (HALF,) * 3, (0, 0, 1.0 - HALF),
+                                                        mass=mass))
+    heights = []
+    run(world, 240, each=lambda f: heights.append(rstate.body_x[0, 2]))
+    return np.array(heights), model, mstate
+
+
 def test_a_box_hanging_from_a_rope_stretches_it_as_statics_says():
     # A 1 kg box hangs from the bottom vertex of a 10-spring rope (k = 1000 N/m each, 0.1 kg)
     # pinned at its top. Spring j carries the box and every vertex below it, so it stretches
     # W_j / k; the box settles where the sum of those puts it (within 1 mm after 10 s) and
     # stays (frame to frame within 1e-6 m), and the top spring is as long as its load says
     # (within 0.1 mm). One-way, the box would fall through.
-    n, half, mass = 11, 0.1, 1.0
-    builder = rope(n)
-    builder.add_attachment(Attachment([n - 1], "Box"))
-    world, rstate, model, mstate = coupled(builder, box("Box", (half,) * 3, (0, 0, 1.0 - half),
-                                                        mass=mass))
-    heights = []
-    run(world, 240, each=lambda f: heights.append(rstate.body_x[0, 2]))
+    mass = 1.0
+    heights, model, mstate = box_on_rope(mass)
     vertex = model.vertex_mass[0]
-    loads = np.array([(mass + vertex * (n - 1 - j)) * G for j in range(n - 1)])
-    expected = 2.0 - (1.0 + float(np.sum(loads)) / 1000.0) - half
+    loads = np.array([(mass + vertex * (N - 1 - j)) * G for j in range(N - 1)])
+    expected = 2.0 - (1.0 + float(np.sum(loads)) / 1000.0) - HALF
     assert abs(heights[-1] - expected) < 1e-3
     assert np.ptp(heights[-24:]) < 1e-6
     top = np.linalg.norm(mstate.x[1] - mstate.x[0])
@@ -79,18 +89,13 @@ def test_a_box_bouncing_on_a_rope_has_the_springs_period():
     # T = 2 pi sqrt((M + m/3) / k_eff) = 1.41 s. Backward Euler at omega h = 0.19 lengthens
     # the period by about (omega h)^2 / 3 and the one-frame split of body and rope adds its
     # own: asserted within 3 %.
-    n, half, mass = 11, 0.1, 5.0
-    builder = rope(n)
-    builder.add_attachment(Attachment([n - 1], "Box"))
-    world, rstate, model, _ = coupled(builder, box("Box", (half,) * 3, (0, 0, 1.0 - half),
-                                                   mass=mass))
-    z = []
-    run(world, 240, each=lambda f: z.append(rstate.body_x[0, 2]))
-    z = np.array(z) - np.mean(z[-96:])
+    mass = 5.0
+    z, model, _ = box_on_rope(mass)
+    z = z - np.mean(z[-96:])
     t = np.arange(1, len(z) + 1) * DT
     up = np.nonzero((z[:-1] < 0.0) & (z[1:] >= 0.0))[0]
     crossings = t[up] - z[up] * DT / (z[up + 1] - z[up])
-    period = 2 * math.pi * math.sqrt((mass + model.vertex_mass.sum() / 3) / (1000.0 / (n - 1)))
+    period = 2 * math.pi * math.sqrt((mass + model.vertex_mass.sum() / 3) / (1000.0 / (N - 1)))
     assert len(crossings) >= 4
     assert abs(np.mean(np.diff(crossings[:4])) / period - 1.0) < 0.03
 
