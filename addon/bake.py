@@ -118,7 +118,7 @@ class BakeJob:
         """The rigid bodies step first: the others may meet them within the same frame."""
         self._unprepared += 1
         bake = rigid.RigidBake(self.scene, self.roles.rigid_bodies, self.rigid_hash,
-                               self.roles.constraints)
+                               self.roles.joints)
         self.rigid = bake
         with self._system(bake):
             bake.prepare(depsgraph, self.frame_start, self.colliders)

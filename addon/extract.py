@@ -29,11 +29,29 @@ class Roles:
     forces: list = field(default_factory=list)
     spring_meshes: list = field(default_factory=list)
     rigid_bodies: list = field(default_factory=list)
-    constraints: list = field(default_factory=list)  # joining rigid bodies (baked with them)
+    constraints: list = field(default_factory=list)  # every enabled constraint object
 
     def __bool__(self) -> bool:
         """Whether anything bakes."""
         return bool(self.emitters or self.spring_meshes or self.rigid_bodies)
+
+    @property
+    def joints(self) -> list:
+        """The constraints joining rigid bodies (baked with them): all but attachments."""
+        return [c for c in self.constraints if not is_attachment(c)] if self.rigid_bodies \
+            else []
+
+
+def is_attachment(constraint) -> bool:
+    """Whether a constraint object holds a spring mesh's vertices (baked with the mesh)."""
+    first = constraint.physanim.constraint.object1
+    return first is not None and first.physanim.spring_mesh.enabled
+
+
+def attachments(scene, ob) -> list:
+    """The constraint objects of ``scene`` holding spring mesh ``ob``'s vertices, by name."""
+    return sorted((c for c in scene.objects if c.physanim.constraint.enabled
+                   and c.physanim.constraint.object1 == ob), key=lambda c: c.name)
 
 
 def gather(scene, only: set[str] | None = None) -> Roles:
@@ -60,7 +78,7 @@ def gather(scene, only: set[str] | None = None) -> Roles:
     return Roles(emitters,
                  [o for o in objects if o.physanim.collider.enabled],
                  [o for o in objects if o.physanim.force.enabled], meshes, rigid,
-                 [o for o in objects if o.physanim.constraint.enabled] if rigid else [])
+                 [o for o in objects if o.physanim.constraint.enabled])
 
 
 def emitter_chain(ob) -> list:

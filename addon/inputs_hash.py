@@ -10,7 +10,7 @@ import bpy
 import numpy as np
 
 from . import compat, convert
-from .extract import Roles, emitter_chain, gather, made_by_bake
+from .extract import Roles, attachments, emitter_chain, gather, is_attachment, made_by_bake
 
 def _animated_paths(id_data) -> set[str]:
     ad = getattr(id_data, "animation_data", None)
@@ -159,6 +159,10 @@ def inputs_hash(scene, ob, role: str, roles: Roles | None = None) -> str:
         records.append(_object_record(ob, role))
         targets = {v.target.name: v.target for v in ob.physanim.spring_mesh.virtual_springs
                    if v.target is not None}
+        held = attachments(scene, ob)  # the objects its vertices hang on, and how
+        records += [_object_record(c, "constraint") for c in held]
+        targets.update({c.physanim.constraint.object2.name: c.physanim.constraint.object2
+                        for c in held if c.physanim.constraint.object2 is not None})
         records += [_object_record(targets[name], None) for name in sorted(targets)]
     records += [_object_record(o, "collider") for o in roles.colliders]
     records += [_object_record(o, "force") for o in roles.forces]
@@ -190,5 +194,7 @@ def rigid_hash(scene, objects: list, roles: Roles | None = None) -> str:
         holder = c.physanim.constraint.object2
         if holder is not None and holder.name not in names:
             records.append(_object_record(holder, None))
+        if is_attachment(c):  # a spring mesh hangs on a body: it pulls it
+            records.append(_object_record(c.physanim.constraint.object1, "spring_mesh"))
     h.update(json.dumps([settings, records], sort_keys=True).encode())
     return h.hexdigest()

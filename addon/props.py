@@ -348,20 +348,27 @@ CONSTRAINT_TYPE_ITEMS = [
 ]
 
 
-def _is_rigid_body(self, ob) -> bool:
-    return ob.physanim.rigid_body.enabled
+def _is_rigid_body_or_spring_mesh(self, ob) -> bool:
+    return ob.physanim.rigid_body.enabled or ob.physanim.spring_mesh.enabled
 
 
 class PHYSANIM_PG_constraint(bpy.types.PropertyGroup):
     """A joint between two rigid bodies, or a rigid body and another object (which holds it
     where it is animated) or the world, placed by this object's origin and axes at the first
-    frame (as Blender's rigid body constraints)."""
+    frame (as Blender's rigid body constraints). With a spring mesh as First, its vertex group
+    is held on the Second object (an attachment: a rigid body moves with the mesh)."""
 
     enabled: BoolProperty(name="Constraint", options=STATIC,
                           description="Join two objects at this object's origin")
     type: EnumProperty(name="Type", items=CONSTRAINT_TYPE_ITEMS, default='BALL', options=STATIC)
-    object1: PointerProperty(name="First", type=bpy.types.Object, poll=_is_rigid_body,
-                             options=STATIC, description="The rigid body held")
+    object1: PointerProperty(name="First", type=bpy.types.Object,
+                             poll=_is_rigid_body_or_spring_mesh, options=STATIC,
+                             description="What is held: a rigid body, or a spring mesh (its "
+                                         "vertex group)")
+    group1: StringProperty(name="Vertex Group", options=STATIC,
+                           description="The First spring mesh's vertices held on the Second "
+                                       "object where they are at the start (empty: all of "
+                                       "them); a rigid body they hang on moves with the mesh")
     object2: PointerProperty(name="Second", type=bpy.types.Object, options=STATIC,
                              description="What holds it: a rigid body, any other object "
                                          "(which holds it where it is animated to be), or "

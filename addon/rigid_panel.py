@@ -112,14 +112,24 @@ class PHYSANIM_PT_constraint(_PhysicsPanel, bpy.types.Panel):
         layout.prop(p, "type")
         col = layout.column(align=True)
         col.prop(p, "object1")
+        mesh = p.object1 is not None and p.object1.physanim.spring_mesh.enabled
+        if mesh and p.object1.type == 'MESH':
+            col.prop_search(p, "group1", p.object1, "vertex_groups")
         col.prop(p, "object2")
         if p.object1 is None:
-            layout.label(text="Choose the rigid body it holds (First)", icon='ERROR')
+            layout.label(text="Choose the rigid body or spring mesh it holds (First)",
+                         icon='ERROR')
+        elif mesh and p.type not in ('FIXED', 'BALL'):
+            layout.label(text="A spring mesh's vertices are held by Fixed or Ball", icon='ERROR')
         elif p.object2 is None:
             layout.label(text="Held by the world", icon='INFO')
+        elif p.object2.physanim.rigid_body.enabled and mesh:
+            layout.label(text=f"Hangs on \"{p.object2.name}\", which moves with it", icon='INFO')
         elif not p.object2.physanim.rigid_body.enabled:
             layout.label(text=f"Held by \"{p.object2.name}\" where it is animated", icon='INFO')
         layout.prop(p, "disable_collisions")
+        if mesh:  # an attachment: no limits, motors, springs or breaking
+            return
         if p.type in ('HINGE', 'SLIDER', 'CONE_TWIST'):
             self._limits(layout, p)
         if p.type in ('HINGE', 'SLIDER'):

@@ -17,12 +17,12 @@ from ..core.cache import CacheWriter
 from ..core.errors import PhysanimError
 from ..core.contact import ColliderPaths
 from ..core.pc2 import Pc2Writer
-from ..core.springs import (SpringDrive, SpringMeshBuilder, SpringMeshSettings,
+from ..core.springs import (Attachment, SpringDrive, SpringMeshBuilder, SpringMeshSettings,
                             SpringMeshSolver, SpringMeshSystem, VirtualSprings)
 from ..core.transforms import inverse_affine, transform_points
 from . import convert, limits
 from .cache_paths import spring_cache_dir
-from .extract import world_matrix
+from .extract import attachments, world_matrix
 from .mesh_read import evaluated_mesh
 
 MODIFIER = "physanim"
@@ -48,6 +48,37 @@ def _object_matrix(ob, frame: int) -> np.ndarray:
     return m
 
 
+ATTACHABLE = ('FIXED', 'BALL')  # joints that hold points (a vertex has no orientation)
+
+
+def attachment(constraint, weights: dict, count: int, frame: int) -> Attachment:
+    """The core attachment a constraint object makes of its First spring mesh's vertex group
+    (all vertices when it names none), held on its Second object (None: the world)."""
+    p = constraint.physanim.constraint
+
+    def fail(message: str):
+        raise PhysanimError(message, obj=constraint.name, frame=frame, kind="constraint")
+
+    if p.type not in ATTACHABLE:
+        fail(f"a spring mesh's vertices can only be held (Fixed or Ball), not by a "
+             f"{p.type.replace('_', ' ').title()} joint — choose Fixed or Ball")
+    if p.object2 is not None and p.object2 == p.object1:
+        fail("its First and Second objects are the same — choose two different objects")
+    if p.use_breaking:
+        fail("a spring mesh's attachment cannot break (breaking is for joints between rigid "
+             "bodies) — turn Breakable off")
+    if not p.group1:
+        index = np.arange(count)
+    elif p.group1 not in weights:
+        fail(f'"{p.group1}" is not a vertex group of "{p.object1.name}"')
+    else:
+        index = np.nonzero(weights[p.group1] > 0.0)[0]
+        if not len(index):
+            fail(f'the vertex group "{p.group1}" of "{p.object1.name}" has no vertices')
+    return Attachment(index, None if p.object2 is None else p.object2.name,
+                      collide=not p.disable_collisions)
+
+
 class SpringMeshBake:
     """Bake of one spring-mesh object.
 
@@ -66,9 +97,12 @@ class SpringMeshBake:
         p = ob.physanim.spring_mesh
         self.props = p
         self.groups = [v for v in p.virtual_springs]
+        self.attachments = attachments(scene, ob)  # constraint objects holding its vertices
         self.needs_rest = bool(p.pin_group) or any(v.mode == 'PIN' for v in self.groups)
         self.targets = sorted({v.target.name for v in self.groups
-                               if v.mode != 'PIN' and v.target is not None})
+                               if v.mode != 'PIN' and v.target is not None}
+                              | {c.physanim.constraint.object2.name for c in self.attachments
+                                 if c.physanim.constraint.object2 is not None})
         self.pc2: Pc2Writer | None = None
 
     @property
@@ -103,6 +137,8 @@ class SpringMeshBake:
                                                    p.pin_stiffness, 0.1 * p.pin_stiffness ** 0.5))
         for k, group in enumerate(self.groups):
             self._add_group(builder, k, group, weights, frame)
+        for c in self.attachments:
+            builder.add_attachment(attachment(c, weights, len(rest), frame))
         self.model = builder.finalize(frame)
         integrator = s.integrator if p.integrator == 'SCENE' else p.integrator
         substeps = p.substeps or s.substeps
@@ -141,7 +177,7 @@ class SpringMeshBake:
         m = _object_matrix(ob, frame)
         out = {"frame": frame, "matrix": m, "rest": None,
                "targets": {name: world_matrix(bpy.data.objects[name], frame,
-                                               "virtual spring target")
+                                               "spring mesh target")
                            for name in self.targets}}
         if self.needs_rest:
             co = evaluated_mesh(ob, depsgraph).co

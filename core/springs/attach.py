@@ -31,12 +31,13 @@ collider's push).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..errors import PhysanimError
-from ..transforms import TransformPath, inverse_affine, transform_points
+from ..transforms import TransformPath, inverse_affine, quaternion_to_matrix, transform_points
 from ..world import Reaction
 from .model import SpringMeshModel, SpringMeshState
 
@@ -174,18 +175,32 @@ def couple(model: SpringMeshModel, held: Held, integrator, pressed: dict,
                                         [np.zeros((3, 3)), body.inertia]])
     du = np.linalg.solve(inertia + coupling, rhs)
     # backward Euler: the mesh and the bodies move by h times the velocity change (the bodies'
-    # attached vertices with them; the bodies by the reactions' move); the impulses that hold
-    # them change linearly with it, so the bodies take exactly M du
+    # attached vertices with them, turned exactly as the reactions' move turns the body); the
+    # impulses that hold them change linearly with it, so the bodies take exactly M du
+    before = x1.copy()
     for d, (dv, d_impulse) in zip(du, columns):
         v1 += d * dv
         x1 += (h * d) * dv
         outside += d * d_impulse
-        for k, (a, b) in enumerate(zip(model.attachments, held.coupled)):
-            if b is not None:
-                held.shift[k] += (h * d) * dv[a.index]
     for p, b in enumerate(names):
-        held.du[b] += du[6 * p:6 * p + 6]
-        held.move[b] += h * du[6 * p:6 * p + 6]
+        step = du[6 * p:6 * p + 6]
+        held.du[b] += step
+        held.move[b] += h * step
+        centre = _centre(held, b, s1)
+        turn = _rotation(h * step[3:])
+        for k, (a, body) in enumerate(zip(model.attachments, held.coupled)):
+            if body == b:
+                x1[a.index] = centre + h * step[:3] + (before[a.index] - centre) @ turn.T
+                held.shift[k] += x1[a.index] - before[a.index]
+
+
+def _rotation(theta: np.ndarray) -> np.ndarray:
+    """(3, 3) rotation by the rotation vector ``theta`` [rad]."""
+    angle = float(np.linalg.norm(theta))
+    if angle < 1e-15:
+        return np.eye(3)
+    half = 0.5 * angle
+    return quaternion_to_matrix(np.array([math.cos(half), *(math.sin(half) / angle * theta)]))
 
 
 def _along(u: np.ndarray, normal: np.ndarray) -> np.ndarray:

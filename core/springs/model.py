@@ -109,11 +109,13 @@ class Attachment:
     the body as the body carries the mesh (two-way coupling, :mod:`..world`).
 
     Args: index: (k,) vertices. target: the object's name; None holds them where they are in
-    the world.
+    the world. collide: whether the mesh still collides with the target (off: a cloth sewn
+    onto a body passes through it, as a joint's "disable collisions").
     """
 
     index: np.ndarray
     target: str | None = None
+    collide: bool = True
 
     def __post_init__(self):
         index = np.atleast_1d(np.asarray(self.index, np.int64))

@@ -5,6 +5,7 @@ outdated when a constraint changes."""
 from __future__ import annotations
 
 import math
+import re
 import sys
 from pathlib import Path
 
@@ -227,3 +228,87 @@ def test_connect_needs_two_rigid_bodies(physanim_ext, tmp_path):
         ob.select_set(ob == cube)
     with pytest.raises(RuntimeError, match="at least two rigid bodies"):
         bpy.ops.physanim.connect()
+
+
+# -- spring meshes held on objects (attachments) -----------------------------------------------
+
+def _pc2_world(ext, ob) -> np.ndarray:
+    """(frames, n, 3) world positions of a baked spring mesh."""
+    path = bpy.path.abspath(ob.modifiers["physanim"].filepath)
+    samples = sys.modules[f"{ext.__name__}.core.pc2"].read_pc2(path)[0]
+    m = np.array(ob.matrix_world)
+    return samples @ m[:3, :3].T + m[:3, 3]
+
+
+def _cloth(location=(0.0, 0.0, 2.0), pin_top=True):
+    """A 9 x 9 grid of 1 m standing in the xz plane as a spring mesh, its top row pinned (vertex
+    group "Top"), its bottom row in the vertex group "Hook"."""
+    bpy.ops.mesh.primitive_grid_add(x_subdivisions=8, y_subdivisions=8, size=1.0,
+                                    location=location, rotation=(math.pi / 2, 0.0, 0.0))
+    ob = bpy.context.object
+    bpy.ops.object.transform_apply(location=False, rotation=True, scale=False)
+    z = np.array([v.co.z for v in ob.data.vertices])
+    for name, rows in (("Top", z > z.max() - 1e-6), ("Hook", z < z.min() + 1e-6)):
+        group = ob.vertex_groups.new(name=name)
+        group.add([int(i) for i in np.nonzero(rows)[0]], 1.0, 'REPLACE')
+    ob.physanim.spring_mesh.enabled = True
+    if pin_top:
+        ob.physanim.spring_mesh.pin_group = "Top"
+    return ob
+
+
+def test_a_constraint_holding_a_spring_mesh_at_its_defaults_holds_it_where_it_is(physanim_ext,
+                                                                             tmp_path):
+    """Enable the role and choose a spring mesh as First, nothing else: all its vertices are
+    held where they are (on the world) — the whole bake keeps the first frame's shape."""
+    scene = _scene(tmp_path)
+    cloth = _cloth(pin_top=False)
+    _constraint("Glue", (0.0, 0.0, 2.0), cloth)
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    x = _pc2_world(physanim_ext, cloth)
+    assert len(x) == scene.physanim.frame_end - scene.physanim.frame_start + 1
+    np.testing.assert_allclose(x, np.broadcast_to(x[0], x.shape), atol=1e-6)
+
+
+def test_a_rigid_box_hangs_from_a_cloth_which_it_pulls(physanim_ext, tmp_path):
+    """A 5 kg cube hung by its top face on the cloth's bottom row (an attachment to a rigid
+    body): the cloth holds it — it stays within 15 cm of where it started, where without the
+    constraint it falls over 2 m in the same 2 s — and it pulls the cloth: the hook row stays
+    on the cube's top face, lower than the cloth hanging alone."""
+    _scene(tmp_path)
+    cloth = _cloth()
+    cube = _cube(location=(0.0, 0.0, 1.4), mass=5.0)
+    cube.scale = (0.5, 0.1, 0.1)
+    _constraint("Sign", (0.0, 0.0, 1.5), cloth, cube, group1="Hook")
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    frames = range(FRAME_START, FRAME_END + 1)
+    top = _pivot_track(bpy.context.scene, cube, (0.0, 0.0, 1.0), frames)
+    assert np.max(np.abs(top[:, 2] - 1.5)) < 0.15
+    x = _pc2_world(physanim_ext, cloth)
+    group = cloth.vertex_groups["Hook"].index
+    hook = [v.index for v in cloth.data.vertices if any(g.group == group for g in v.groups)]
+    np.testing.assert_allclose(x[-1][hook, 2], top[-1, 2], atol=2e-3)
+
+    c = bpy.data.objects["Sign"].physanim.constraint
+    c.enabled = False
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    fallen = _pivot_track(bpy.context.scene, cube, (0.0, 0.0, 1.0), frames)
+    assert fallen[-1, 2] < 1.5 - 2.0
+    alone = _pc2_world(physanim_ext, cloth)  # the cloth hanging under its own weight only
+    assert x[-1][hook, 2].mean() < alone[-1][hook, 2].mean() - 0.005
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"type": 'HINGE'}, "can only be held (Fixed or Ball), not by a Hinge joint"),
+    ({"group1": "Nope"}, '"Nope" is not a vertex group of "Grid"'),
+    ({"use_breaking": True}, "cannot break"),
+])
+def test_an_attachment_that_cannot_hold_says_why(physanim_ext, tmp_path, change, message):
+    _scene(tmp_path)
+    cloth = _cloth()
+    cube = _cube(location=(0.0, 0.0, 1.4))
+    ob = _constraint("Sign", (0.0, 0.0, 1.5), cloth, cube, group1="Hook")
+    for key, value in change.items():
+        setattr(ob.physanim.constraint, key, value)
+    with pytest.raises(RuntimeError, match=re.escape(message)):
+        bpy.ops.physanim.bake()

@@ -13,7 +13,8 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 SCENES = ("fountain", "fireworks", "robot_arm", "jelly_cube", "flag", "cloth_drape",
-          "mesh_pour", "rigid_bodies", "dominoes", "t_handle", "rings_peg", "bowl_pile", "arm_throw", "wrecking_ball", "newtons_cradle")
+          "mesh_pour", "rigid_bodies", "dominoes", "t_handle", "rings_peg", "bowl_pile", "arm_throw", "wrecking_ball", "newtons_cradle",
+          "banner_ball")
 
 
 def test_every_sample_scene_is_tested():
