@@ -373,44 +373,40 @@ class PHYSANIM_PG_constraint(bpy.types.PropertyGroup):
                              description="What holds it: a rigid body, any other object "
                                          "(which holds it where it is animated to be), or "
                                          "nothing (the world)")
-    use_limits: BoolProperty(name="Limits", options=STATIC,
+    use_limits: BoolProperty(name="Limits",
                              description="Limit the hinge's angle, the slider's distance or "
                                          "the cone twist's twist")
     angle_lower: FloatProperty(name="Lower", min=-3.14159, max=3.14159, default=-0.785398,
-                               unit='ROTATION', options=STATIC,
+                               unit='ROTATION',
                                description="Smallest angle of the first object about Z "
                                            "(hinge) or twist (cone twist)")
     angle_upper: FloatProperty(name="Upper", min=-3.14159, max=3.14159, default=0.785398,
-                               unit='ROTATION', options=STATIC,
+                               unit='ROTATION',
                                description="Largest angle")
     distance_lower: FloatProperty(name="Lower", min=-1.0e5, max=1.0e5, default=-1.0,
-                                  unit='LENGTH', options=STATIC,
+                                  unit='LENGTH',
                                   description="Smallest distance along Z (slider)")
     distance_upper: FloatProperty(name="Upper", min=-1.0e5, max=1.0e5, default=1.0,
-                                  unit='LENGTH', options=STATIC,
+                                  unit='LENGTH',
                                   description="Largest distance along Z (slider)")
     cone_angle: FloatProperty(name="Cone", min=0.001, max=3.1, default=0.785398,
-                              unit='ROTATION', options=STATIC,
+                              unit='ROTATION',
                               description="Largest angle between the two objects' Z axes")
-    use_motor: BoolProperty(name="Motor", options=STATIC,
+    use_motor: BoolProperty(name="Motor",
                             description="Drive the hinge or slider at a speed")
-    motor_velocity: FloatProperty(name="Speed", min=-1.0e4, max=1.0e4, default=1.0,
-                                  options=STATIC, description="rad/s (hinge) or m/s (slider) of the first "
+    motor_velocity: FloatProperty(name="Speed", min=-1.0e4, max=1.0e4, default=1.0, description="rad/s (hinge) or m/s (slider) of the first "
                                               "object relative to the second")
-    motor_max: FloatProperty(name="Max Torque / Force", min=0.0, max=1.0e9, default=10.0,
-                             options=STATIC, description="The motor's strength: N m (hinge) or N (slider)")
-    use_spring: BoolProperty(name="Spring", options=STATIC,
+    motor_max: FloatProperty(name="Max Torque / Force", min=0.0, max=1.0e9, default=10.0, description="The motor's strength: N m (hinge) or N (slider)")
+    use_spring: BoolProperty(name="Spring",
                              description="A damped spring pulls the hinge or slider back to "
                                          "where it started")
-    spring_stiffness: FloatProperty(name="Stiffness", min=0.0, max=1.0e9, default=10.0,
-                                    options=STATIC, description="N m/rad (hinge) or N/m (slider)")
-    spring_damping: FloatProperty(name="Damping", min=0.0, max=1.0e9, default=0.5,
-                                  options=STATIC, description="N m s/rad (hinge) or N s/m (slider)")
-    use_breaking: BoolProperty(name="Breakable", options=STATIC,
+    spring_stiffness: FloatProperty(name="Stiffness", min=0.0, max=1.0e9, default=10.0, description="N m/rad (hinge) or N/m (slider)")
+    spring_damping: FloatProperty(name="Damping", min=0.0, max=1.0e9, default=0.5, description="N m s/rad (hinge) or N s/m (slider)")
+    use_breaking: BoolProperty(name="Breakable",
                                description="Let go when the force it carries exceeds a "
                                            "threshold")
     break_force: FloatProperty(name="Breaking Force", min=1.0e-6, max=1.0e12, default=100.0,
-                               unit='NONE', options=STATIC, description="Newtons")
+                               unit='NONE', description="Newtons")
     disable_collisions: BoolProperty(name="Disable Collisions", default=True, options=STATIC,
                                      description="The two objects do not collide with each "
                                                  "other")

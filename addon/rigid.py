@@ -206,8 +206,10 @@ class RigidBake:
         for ob in self.objects:
             builder.add_body(body_settings(ob, depsgraph, frame))
         index = {ob.name: i for i, ob in enumerate(self.objects)}
-        for ob in self.constraints:
-            j = builder.add_joint(joint_settings(ob, index, frame))
+        self.index = index
+        self.joint_values = [joint_settings(ob, index, frame) for ob in self.constraints]
+        for ob, settings in zip(self.constraints, self.joint_values):
+            j = builder.add_joint(settings)
             holder = ob.physanim.constraint.object2
             if holder is not None and holder.name not in index:  # an animated object holds it
                 self.holders[j] = (holder, np.linalg.inv(world_matrix(holder, frame, "constraint"))
@@ -245,10 +247,13 @@ class RigidBake:
             return np.stack([self._last[key], *(b[key] for b in between), now[key]])
         paths = {i: path(i) for i in self.kinematic}
         joints = {j: path(("joint", j)) for j in self.holders}
+        values = self.joint_values  # read at the interval's start: its limits, motors, ...
         self.kinematic = self._animated()
         self.simulated |= set(range(len(self.objects))) - set(self.kinematic)
         self._last = {**now, **self.kinematic_matrices(frame)}
-        return RigidPaths(paths, joints)
+        # the constraints' keyable values read now steer the next interval
+        self.joint_values = [joint_settings(ob, self.index, frame) for ob in self.constraints]
+        return RigidPaths(paths, joints, values if self.constraints else None)
 
     def record_breaks(self) -> list[str]:
         """Each constraint's frame of breaking (-1: it held) onto its object; the lines that

@@ -19,7 +19,7 @@ sub-step) exceeds ``break_force`` [N]; it then holds nothing and the frame is re
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -140,12 +140,31 @@ class JointModel:
         return JointState(np.zeros((self.joint_count, ROWS)), np.zeros(self.joint_count, bool),
                           np.full(self.joint_count, -1, np.int64))
 
+    def with_values(self, joints: list[JointSettings]) -> JointModel:
+        """These joints with the animatable values (:data:`VALUES`: limits, motor, spring,
+        breaking) of ``joints`` (one settings per joint, same order: the values a frame
+        keyed); their structure (kinds, bodies, frames) stays."""
+        if len(joints) != self.joint_count:
+            raise ValueError(f"{len(joints)} joint settings for {self.joint_count} joints")
+        for s, name, kind in zip(joints, self.joint_name, self.joint_kind):
+            if s.name != name or JOINT_KINDS.index(s.kind) != kind:
+                raise PhysanimError("its type changed during the bake (it is read at the first "
+                                    "frame)", obj=name, kind="constraint")
+        return replace(self, **{f"joint_{key}": _column(joints, key, dtype)
+                                for key, dtype in VALUES.items()})
+
     def excluded_pairs(self, body_count: int) -> np.ndarray:
         """Keys lo * body_count + hi of the body pairs that must not collide."""
         both = self.joint_disable_collisions & (self.joint_b != FRAME)
         a, b = self.joint_a[both], self.joint_b[both]
         return np.unique(np.minimum(a, b) * body_count + np.maximum(a, b))
 
+
+# the settings an animator may key, read every frame (JointModel.with_values), and their types
+VALUES = {"use_limits": bool, "lower": np.float64, "upper": np.float64, "cone": np.float64,
+          "use_motor": bool, "motor_velocity": np.float64, "motor_max": np.float64,
+          "use_spring": bool, "stiffness": np.float64, "damping": np.float64,
+          "break_force": np.float64}
 
 ROWS = 10  # impulses kept per joint: 6 equality rows, then 4 limit / motor / spring rows
 
@@ -185,7 +204,7 @@ def joint_model(joints: list[JointSettings], body_x: np.ndarray, body_q_matrix: 
     b = np.array([s.body_b for s in joints], np.int64)
 
     def column(key, dtype=np.float64):
-        return frozen([getattr(s, key) for s in joints], dtype)
+        return _column(joints, key, dtype)
 
     return JointModel(
         tuple(s.name for s in joints), frozen([JOINT_KINDS.index(s.kind) for s in joints],
@@ -195,6 +214,10 @@ def joint_model(joints: list[JointSettings], body_x: np.ndarray, body_q_matrix: 
         column("use_motor", bool), column("motor_velocity"), column("motor_max"),
         column("use_spring", bool), column("stiffness"), column("damping"),
         column("break_force"), column("disable_collisions", bool))
+
+
+def _column(joints: list[JointSettings], key: str, dtype=np.float64) -> np.ndarray:
+    return frozen([getattr(s, key) for s in joints], dtype)
 
 
 def _unscaled(m) -> np.ndarray:

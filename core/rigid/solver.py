@@ -10,7 +10,7 @@ kept for the next frame.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -18,10 +18,11 @@ from ..bounds import DEFAULT_BOUNDS, StateBounds
 from ..contact import ColliderFrame, ColliderPaths
 from ..errors import SimulationError
 from ..transforms import TransformPath
-from ..world import BodyInertia, SolverSystem, World, WorldFrame
+from ..world import SolverSystem, World, WorldFrame
 from . import contact_solver as cs_
 from .contact_set import ContactSet, tangents
 from . import as_colliders, dynamics, joint_step, sleep, warm
+from . import reactions as reactions_
 from . import joint_solver as js_
 from .joints import FRAME
 from . import quaternion as quat
@@ -53,6 +54,9 @@ class RigidFrameInputs:
             arm lets a box go), and joins a path where it starts.
         joint_paths: joint index -> (k + 1, 4, 4) world frames of a joint's FRAME side over
             this interval (an animated object holding it); others stay where they were placed.
+        joint_settings: the joints' settings for this interval (one per joint: their keyed
+            limits, motors, springs and breaking, :meth:`JointModel.with_values`); None: the
+            model's.
     """
 
     frame: int
@@ -62,16 +66,17 @@ class RigidFrameInputs:
     colliders: Sequence[ColliderFrame] = ()
     kinematic: dict = field(default_factory=dict)
     joint_paths: dict = field(default_factory=dict)
+    joint_settings: list | None = None
 
     @classmethod
     def of(cls, frame: WorldFrame, paths: RigidPaths | None) -> RigidFrameInputs:
         paths = paths or RigidPaths()
         return cls(frame.frame, frame.t0, frame.frame_dt, frame.gravity, frame.colliders,
-                   paths.kinematic, paths.joints)
+                   paths.kinematic, paths.joints, paths.joint_settings)
 
     @property
     def paths(self) -> RigidPaths:
-        return RigidPaths(self.kinematic, self.joint_paths)
+        return RigidPaths(self.kinematic, self.joint_paths, self.joint_settings)
 
     @property
     def world(self) -> WorldFrame:
@@ -81,11 +86,12 @@ class RigidFrameInputs:
 @dataclass
 class RigidPaths:
     """The rigid bodies' own input for a frame interval: the paths of the bodies that follow
-    their animation (``kinematic``) and of the joints' animated frames (``joints``), as in
-    :class:`RigidFrameInputs`."""
+    their animation (``kinematic``), of the joints' animated frames (``joints``) and the
+    joints' keyed settings (``joint_settings``), as in :class:`RigidFrameInputs`."""
 
     kinematic: dict = field(default_factory=dict)
     joints: dict = field(default_factory=dict)
+    joint_settings: list | None = None
 
 
 @dataclass
@@ -121,6 +127,7 @@ class _FrameStep:
     awake: np.ndarray | None = None  # indices of the dynamic bodies simulated this frame
     driven: np.ndarray | None = None  # indices of the bodies on their paths this frame
     joints: joint_step.JointStep | None = None
+    model: RigidBodyModel | None = None  # the frame's: the joints with their keyed values
 
     @property
     def v(self) -> np.ndarray:
@@ -160,23 +167,9 @@ class RigidBodySolver:
         return world.advance(inputs.world, {system: inputs.paths}).reports[system]
 
     def absorb(self, state: RigidBodyState, reactions) -> None:
-        """Impulses other systems' constraints gave the bodies over the frame just ended (a
-        cloth a body hangs from, :class:`~physanim.core.world.Reaction`): added to their
-        momenta, each at its point (about the centre before the move), and the move they made
-        to its pose; a body asleep wakes. Names of no dynamic body are ignored."""
-        model = self.model
-        index = {name: i for i, name in enumerate(model.body_name)}
-        for r in reactions:
-            i = index.get(r.body)
-            if i is None or model.body_kinematic[i]:
-                continue
-            state.body_P[i] += r.impulse.sum(axis=0)
-            state.body_L[i] += np.cross(r.point - state.body_x[i], r.impulse).sum(axis=0)
-            state.body_x[i] += r.move[:3]
-            state.body_q[i] = quat.normalized(quat.multiply(
-                quat.from_rotation_vector(r.move[3:]), state.body_q[i]))
-            if state.body_asleep[i] and np.any(r.impulse):
-                state.body_asleep[i], state.body_slow[i] = False, 0
+        """Impulses other systems gave the bodies over the frame just ended
+        (:func:`.reactions.absorb`)."""
+        reactions_.absorb(self.model, state, reactions)
 
     def begin_frame(self, state: RigidBodyState, inputs: RigidFrameInputs, paths) -> _FrameStep:
         """Pose, find and prepare the frame's contacts."""
@@ -229,7 +222,9 @@ class RigidBodySolver:
             self._wake_state(step, bodies.moving)
             self._collide(step, inputs.frame_dt, state.contacts,
                           forced=np.concatenate([woken, np.zeros(len(bodies) - n, bool)]))
-        joint_step.begin(self.model, step, live, framed)
+        step.model = model if inputs.joint_settings is None else replace(
+            model, joints=model.joints.with_values(inputs.joint_settings))
+        joint_step.begin(step.model, step, live, framed)
         return step
 
     def _wake_state(self, step: _FrameStep, moving: np.ndarray) -> None:
@@ -346,7 +341,7 @@ class RigidBodySolver:
             self._collide(step, (1.0 - s0) * step.inputs.frame_dt)
         cs, vel = step.contacts, step.vel
         self._move_posed(step, s0, s1)
-        joint_step.pose(self.model, step, self._inverse_inertia)
+        joint_step.pose(step.model, step, self._inverse_inertia)
         self._forces(step)
         soft = cs_.Softness.of(min(cs_.CONTACT_HERTZ, 0.25 / h), cs_.DAMPING_RATIO, h)
         hard = cs_.Softness.of(min(cs_.STATIC_HERTZ, 0.5 / h), cs_.DAMPING_RATIO, h)
@@ -359,14 +354,14 @@ class RigidBodySolver:
             js_.solve(vel, js.solve, js.impulse, h, use_bias=True)
         cs_.solve(vel, cs, step.rows, cs_.Scales.of(cs, step.separation, h, soft, hard, True))
         self._integrate(step)
-        joint_step.project(self.model, step, self._inverse_inertia)
+        joint_step.project(step.model, step, self._inverse_inertia)
         self._pose_contacts(step)  # the bodies moved: arms, inertias and gaps at the new poses
-        joint_step.pose(self.model, step, self._inverse_inertia)
+        joint_step.pose(step.model, step, self._inverse_inertia)
         if js.solve is not None:
             js_.solve(vel, js.solve, js.impulse, h, use_bias=False)
         cs_.solve(vel, cs, step.rows, cs_.Scales.of(cs, step.separation, h, soft, hard, False))
         cs_.restitution(vel, cs, step.rows)
-        joint_step.break_over(self.model, step, self._inverse_inertia)
+        joint_step.break_over(step.model, step, self._inverse_inertia)
         self._store(step, last=k == self.substeps - 1)
 
     # -- passes ---------------------------------------------------------------------------------
@@ -512,12 +507,7 @@ class RigidBodySystem(SolverSystem):
 
     def frame_bodies(self) -> dict:
         """Each dynamic body's mass, world inertia and centre of mass now."""
-        m, state = self.solver.model, self.state
-        d = np.nonzero(~m.body_kinematic)[0]
-        rot = quat.to_matrix(state.body_q[d])
-        inertia = rot @ m.body_inertia[d] @ rot.transpose(0, 2, 1)
-        return {m.body_name[i]: BodyInertia(float(m.body_mass[i]), inertia[k],
-                                            state.body_x[i].copy()) for k, i in enumerate(d)}
+        return reactions_.bodies(self.solver.model, self.state)
 
     def inputs(self, frame: WorldFrame, paths: RigidPaths | None) -> RigidFrameInputs:
         return RigidFrameInputs.of(frame, paths)

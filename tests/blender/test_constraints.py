@@ -142,6 +142,44 @@ def test_a_breakable_constraint_breaks_and_says_when(physanim_ext, tmp_path):
     assert hook.physanim.constraint.broken_frame == -1
 
 
+def _key_constant(ext, ob, path: str, frames_values) -> None:
+    """Key ``ob.physanim.constraint.<path>`` at each (frame, value), held between keys."""
+    c = ob.physanim.constraint
+    for frame, value in frames_values:
+        setattr(c, path, value)
+        c.keyframe_insert(path, frame=frame)
+    for fcurve in _addon(ext, "compat").action_fcurves(ob.animation_data):
+        for point in fcurve.keyframe_points:
+            point.interpolation = 'CONSTANT'
+
+
+def test_keyed_breaking_force_and_motor_steer_the_constraints(physanim_ext, tmp_path):
+    """Constraint values are keyframable and read every frame: a hook whose breaking force is
+    keyed from 100 N down to 5 N at frame 12 (it carries 9.81 N) lets go there (recorded as
+    frame 13, when the break shows); a hinge motor keyed from +2 to -2 rad/s at frame 24
+    turns the door one way, then back."""
+    scene = _scene(tmp_path)
+    cube = _cube(location=(0.0, 0.0, 3.0))
+    hook = _constraint("Hook", (0.0, 0.0, 4.0), cube, use_breaking=True)
+    _key_constant(physanim_ext, hook, "break_force", [(1, 100.0), (12, 5.0)])
+    door = _cube(location=(6.5, 0.0, 1.0))
+    door.scale = (0.5, 0.025, 1.0)
+    hinge = _constraint("DoorHinge", (6.0, 0.0, 1.0), door, kind='HINGE', use_motor=True,
+                        motor_max=50.0)
+    _key_constant(physanim_ext, hinge, "motor_velocity", [(1, 2.0), (24, -2.0)])
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    assert hook.physanim.constraint.broken_frame == 13
+    scene.frame_set(12)
+    assert cube.matrix_world.translation.z == pytest.approx(3.0, abs=1e-3)
+    angles = []
+    for f in range(FRAME_START, FRAME_END + 1):
+        scene.frame_set(f)
+        x = door.matrix_world.to_3x3().col[0]
+        angles.append(math.atan2(x.y, x.x))
+    turn = int(np.argmax(angles)) + FRAME_START
+    assert 24 <= turn <= 27 and angles[-1] < angles[turn - FRAME_START] - 0.5
+
+
 def test_two_bodies_on_a_hinge_swing_together(physanim_ext, tmp_path):
     """Two cubes joined by a hinge at their shared edge, the first hung from the world: the
     shared edge's points stay together on both."""

@@ -3,6 +3,7 @@ motors at their speed, limits held, breaking at the threshold, momentum kept."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -346,3 +347,44 @@ def test_the_direct_chain_solve_equals_conjugate_gradients():
                                     np.concatenate([model.body_inv_mass, [0.0]]), group)
         assert np.abs(direct - iterative).max() < 1e-5 * np.abs(iterative).max()
         assert np.abs(direct).max() > 1e-5  # it moved something
+
+
+def test_keyed_joint_values_change_the_motor_limit_and_breaking_frame_by_frame():
+    """The joints' limits, motors, springs and breaking are read every frame (keyframable in
+    Blender): the door's motor target keyed from 1 to -1 rad/s at 0.5 s turns it back at the
+    new speed (within 2 %); a limit at -0.5 rad keyed on at 1 s catches it there; and a hook
+    whose breaking force is keyed down below the weight it carries lets go on that frame."""
+    model, solver, state = door()
+    base = JointSettings("Hinge", "HINGE", 0, matrix=joint_frame((0.0, 0.0, 1.0)),
+                         use_motor=True, motor_velocity=1.0, motor_max=50.0, lower=-0.5,
+                         upper=0.5)
+    speeds, angles = [], []
+
+    def world_w(s):
+        r = quat.to_matrix(s.body_q)[0]
+        return (r @ np.linalg.solve(model.body_inertia[0], r.T @ s.body_L[0]))[2]
+
+    for f in range(int(2.5 / DT)):
+        t = f * DT
+        keyed = replace(base, motor_velocity=1.0 if t < 0.5 else -1.0, use_limits=t >= 1.0)
+        solver.advance(state, RigidFrameInputs(f, t, DT, (0.0, 0.0, -G),
+                                               joint_settings=[keyed]))
+        speeds.append(world_w(state))
+        angles.append(hinge_angle(state))
+    assert speeds[int(0.45 / DT)] == pytest.approx(1.0, rel=0.02)
+    assert speeds[int(0.95 / DT)] == pytest.approx(-1.0, rel=0.02)
+    caught = angles[int(1.0 / DT):]
+    assert min(caught) > -0.5 - 1e-3 and caught[-1] == pytest.approx(-0.5, abs=1e-2)
+
+    m = 3.0
+    hook = JointSettings("Hook", "BALL", 0, break_force=2.0 * m * G)
+    _, solver, state = build([box("Box", (0.1, 0.1, 0.1), (0.0, 0.0, -0.1), mass=m)], [hook])
+    for f in range(24):
+        keyed = replace(hook, break_force=(2.0 if f < 12 else 0.5) * m * G)
+        report = solver.advance(state, RigidFrameInputs(f, f * DT, DT, (0.0, 0.0, -G),
+                                                        joint_settings=[keyed]))
+        assert report.broken == (["Hook"] if f == 12 else [])
+    assert state.joints.joint_broken_frame[0] == 12
+    with pytest.raises(PhysanimError, match="type changed"):
+        solver.advance(state, RigidFrameInputs(24, 1.0, DT, joint_settings=[
+            replace(hook, kind="FIXED")]))
