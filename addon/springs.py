@@ -99,10 +99,12 @@ class SpringMeshBake:
         self.groups = [v for v in p.virtual_springs]
         self.attachments = attachments(scene, ob)  # constraint objects holding its vertices
         self.needs_rest = bool(p.pin_group) or any(v.mode == 'PIN' for v in self.groups)
-        self.targets = sorted({v.target.name for v in self.groups
-                               if v.mode != 'PIN' and v.target is not None}
-                              | {c.physanim.constraint.object2.name for c in self.attachments
-                                 if c.physanim.constraint.object2 is not None})
+        held_on = {c.physanim.constraint.object2.name: "attachment target"
+                   for c in self.attachments if c.physanim.constraint.object2 is not None}
+        pulled_to = {v.target.name: "virtual spring target" for v in self.groups
+                     if v.mode != 'PIN' and v.target is not None}
+        self.target_kinds = {**held_on, **pulled_to}  # what messages call each target
+        self.targets = sorted(self.target_kinds)
         self.pc2: Pc2Writer | None = None
 
     @property
@@ -177,7 +179,7 @@ class SpringMeshBake:
         m = _object_matrix(ob, frame)
         out = {"frame": frame, "matrix": m, "rest": None,
                "targets": {name: world_matrix(bpy.data.objects[name], frame,
-                                               "spring mesh target")
+                                               self.target_kinds[name])
                            for name in self.targets}}
         if self.needs_rest:
             co = evaluated_mesh(ob, depsgraph).co
