@@ -13,7 +13,7 @@ from ..core.contact import ColliderFrame
 from ..core.contact.fit import fit_analytic_shape
 from ..core.forces import Attractor, Drag, Vortex, Wind
 from ..core.particles import (EmitterFrame, EmitterSettings, FrameInputs, ParticleModel,
-                              ParticleModelBuilder, SpringLink)
+                              ParticleModelBuilder, PointConstraint, SpringLink)
 from . import convert, limits
 from .mesh_read import evaluated_mesh, mesh_polygons
 
@@ -37,9 +37,10 @@ class Roles:
 
     @property
     def joints(self) -> list:
-        """The constraints joining rigid bodies (baked with them): all but attachments."""
-        return [c for c in self.constraints if not is_attachment(c)] if self.rigid_bodies \
-            else []
+        """The constraints joining rigid bodies (baked with them): not those holding a spring
+        mesh's vertices or an emitter's particles."""
+        return [c for c in self.constraints if not (is_attachment(c) or holds_particles(c))] \
+            if self.rigid_bodies else []
 
 
 def is_attachment(constraint) -> bool:
@@ -48,10 +49,37 @@ def is_attachment(constraint) -> bool:
     return first is not None and first.physanim.spring_mesh.enabled
 
 
+def holds_particles(constraint) -> bool:
+    """Whether a constraint object holds an emitter's particles (baked with them)."""
+    first = constraint.physanim.constraint.object1
+    return first is not None and first.physanim.emitter.enabled
+
+
 def attachments(scene, ob) -> list:
-    """The constraint objects of ``scene`` holding spring mesh ``ob``'s vertices, by name."""
+    """The constraint objects of ``scene`` holding ``ob`` (a spring mesh's vertices, an
+    emitter's particles), by name."""
     return sorted((c for c in scene.objects if c.physanim.constraint.enabled
                    and c.physanim.constraint.object1 == ob), key=lambda c: c.name)
+
+
+POINT_TYPES = ('ON_PLANE', 'ON_SPHERE', 'ON_CIRCLE')
+
+
+def point_constraints(scene, ob, frame: int) -> list:
+    """Emitter ``ob``'s particle constraints at ``frame`` (the scene is there): (name, type,
+    world matrix, radius) each — the first is the constraint object — or an error naming the
+    constraint."""
+    out = []
+    for c in attachments(scene, ob):
+        p = c.physanim.constraint
+        if p.type not in POINT_TYPES:
+            raise PhysanimError(f"an emitter's particles are held On Plane, On Sphere or On "
+                                f"Wire, not by a {p.type.replace('_', ' ').title()} joint — "
+                                "choose one of those", obj=c.name, frame=frame,
+                                kind="constraint")
+        _check_finite(c, frame, "constraint", {"radius": float(p.radius)})
+        out.append((c, p.type, world_matrix(c, frame, "constraint"), float(p.radius)))
+    return out
 
 
 def gather(scene, only: set[str] | None = None) -> Roles:
@@ -301,6 +329,7 @@ class Extractor:
                         f"{values[key]:g} {unit}: values would become negative — lower "
                         f"{key}_random or raise {key}", obj=ob.name, frame=frame, kind="emitter")
             values["active"] = p.frame_start <= frame <= p.frame_end  # births of this frame
+            values["constraints"] = point_constraints(self.scene, ob, frame)
             emitters.append((world_matrix(ob, frame, "emitter"), verts, values))
         return emitters
 
@@ -356,14 +385,19 @@ class Extractor:
 
         emitters = []
         # the interval's births are frame b's: they use the emitter's values at b
-        for i, ((m0, v0, _), (m1, v1, val)) in enumerate(zip(a.emitters, b.emitters)):
+        for i, ((m0, v0, start), (m1, v1, val)) in enumerate(zip(a.emitters, b.emitters)):
+            held = tuple(_framed(c, a.frame, "constraint", PointConstraint, c.name, kind, ma, mb,
+                                 radius)
+                         for (c, kind, ma, _), (_, _, mb, radius)
+                         in zip(start["constraints"], val["constraints"]))
             emitters.append(EmitterFrame(
                 rate=val["rate"], rate_random=val["rate_random"], speed=val["speed"],
                 speed_random=val["speed_random"], lifetime=seconds(val["lifetime"]),
                 lifetime_random=seconds(val["lifetime_random"]), mass=val["mass"],
                 size=val["size"], size_random=val["size_random"], spread=val["spread"],
                 inherit_velocity=val["inherit_velocity"], active=val["active"],
-                matrix0=m0, matrix1=m1, matrices=keys(0, i, m0, m1), verts0=v0, verts1=v1))
+                matrix0=m0, matrix1=m1, matrices=keys(0, i, m0, m1), verts0=v0, verts1=v1,
+                constraints=held))
         colliders = [_framed(ob, a.frame, "collider", ColliderFrame,
                              ob.name, shape, m0, m1, rest, fric, keys(1, i, m0, m1), thick,
                              v0, v1, self._collider_tris.get(ob.name))

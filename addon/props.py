@@ -345,11 +345,19 @@ CONSTRAINT_TYPE_ITEMS = [
     ('SLIDER', "Slider", "Slides along this object's Z axis only, without turning (a drawer)"),
     ('CONE_TWIST', "Cone Twist", "Held at the pivot; this object's Z axis on the second object "
      "stays within a cone around it on the first (a shoulder, a rope's link)"),
+    ('ON_PLANE', "On Plane", "An emitter's particles stay on the plane through this object's "
+     "origin, normal to its Z axis (they slide on it)"),
+    ('ON_SPHERE', "On Sphere", "An emitter's particles stay at Radius from this object's "
+     "origin (on a sphere; each a pendulum on a rod to it)"),
+    ('ON_CIRCLE', "On Wire", "An emitter's particles run on the circle of Radius about this "
+     "object's origin, in its XY plane (beads on a wire)"),
 ]
+POINT_TYPES = ('ON_PLANE', 'ON_SPHERE', 'ON_CIRCLE')  # for an emitter's particles
 
 
 def _is_rigid_body_or_spring_mesh(self, ob) -> bool:
-    return ob.physanim.rigid_body.enabled or ob.physanim.spring_mesh.enabled
+    p = ob.physanim
+    return p.rigid_body.enabled or p.spring_mesh.enabled or p.emitter.enabled
 
 
 class PHYSANIM_PG_constraint(bpy.types.PropertyGroup):
@@ -363,8 +371,9 @@ class PHYSANIM_PG_constraint(bpy.types.PropertyGroup):
     type: EnumProperty(name="Type", items=CONSTRAINT_TYPE_ITEMS, default='BALL', options=STATIC)
     object1: PointerProperty(name="First", type=bpy.types.Object,
                              poll=_is_rigid_body_or_spring_mesh, options=STATIC,
-                             description="What is held: a rigid body, or a spring mesh (its "
-                                         "vertex group)")
+                             description="What is held: a rigid body, a spring mesh (its "
+                                         "vertex group) or an emitter (its particles: On "
+                                         "Plane, On Sphere, On Wire)")
     group1: StringProperty(name="Vertex Group", options=STATIC,
                            description="The First spring mesh's vertices held on the Second "
                                        "object where they are at the start (empty: all of "
@@ -407,6 +416,8 @@ class PHYSANIM_PG_constraint(bpy.types.PropertyGroup):
                                            "threshold")
     break_force: FloatProperty(name="Breaking Force", min=1.0e-6, max=1.0e12, default=100.0,
                                unit='NONE', description="Newtons")
+    radius: FloatProperty(name="Radius", min=1e-6, max=1.0e5, default=1.0, unit='LENGTH',
+                          description="The sphere's or the wire's radius (On Sphere, On Wire)")
     disable_collisions: BoolProperty(name="Disable Collisions", default=True, options=STATIC,
                                      description="The two objects do not collide with each "
                                                  "other")

@@ -113,11 +113,23 @@ class PHYSANIM_PT_constraint(_PhysicsPanel, bpy.types.Panel):
         col = layout.column(align=True)
         col.prop(p, "object1")
         mesh = p.object1 is not None and p.object1.physanim.spring_mesh.enabled
+        particles = p.object1 is not None and p.object1.physanim.emitter.enabled
+        points = p.type in ('ON_PLANE', 'ON_SPHERE', 'ON_CIRCLE')
         if mesh and p.object1.type == 'MESH':
             col.prop_search(p, "group1", p.object1, "vertex_groups")
+        if points:
+            if p.type != 'ON_PLANE':
+                col.prop(p, "radius")
+            if not particles:
+                layout.label(text="On Plane, On Sphere and On Wire hold an emitter's "
+                             "particles (First)", icon='ERROR')
+            return
         col.prop(p, "object2")
         if p.object1 is None:
             layout.label(text="Choose the rigid body or spring mesh it holds (First)",
+                         icon='ERROR')
+        elif particles:
+            layout.label(text="An emitter's particles are held On Plane, On Sphere or On Wire",
                          icon='ERROR')
         elif mesh and p.type not in ('FIXED', 'BALL'):
             layout.label(text="A spring mesh's vertices are held by Fixed or Ball", icon='ERROR')

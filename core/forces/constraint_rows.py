@@ -143,17 +143,21 @@ class Tethers:
 
 @dataclass(frozen=True)
 class OnPlanes:
-    """Points kept on planes through ``origin`` with unit ``normal``: n . (x - o) = 0.
+    """Points kept on planes through ``origin`` (moving at constant velocity) with unit
+    ``normal``: n . (x - o(t)) = 0, o(t) = origin + (t - t0) origin_v.
 
-    Args: i: (r,) point indices. origin, normal: (r, 3) or (3,).
+    Args: i: (r,) point indices. origin, normal: (r, 3) or (3,). origin_v: [m/s]. t0 [s].
     """
 
     i: np.ndarray
     origin: np.ndarray
     normal: np.ndarray
+    origin_v: np.ndarray = (0.0, 0.0, 0.0)
+    t0: float = 0.0
 
     def __post_init__(self):
-        _per_point(self, origin="plane origin", normal="plane normal")
+        _per_point(self, origin="plane origin", normal="plane normal",
+                   origin_v="plane velocity")
         norm = np.sqrt(dot_rows(self.normal, self.normal))
         if np.any(norm < 1e-12):
             raise ValueError("constraint plane normal must not be zero")
@@ -161,8 +165,9 @@ class OnPlanes:
 
     def rows(self, x: np.ndarray, v: np.ndarray, t: float) -> Rows:
         n = self.normal
-        return Rows(_single(self.i), _first(n), dot_rows(n, x[self.i] - self.origin),
-                    dot_rows(n, v[self.i]), np.zeros(len(self.i)))
+        o = self.origin + (t - self.t0) * self.origin_v
+        return Rows(_single(self.i), _first(n), dot_rows(n, x[self.i] - o),
+                    dot_rows(n, v[self.i] - self.origin_v), np.zeros(len(self.i)))
 
 
 def on_spheres(i, centre, radius) -> Tethers:
@@ -170,10 +175,11 @@ def on_spheres(i, centre, radius) -> Tethers:
     return Tethers(i, centre, radius)
 
 
-def on_circles(i, centre, axis, radius) -> list:
-    """Beads on circular wires (centre, unit axis, radius): the sphere of the wire's radius and
-    the plane of the wire, two rows per bead — Witkin's bead on a wire."""
-    return [OnPlanes(i, centre, axis), Tethers(i, centre, radius)]
+def on_circles(i, centre, axis, radius, centre_v=(0.0, 0.0, 0.0), t0: float = 0.0) -> list:
+    """Beads on circular wires (centre moving at ``centre_v``, unit axis, radius): the sphere of
+    the wire's radius and the plane of the wire, two rows per bead — Witkin's bead on a
+    wire."""
+    return [OnPlanes(i, centre, axis, centre_v, t0), Tethers(i, centre, radius, centre_v, t0)]
 
 
 @dataclass(frozen=True)

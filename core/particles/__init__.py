@@ -2,11 +2,11 @@
 :mod:`physanim.core.contact`, forces and springs in :mod:`physanim.core.forces`)."""
 from .model import ParticleModel, ParticleModelBuilder, ParticleState
 from .output import emitter_arrays
-from .settings import EmitterFrame, EmitterSettings, SpringLink
+from .settings import POINT_CONSTRAINTS, EmitterFrame, EmitterSettings, PointConstraint, SpringLink
 from .solver import FrameInputs, FrameReport, ParticleSolver, ParticleSystem
 
 __all__ = [
-    "EmitterFrame", "EmitterSettings", "FrameInputs", "FrameReport",
+    "POINT_CONSTRAINTS", "PointConstraint", "EmitterFrame", "EmitterSettings", "FrameInputs", "FrameReport",
     "ParticleModel", "ParticleModelBuilder", "ParticleSolver", "ParticleSystem", "ParticleState", "SpringLink",
     "emitter_arrays",
 ]

@@ -99,6 +99,41 @@ class EmitterSettings:
         non_negative(owner, stretch=self.stretch)
 
 
+POINT_CONSTRAINTS = ("ON_PLANE", "ON_SPHERE", "ON_CIRCLE")
+
+
+@dataclass(frozen=True)
+class PointConstraint:
+    """A hard constraint on every particle of one emitter over a frame interval, placed by a
+    frame that moves from ``matrix0`` to ``matrix1`` (its origin o and z axis n):
+
+        ON_PLANE   on the plane through o with normal n
+        ON_SPHERE  at ``radius`` from o (on a sphere; a pendulum's rod to a pivot)
+        ON_CIRCLE  on the circle of ``radius`` about o in that plane (a bead on a wire)
+
+    Args: name: what messages call it (the constraint's object). kind: one of
+    :data:`POINT_CONSTRAINTS`. matrix0, matrix1: (4, 4) world matrices. radius [m].
+    """
+
+    name: str
+    kind: str
+    matrix0: np.ndarray = field(default_factory=lambda: np.eye(4))
+    matrix1: np.ndarray = field(default_factory=lambda: np.eye(4))
+    radius: float = 1.0
+
+    def __post_init__(self):
+        owner = f'constraint "{self.name}"'
+        if self.kind not in POINT_CONSTRAINTS:
+            raise ValueError(f"{owner}: kind must be one of {POINT_CONSTRAINTS} (got {self.kind!r})")
+        for key in ("matrix0", "matrix1"):
+            object.__setattr__(self, key, matrix(owner, key, getattr(self, key)))
+            if np.linalg.norm(getattr(self, key)[:3, 2]) < 1e-12:
+                raise ValueError(f"{owner}: its Z axis has zero length (a zero scale)")
+        finite(owner, radius=self.radius)
+        if self.kind != "ON_PLANE" and not self.radius > 0.0:
+            raise ValueError(f"{owner}: the radius must be > 0 (got {self.radius})")
+
+
 @dataclass(frozen=True)
 class EmitterFrame:
     """Keyframable emitter values for one frame interval [t, t + frame_dt], plus its motion.
@@ -120,6 +155,7 @@ class EmitterFrame:
         matrix0, matrix1: (4, 4) world matrices at the start and end of the interval.
         matrices: optional (k + 1, 4, 4) sub-frame samples at s = 0, 1/k, ..., 1 (curved motion).
         verts0, verts1: (n, 3) local vertex positions at start and end (None for ``ORIGIN``).
+        constraints: hard constraints on this emitter's particles (:class:`PointConstraint`).
     """
 
     rate: float = 10.0
@@ -139,6 +175,7 @@ class EmitterFrame:
     matrices: np.ndarray | None = None
     verts0: np.ndarray | None = None
     verts1: np.ndarray | None = None
+    constraints: tuple = ()
 
     def validated(self, name: str) -> EmitterFrame:
         owner = f'emitter "{name}"'

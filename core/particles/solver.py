@@ -3,10 +3,11 @@
 Per sub-step, in order (each a named pass below):
     collide   find particles resting on colliders (for the contact force)
     forces    the force list: gravity, force objects, particle springs, contact (last)
-    integrate the chosen ODE integrator on the flat state y = [x, v]; hard links (rods)
-              add Witkin's constraint forces last in every derivative
+    integrate the chosen ODE integrator on the flat state y = [x, v]; hard constraints
+              (rigid links, an emitter's planes, spheres and wires) add Witkin's constraint
+              forces last in every derivative
     respond   continuous collision response on each particle's path (no tunnelling)
-    constrain hard links back to their lengths (RATTLE after a first-order step, post-
+    constrain hard constraints held exactly again (RATTLE after a first-order step, post-
               stabilisation after a higher-order one: :mod:`physanim.core.forces.constraints`)
     check     every value finite, or an error naming emitter, frame and particle
     age/kill  particles whose age reaches their life span die (sub-emitters burst there)
@@ -24,12 +25,13 @@ import numpy as np
 from ..bounds import DEFAULT_BOUNDS, StateBounds
 from ..contact import ColliderFrame, ColliderPaths, ContactForce, respond, resting_contacts
 from ..errors import PhysanimError, SimulationError
-from ..forces import DampedSprings, Force, Gravity, HardConstraints, ParticleView, Rods
+from ..forces import (DampedSprings, Force, Gravity, HardConstraints, OnPlanes, ParticleView,
+                      Rods, Tethers, on_circles)
 from ..integrators import make_integrator
 from ..world import SolverSettings, SolverSystem, World, WorldFrame
 from .emit import Births, sample_births, sample_bursts
 from .model import ParticleModel, ParticleState
-from .settings import EmitterFrame
+from .settings import EmitterFrame, PointConstraint
 
 FIRST_ORDER = ("EULER", "SYMPLECTIC_EULER", "IMPLICIT")  # integrators whose rods take RATTLE
 MAX_PARTICLES = 50_000_000  # hard limit that keeps a bake inside memory (~5 GB of state)
@@ -154,6 +156,22 @@ class _ParticleOde:
         return np.concatenate([y[3 * n:], (f / self.state.particle_mass[:, None]).ravel()])
 
 
+def point_rows(c: PointConstraint, held: np.ndarray, s0: float, t: float, h: float,
+               frame_dt: float) -> list:
+    """The rows of point constraint ``c`` on particles ``held`` for the sub-step starting at
+    ``s0`` of the frame (time ``t``): its frame's origin moves linearly over the frame, its axis
+    is taken at the sub-step's start."""
+    o0, o1 = c.matrix0[:3, 3], c.matrix1[:3, 3]
+    origin, velocity = o0 + s0 * (o1 - o0), (o1 - o0) / frame_dt
+    axis = c.matrix0[:3, 2] + s0 * (c.matrix1[:3, 2] - c.matrix0[:3, 2])
+    axis = axis / np.linalg.norm(axis)
+    if c.kind == "ON_PLANE":
+        return [OnPlanes(held, origin, axis, velocity, t)]
+    if c.kind == "ON_SPHERE":
+        return [Tethers(held, origin, c.radius, velocity, t)]
+    return on_circles(held, origin, axis, c.radius, velocity, t)
+
+
 class ParticleSolver:
     """Advances a :class:`ParticleState` of a :class:`ParticleModel` frame by frame.
 
@@ -211,19 +229,23 @@ class ParticleSolver:
         contact = ContactForce(resting_contacts(step.paths, state.particle_x, state.particle_v,
                                                 s0, step.rest_speed), h)
         x0, v0 = state.particle_x, state.particle_v
-        rods = self._rods(state)
+        held = self._constraints(state, inputs, s0, t, h)
         step.report.integrator_steps += self._integrate(
-            state, self._forces(state, inputs, step.g), contact, rods, t, h, inputs)
+            state, self._forces(state, inputs, step.g), contact, held, t, h, inputs)
         done = respond(step.paths, x0, state.particle_x, v0, state.particle_v, s0, s1, h,
                        step.rest_speed)
         state.particle_x, state.particle_v = done.x, done.v
         step.report.collisions += done.count
-        if rods is not None:
-            self._constrain(state, rods, x0, t + h, h)
+        if held is not None:
+            self._constrain(state, held, x0, t + h, h)
         self._check(state, inputs, t + h)
         deaths = self._age_kill(state, h)
         step.report.deaths += sum(len(d[0]) for d in deaths)
+        alive = state.particle_count
         self._emit(state, inputs, step.births, deaths, s0, s1, step.g, step.report)
+        if state.particle_count > alive and any(ef.constraints for ef in inputs.emitters):
+            born = self._constraints(state, inputs, s1, t + h, h)  # the newborn onto them
+            self._constrain(state, born, None, t + h, h)
         self._check_bounds(state, inputs)
         state.t = t + h
 
@@ -254,27 +276,34 @@ class ParticleSolver:
                                             settings.link.damping))
         return forces
 
-    def _rods(self, state) -> HardConstraints | None:
-        """The hard links (rods) between living particles, or None."""
-        if not len(state.link_a):
-            return None
-        hard = np.array([e.link is not None and e.link.hard for e in self.model.emitters])
-        sel = np.nonzero(hard[state.link_emitter])[0]
-        if not len(sel):
-            return None
-        # each emitter's links in birth order: a chain's rods side by side, so their system is
-        # tridiagonal (solved directly by cyclic reduction)
-        sel = sel[np.argsort(state.link_emitter[sel], kind="stable")]
-        return HardConstraints([Rods(state.index_of(state.link_a[sel]),
-                                     state.index_of(state.link_b[sel]), state.link_rest[sel])])
+    def _constraints(self, state, inputs, s0: float, t: float, h: float
+                     ) -> HardConstraints | None:
+        """The sub-step's hard constraints: the hard links (rods) between living particles and
+        the emitters' point constraints (planes, spheres, wires), or None."""
+        kinds = []
+        if len(state.link_a):
+            hard = np.array([e.link is not None and e.link.hard for e in self.model.emitters])
+            sel = np.nonzero(hard[state.link_emitter])[0]
+            # each emitter's links in birth order: a chain's rods side by side, so their
+            # system is tridiagonal (solved directly by cyclic reduction)
+            sel = sel[np.argsort(state.link_emitter[sel], kind="stable")]
+            if len(sel):
+                kinds.append(Rods(state.index_of(state.link_a[sel]),
+                                  state.index_of(state.link_b[sel]), state.link_rest[sel]))
+        for e, ef in enumerate(inputs.emitters):
+            held = np.nonzero(state.particle_emitter == e)[0] if ef.constraints else ()
+            for c in ef.constraints if len(held) else ():
+                kinds.extend(point_rows(c, held, s0, t, h, inputs.frame_dt))
+        return HardConstraints(kinds) if kinds else None
 
-    def _constrain(self, state, rods: HardConstraints, x0, t, h) -> None:
-        """Rods back to their lengths: after a first-order step along the gradients of its start
-        (RATTLE: bounded energy error), after a higher-order one along their own."""
+    def _constrain(self, state, held: HardConstraints, x0, t, h) -> None:
+        """The particles back on their constraints: after a first-order step along the
+        gradients of its start ``x0`` (RATTLE: bounded energy error), after a higher-order one
+        (or with ``x0`` None: newborn particles) along their own."""
         first_order = self.settings.integrator in FIRST_ORDER
         x, v = state.particle_x.copy(), state.particle_v.copy()
-        rods.project(x, v, t, 1.0 / state.particle_mass,
-                     start=x0 if first_order and len(x0) == len(x) else None, h=h)
+        rattle = first_order and x0 is not None and len(x0) == len(x)
+        held.project(x, v, t, 1.0 / state.particle_mass, start=x0 if rattle else None, h=h)
         state.particle_x, state.particle_v = x, v
 
     def _integrate(self, state, forces, contact, rods, t, h, inputs) -> int:

@@ -350,3 +350,50 @@ def test_an_attachment_that_cannot_hold_says_why(physanim_ext, tmp_path, change,
         setattr(ob.physanim.constraint, key, value)
     with pytest.raises(RuntimeError, match=re.escape(message)):
         bpy.ops.physanim.bake()
+
+
+# -- an emitter's particles held on planes, spheres and wires ---------------------------------
+
+def _particle_frames(ext, emitter) -> list:
+    """Every cached frame of an emitter's result: dicts of arrays."""
+    res = emitter.physanim.emitter.result
+    folder = bpy.path.abspath(res.physanim.result.cache)
+    read = sys.modules[f"{ext.__name__}.core.cache"].read_frame
+    scene = bpy.context.scene
+    return [read(folder, f) for f in range(scene.physanim.frame_start,
+                                            scene.physanim.frame_end + 1)]
+
+
+@pytest.mark.parametrize("kind", ['ON_PLANE', 'ON_CIRCLE'])
+def test_an_emitters_particles_stay_on_a_plane_or_a_wire(physanim_ext, tmp_path, kind):
+    """A default plane emitter and a constraint holding its particles, with only its type (and
+    its placement) set: On Plane — a vertical plane through the origin (the Empty turned 90
+    degrees about X): every particle has y = 0 in every frame while they fly up and fall; On
+    Wire — the vertical circle of the default radius (1 m) about (0, 0, 1): every particle is
+    on it."""
+    _scene(tmp_path)
+    bpy.ops.mesh.primitive_plane_add()
+    emitter = bpy.context.object
+    emitter.physanim.emitter.enabled = True
+    centre = (0.0, 0.0, 0.0) if kind == 'ON_PLANE' else (0.0, 0.0, 1.0)
+    rail = _constraint("Rail", centre, emitter, kind=kind)
+    rail.rotation_euler = (math.pi / 2, 0.0, 0.0)
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    frames = [a for a in _particle_frames(physanim_ext, emitter) if len(a["id"])]
+    assert len(frames) > 40
+    x = np.concatenate([a["position"] for a in frames])
+    np.testing.assert_allclose(x[:, 1], 0.0, atol=1e-5)
+    if kind == 'ON_CIRCLE':
+        np.testing.assert_allclose(np.linalg.norm(x - centre, axis=1), 1.0, atol=1e-5)
+    assert np.ptp(x[:, 2]) > 1.0 and np.ptp(x[:, 0]) > 0.5  # they move, on it
+
+
+def test_an_emitter_held_by_a_joint_type_says_why(physanim_ext, tmp_path):
+    _scene(tmp_path)
+    bpy.ops.mesh.primitive_plane_add()
+    emitter = bpy.context.object
+    emitter.physanim.emitter.enabled = True
+    _constraint("Rail", (0.0, 0.0, 0.0), emitter, kind='HINGE')
+    with pytest.raises(RuntimeError, match="held On Plane, On Sphere or On Wire, not by a "
+                                           "Hinge joint"):
+        bpy.ops.physanim.bake()

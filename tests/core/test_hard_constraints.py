@@ -15,7 +15,7 @@ from physanim.core.forces import constraints as hard
 from physanim.core.integrators import make_integrator
 from physanim.core.particles import EmitterFrame, EmitterSettings, ParticleSolver, SpringLink
 from physanim.tests.core.helpers import particle_model, translation
-from physanim.tests.core.test_particles_closed_forms import _inputs
+from physanim.tests.core.test_particles_closed_forms import DT, _inputs
 
 G = 9.81
 FIRST_ORDER = ("SYMPLECTIC_EULER", "EULER", "IMPLICIT")
@@ -270,3 +270,54 @@ def test_hard_particle_links_make_a_rope_that_never_stretches():
             np.testing.assert_allclose(momentum, [momentum[0]] * len(momentum), atol=1e-9)
         else:
             assert np.ptp(state.particle_x[:, 2]) > 0.05  # it is a rope, not a rigid rod
+
+
+def _wire(kind, radius=0.5, m0=None, m1=None):
+    from physanim.core.particles import PointConstraint
+    rot = np.eye(4)
+    rot[:3, :3] = [[1, 0, 0], [0, 0, -1], [0, 1, 0]]  # its z axis along -y: a vertical wire
+    return PointConstraint("Wire", kind, rot if m0 is None else m0, rot if m1 is None else m1,
+                           radius)
+
+
+def test_an_emitters_particles_run_on_a_wire_at_the_product_defaults():
+    # A particle on a vertical circular wire (an ON_CIRCLE constraint on its emitter), started
+    # level with the centre going up at 1 m/s, at the product's defaults (symplectic Euler, 2
+    # sub-steps, 24 fps) for 10 s: on the wire to 1e-6 m every frame, and its energy within
+    # symplectic Euler's first-order bound (RATTLE: measured 0.05 m g R at h = 1/60 s, it
+    # halves with h).
+    from physanim.core.particles import EmitterFrame as Frame
+    from physanim.tests.core.helpers import place
+    model = particle_model(EmitterSettings("Beads"))
+    state = model.state()
+    place(state, [[0.5, 0.0, 0.0]], [[0.0, 0.0, 1.0]], mass=0.2)
+    solver = ParticleSolver(model, substeps=2)
+    wire = _wire("ON_CIRCLE")
+    e0 = 0.5 * 0.2 * 1.0
+    worst_off, worst_energy = 0.0, 0.0
+    for f in range(240):
+        solver.advance(state, _inputs(f, emitters=[Frame(active=False, constraints=(wire,))]))
+        x, v = state.particle_x[0], state.particle_v[0]
+        worst_off = max(worst_off, abs(np.linalg.norm(x) - 0.5), abs(x[1]))
+        worst_energy = max(worst_energy, abs(0.5 * 0.2 * v @ v + 0.2 * G * x[2] - e0))
+    assert worst_off < 1e-6
+    assert worst_energy < 0.15 * 0.2 * G * 0.5
+
+
+def test_particles_born_off_a_moving_plane_are_put_on_it_and_ride_it():
+    # An emitter at the origin shoots particles up at 5 m/s and sideways; an ON_PLANE
+    # constraint on it (a horizontal plane rising at 1 m/s from z = 1) holds every particle:
+    # each is on the plane at every frame (to 1e-9 m), however it was born, and they keep
+    # their sideways motion (the constraint removes only the normal part).
+    from physanim.core.particles import EmitterFrame as Frame
+    model = particle_model(EmitterSettings("Lift", direction="AXIS", axis=(1.0, 0.0, 1.0)))
+    state = model.state()
+    solver = ParticleSolver(model, substeps=2)
+    for f in range(24):
+        m0, m1 = translation(0, 0, 1.0 + f * DT), translation(0, 0, 1.0 + (f + 1) * DT)
+        plane = _wire("ON_PLANE", m0=m0, m1=m1)
+        solver.advance(state, _inputs(f, emitters=[Frame(rate=3, speed=5.0, lifetime=100.0,
+                                                         constraints=(plane,))]))
+        np.testing.assert_allclose(state.particle_x[:, 2], 1.0 + (f + 1) * DT, atol=1e-9)
+        np.testing.assert_allclose(state.particle_v[:, 2], 1.0, atol=1e-9)
+    assert state.particle_count > 50 and np.ptp(state.particle_x[:, 0]) > 1.0
