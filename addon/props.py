@@ -345,6 +345,8 @@ CONSTRAINT_TYPE_ITEMS = [
     ('SLIDER', "Slider", "Slides along this object's Z axis only, without turning (a drawer)"),
     ('CONE_TWIST', "Cone Twist", "Held at the pivot; this object's Z axis on the second object "
      "stays within a cone around it on the first (a shoulder, a rope's link)"),
+    ('SPRING', "Spring", "Held at the pivot by a damped spring of zero rest length (its "
+     "Stiffness and Damping): a bungee, free to turn"),
     ('ON_PLANE', "On Plane", "An emitter's particles stay on the plane through this object's "
      "origin, normal to its Z axis (they slide on it)"),
     ('ON_SPHERE', "On Sphere", "An emitter's particles stay at Radius from this object's "
@@ -403,14 +405,18 @@ class PHYSANIM_PG_constraint(bpy.types.PropertyGroup):
                               description="Largest angle between the two objects' Z axes")
     use_motor: BoolProperty(name="Motor",
                             description="Drive the hinge or slider at a speed")
-    motor_velocity: FloatProperty(name="Speed", min=-1.0e4, max=1.0e4, default=1.0, description="rad/s (hinge) or m/s (slider) of the first "
+    motor_velocity: FloatProperty(name="Speed", min=-1.0e4, max=1.0e4, default=1.0,
+                                  description="rad/s (hinge) or m/s (slider) of the first "
                                               "object relative to the second")
-    motor_max: FloatProperty(name="Max Torque / Force", min=0.0, max=1.0e9, default=10.0, description="The motor's strength: N m (hinge) or N (slider)")
+    motor_max: FloatProperty(name="Max Torque / Force", min=0.0, max=1.0e9, default=10.0,
+                             description="The motor's strength: N m (hinge) or N (slider)")
     use_spring: BoolProperty(name="Spring",
                              description="A damped spring pulls the hinge or slider back to "
                                          "where it started")
-    spring_stiffness: FloatProperty(name="Stiffness", min=0.0, max=1.0e9, default=10.0, description="N m/rad (hinge) or N/m (slider)")
-    spring_damping: FloatProperty(name="Damping", min=0.0, max=1.0e9, default=0.5, description="N m s/rad (hinge) or N s/m (slider)")
+    spring_stiffness: FloatProperty(name="Stiffness", min=0.0, max=1.0e9, default=10.0,
+                                    description="N m/rad (hinge) or N/m (slider, spring)")
+    spring_damping: FloatProperty(name="Damping", min=0.0, max=1.0e9, default=0.5,
+                                  description="N m s/rad (hinge) or N s/m (slider, spring)")
     use_breaking: BoolProperty(name="Breakable",
                                description="Let go when the force it carries exceeds a "
                                            "threshold")

@@ -181,7 +181,8 @@ def joint_settings(ob, index: dict, frame: int) -> JointSettings:
             lower=getattr(p, f"{limits}_lower") if limits else 0.0,
             upper=getattr(p, f"{limits}_upper") if limits else 0.0, cone=p.cone_angle,
             use_motor=p.use_motor, motor_velocity=p.motor_velocity, motor_max=p.motor_max,
-            use_spring=p.use_spring, stiffness=p.spring_stiffness, damping=p.spring_damping,
+            use_spring=p.use_spring or p.type == 'SPRING', stiffness=p.spring_stiffness,
+            damping=p.spring_damping,
             break_force=p.break_force if p.use_breaking else float("inf"),
             disable_collisions=p.disable_collisions)
     except PhysanimError as exc:

@@ -144,6 +144,10 @@ class PHYSANIM_PT_constraint(_PhysicsPanel, bpy.types.Panel):
             return
         if p.type in ('HINGE', 'SLIDER', 'CONE_TWIST'):
             self._limits(layout, p)
+        if p.type == 'SPRING':
+            col = layout.column(align=True)
+            col.prop(p, "spring_stiffness")
+            col.prop(p, "spring_damping")
         if p.type in ('HINGE', 'SLIDER'):
             col = layout.column(align=True)
             col.prop(p, "use_motor")

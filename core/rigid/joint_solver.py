@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .joint_chains import ChainSolver, chains
-from .joints import CONE_TWIST, FRAME, HINGE, ROWS, SLIDER, JointModel
+from .joints import CONE_TWIST, FRAME, HINGE, ROWS, SLIDER, SPRING_JOINT, JointModel
 
 JOINT_BIAS = 0.2  # fraction of a joint's drift taken back per sub-step (with position feedback)
 MAX_CORRECTION = 4.0  # [m/s], [rad/s] fastest drift correction
@@ -37,7 +37,8 @@ _HOLDS = np.array([[1, 1, 1, 1, 1, 1],  # FIXED
                    [1, 1, 1, 0, 0, 0],  # BALL
                    [1, 1, 1, 1, 1, 0],  # HINGE (turning about x and y: z is free)
                    [1, 1, 0, 1, 1, 1],  # SLIDER (z is free)
-                   [1, 1, 1, 0, 0, 0]], bool)  # CONE_TWIST
+                   [1, 1, 1, 0, 0, 0],  # CONE_TWIST
+                   [0, 0, 0, 0, 0, 0]], bool)  # SPRING (its pivot rows are soft: clamped slots)
 
 
 @dataclass
@@ -171,15 +172,23 @@ def _clamped(model, joints, kind, wa, wb, axis_a, axis_b, swing, gap, ra, rb, h)
         on = cone & limits
         j[on, 1], c[on, 1], what[on, 1] = _angular(-axis_a)[on], (twist - lower)[on], LIMIT
         j[on, 2], c[on, 2], what[on, 2] = _angular(axis_a)[on], (upper - twist)[on], LIMIT
+    # a spring joint: its pivot's three directions as soft rows (slots 0, 1 and 3)
+    sprung = kind == SPRING_JOINT
+    for slot, i in zip((0, 1, 3), range(3)):
+        u = wa[:, :, i]
+        j[sprung, slot] = _linear(u, ra, rb)[sprung]
+        c[sprung, slot] = np.einsum("ji,ji->j", u, gap)[sprung]
+        what[sprung, slot] = SPRING
     target = np.zeros((n, 4))
     target[:, 2] = model.joint_motor_velocity[joints]
     bound = np.zeros((n, 4))
     bound[:, 2] = model.joint_motor_max[joints] * h
     k, d = model.joint_stiffness[joints], model.joint_damping[joints]
-    gamma, beta = np.zeros((n, 4)), np.zeros((n, 4))
     soft = d + h * k
-    gamma[:, 3] = np.where(soft > 0.0, 1.0 / (h * np.where(soft > 0.0, soft, 1.0)), 0.0)
-    beta[:, 3] = np.where(soft > 0.0, h * k / np.where(soft > 0.0, soft, 1.0), 0.0)
+    gamma = np.where(what == SPRING, np.where(soft > 0.0, 1.0 / (
+        h * np.where(soft > 0.0, soft, 1.0)), 0.0)[:, None], 0.0)
+    beta = np.where(what == SPRING, np.where(soft > 0.0, h * k / np.where(
+        soft > 0.0, soft, 1.0), 0.0)[:, None], 0.0)
     return j, c, what, target, bound, gamma, beta
 
 

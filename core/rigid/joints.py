@@ -12,6 +12,9 @@ origin) and axes (its rotation's columns x, y, z) — that it holds fixed in eac
                 along z from A's pivot to B's). Limits [m], a motor, a spring towards 0.
     CONE_TWIST  the pivot; B's z axis within ``cone`` [rad] of A's, its twist about it within
                 [lower, upper] [rad] when limited (a shoulder, a rag doll's neck).
+    SPRING      the pivot softly: a damped spring of zero rest length between the joint's point
+                on each side (``stiffness`` [N/m], ``damping`` [N s/m]) — Witkin's soft
+                "attach" constraint, solved implicitly (Catto's soft rows); B turns freely.
 
 A joint breaks when the force it carries (the impulse of its pivot over a sub-step / the
 sub-step) exceeds ``break_force`` [N]; it then holds nothing and the frame is recorded.
@@ -26,8 +29,8 @@ import numpy as np
 from ..errors import PhysanimError
 from ..validate import frozen
 
-JOINT_KINDS = ("FIXED", "BALL", "HINGE", "SLIDER", "CONE_TWIST")
-FIXED, BALL, HINGE, SLIDER, CONE_TWIST = range(5)
+JOINT_KINDS = ("FIXED", "BALL", "HINGE", "SLIDER", "CONE_TWIST", "SPRING")
+FIXED, BALL, HINGE, SLIDER, CONE_TWIST, SPRING_JOINT = range(6)
 FRAME = -1  # body_b of a joint to the world or an animated object
 
 
@@ -48,7 +51,8 @@ class JointSettings:
         use_motor, motor_velocity, motor_max: HINGE [rad/s], [N m] and SLIDER [m/s], [N]: drives
             B relative to A at the velocity with at most that torque / force.
         use_spring, stiffness, damping: HINGE [N m/rad], [N m s/rad] and SLIDER [N/m],
-            [N s/m]: a damped spring towards angle / distance 0 (the start).
+            [N s/m]: a damped spring towards angle / distance 0 (the start); SPRING's own
+            [N/m], [N s/m] (always on).
         break_force: [N] the joint breaks above it (inf: never).
         disable_collisions: the two bodies do not collide with each other.
     """
@@ -93,6 +97,8 @@ class JointSettings:
                 fail(f"{key} must be finite and >= 0 (got {value})")
         if self.use_limits and self.lower > self.upper:
             fail(f"the lower limit {self.lower:g} is above the upper {self.upper:g}")
+        if self.kind == "SPRING" and not (self.stiffness > 0.0 or self.damping > 0.0):
+            fail("a spring needs a stiffness or a damping above 0")
         if self.kind == "CONE_TWIST" and not 0.0 < self.cone < math.pi:
             fail(f"the cone angle must be in (0, pi) rad (got {self.cone})")
         if not (self.break_force > 0.0) or math.isnan(self.break_force):

@@ -397,3 +397,22 @@ def test_an_emitter_held_by_a_joint_type_says_why(physanim_ext, tmp_path):
     with pytest.raises(RuntimeError, match="held On Plane, On Sphere or On Wire, not by a "
                                            "Hinge joint"):
         bpy.ops.physanim.bake()
+
+
+def test_a_spring_constraint_at_its_defaults_bounces_a_cube_on_it(physanim_ext, tmp_path):
+    """Type Spring, nothing else set: the 1 kg cube hangs from the Empty at its centre on a
+    damped spring of 10 N/m — it drops, bounces about the static sag m g / k = 0.98 m below
+    (with the period 2 pi sqrt(m / k) = 2 s) and does not turn (the pull is at its centre)."""
+    scene = _scene(tmp_path, end=120)
+    cube = _cube(location=(0.0, 0.0, 3.0))
+    _constraint("Bungee", (0.0, 0.0, 3.0), cube, kind='SPRING')
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    z = []
+    for f in range(FRAME_START, 121):
+        scene.frame_set(f)
+        z.append(cube.matrix_world.translation.z)
+    z = np.array(z) - (3.0 - 9.81 / 10.0)
+    assert z.min() < -0.7 * 0.98  # it overshoots the sag
+    down = np.nonzero((z[:-1] > 0.0) & (z[1:] <= 0.0))[0]
+    assert np.mean(np.diff(down)) / 24 == pytest.approx(2 * math.pi * math.sqrt(0.1), rel=0.05)
+    assert cube.matrix_world.to_3x3().col[2].z > 1 - 1e-6
