@@ -7,7 +7,10 @@ import bpy
 import numpy as np
 from bpy.props import EnumProperty, FloatProperty
 
-from .props import CONSTRAINT_TYPE_ITEMS
+from .props import CONSTRAINT_TYPE_ITEMS, POINT_TYPES
+
+# the joints that join two rigid bodies (not those holding an emitter's particles)
+JOINT_TYPE_ITEMS = [item for item in CONSTRAINT_TYPE_ITEMS if item[0] not in POINT_TYPES]
 
 COLLECTION = "PhysAnim Constraints"
 PATTERN_ITEMS = [
@@ -67,6 +70,7 @@ def pivot(a, b, how: str) -> np.ndarray:
     # per axis, the middle of where the boxes overlap, or of the gap between them
     return 0.5 * (lo.max(axis=0) + hi.min(axis=0))
 
+
 class PHYSANIM_OT_connect(bpy.types.Operator):
     """Join the selected rigid bodies with constraint objects (Empties in the "PhysAnim
     Constraints" collection)"""
@@ -75,7 +79,7 @@ class PHYSANIM_OT_connect(bpy.types.Operator):
     bl_label = "Connect Selected"
     bl_options = {'REGISTER', 'UNDO'}
 
-    type: EnumProperty(name="Type", items=CONSTRAINT_TYPE_ITEMS, default='BALL')
+    type: EnumProperty(name="Type", items=JOINT_TYPE_ITEMS, default='BALL')
     pattern: EnumProperty(name="Pattern", items=PATTERN_ITEMS, default='CHAIN')
     pivot: EnumProperty(name="Pivot", items=PIVOT_ITEMS, default='TOUCH')
     distance: FloatProperty(name="Distance", min=0.0, max=100.0, default=0.01, unit='LENGTH',
