@@ -320,6 +320,29 @@ def test_nan_key_on_an_attach_target_names_it_and_the_frame(physanim_ext, tmp_pa
     baked.assert_intact()
 
 
+def test_nan_key_on_what_a_constraint_holds_a_mesh_on_names_it_and_the_frame(physanim_ext,
+                                                                            tmp_path):
+    """The same through a Constraint object holding the mesh's vertex group on the Empty (an
+    attachment): the message calls it the attachment target, and the previous bake stays."""
+    scene = _scene()
+    hook = bpy.data.objects.new("Hook", None)
+    scene.collection.objects.link(hook)
+    ob = _cloth(pin_top=False)
+    co = _local(ob.data)
+    top = np.nonzero(np.isclose(co[:, 1], co[:, 1].max()))[0]
+    ob.vertex_groups.new(name="hooked").add(top.tolist(), 1.0, 'REPLACE')
+    tie = bpy.data.objects.new("Tie", None)
+    scene.collection.objects.link(tie)
+    c = tie.physanim.constraint
+    c.enabled, c.object1, c.group1, c.object2 = True, ob, "hooked", hook
+    _save(tmp_path)
+    baked = _bake_first(physanim_ext, ob)
+
+    _keys(hook, "location", 2, [(1, 0.0), (7, math.nan)])
+    _bake_fails('attachment target "Hook" at frame 7', "non-finite", "nan")
+    baked.assert_intact()
+
+
 # ----------------------------------------------------------------------- degenerate meshes
 
 def _grid_with_loose_and_twin(bm):
