@@ -16,6 +16,7 @@ from ..core.particles import (EmitterFrame, EmitterSettings, FrameInputs, Partic
                               ParticleModelBuilder, PointConstraint, SpringLink)
 from . import convert, limits
 from .mesh_read import evaluated_mesh, mesh_polygons
+from .props import CONSTRAINT_TYPE_ITEMS
 
 MESH_SOURCES = ("VERTS", "FACES", "VOLUME")
 
@@ -39,30 +40,44 @@ class Roles:
     def joints(self) -> list:
         """The constraints joining rigid bodies (baked with them): not those holding a spring
         mesh's vertices or an emitter's particles."""
-        return [c for c in self.constraints if not (is_attachment(c) or holds_particles(c))] \
-            if self.rigid_bodies else []
+        return [c for c in self.constraints if holds(c) == "joint"] if self.rigid_bodies else []
+
+
+def holds(constraint) -> str:
+    """What a constraint object holds, so which bake takes it: "particles" (its First's
+    particles: the On Plane / On Sphere / On Wire types, or any type on a plain emitter, which
+    that bake then refuses), "attachment" (its First spring mesh's vertices) or "joint" (a
+    rigid body). An object in two roles is held as its type says."""
+    p = constraint.physanim.constraint
+    first = p.object1
+    if first is None:
+        return "joint"
+    roles = first.physanim
+    if roles.emitter.enabled and (p.type in POINT_TYPES or not (
+            roles.spring_mesh.enabled or roles.rigid_body.enabled)):
+        return "particles"
+    return "attachment" if roles.spring_mesh.enabled else "joint"
 
 
 def is_attachment(constraint) -> bool:
     """Whether a constraint object holds a spring mesh's vertices (baked with the mesh)."""
-    first = constraint.physanim.constraint.object1
-    return first is not None and first.physanim.spring_mesh.enabled
+    return holds(constraint) == "attachment"
 
 
-def holds_particles(constraint) -> bool:
-    """Whether a constraint object holds an emitter's particles (baked with them)."""
-    first = constraint.physanim.constraint.object1
-    return first is not None and first.physanim.emitter.enabled
-
-
-def attachments(scene, ob) -> list:
-    """The constraint objects of ``scene`` holding ``ob`` (a spring mesh's vertices, an
-    emitter's particles), by name."""
+def attachments(scene, ob, what: str = "attachment") -> list:
+    """The constraint objects of ``scene`` holding ``ob`` as ``what`` (:func:`holds`), by
+    name."""
     return sorted((c for c in scene.objects if c.physanim.constraint.enabled
-                   and c.physanim.constraint.object1 == ob), key=lambda c: c.name)
+                   and c.physanim.constraint.object1 == ob and holds(c) == what),
+                  key=lambda c: c.name)
 
 
 POINT_TYPES = ('ON_PLANE', 'ON_SPHERE', 'ON_CIRCLE')
+
+
+def type_name(identifier: str) -> str:
+    """A constraint type as the panel names it (``ON_CIRCLE`` -> "On Wire")."""
+    return next(name for key, name, _ in CONSTRAINT_TYPE_ITEMS if key == identifier)
 
 
 def point_constraints(scene, ob, frame: int) -> list:
@@ -70,13 +85,12 @@ def point_constraints(scene, ob, frame: int) -> list:
     world matrix, radius) each — the first is the constraint object — or an error naming the
     constraint."""
     out = []
-    for c in attachments(scene, ob):
+    for c in attachments(scene, ob, "particles"):
         p = c.physanim.constraint
         if p.type not in POINT_TYPES:
             raise PhysanimError(f"an emitter's particles are held On Plane, On Sphere or On "
-                                f"Wire, not by a {p.type.replace('_', ' ').title()} joint — "
-                                "choose one of those", obj=c.name, frame=frame,
-                                kind="constraint")
+                                f"Wire, not by a {type_name(p.type)} joint — choose one of "
+                                "those", obj=c.name, frame=frame, kind="constraint")
         _check_finite(c, frame, "constraint", {"radius": float(p.radius)})
         out.append((c, p.type, world_matrix(c, frame, "constraint"), float(p.radius)))
     return out

@@ -156,7 +156,7 @@ def inputs_hash(scene, ob, role: str, roles: Roles | None = None) -> str:
     if role == "emitter":
         records += [_object_record(o, "emitter") for o in emitter_chain(ob)]
         records += [_object_record(c, "constraint") for o in emitter_chain(ob)
-                    for c in attachments(scene, o)]  # what holds its particles
+                    for c in attachments(scene, o, "particles")]  # what holds its particles
     else:
         records.append(_object_record(ob, role))
         targets = {v.target.name: v.target for v in ob.physanim.spring_mesh.virtual_springs

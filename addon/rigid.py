@@ -23,7 +23,7 @@ from ..core.rigid.solver import RigidBodySolver, RigidBodySystem, RigidPaths
 from ..core.transforms import decompose
 from . import limits
 from .cache_paths import rigid_cache_dir
-from .extract import world_matrix
+from .extract import type_name, world_matrix
 from .mesh_read import evaluated_mesh
 
 STREAM = "bodies"
@@ -168,8 +168,8 @@ def joint_settings(ob, index: dict, frame: int) -> JointSettings:
     if p.object1 is None or p.object1.name not in index:
         fail("its First object must be a rigid body — choose one in the Constraint panel")
     if p.type in ('ON_PLANE', 'ON_SPHERE', 'ON_CIRCLE'):
-        fail(f"{p.type.replace('_', ' ').title()} holds an emitter's particles, not a rigid "
-             "body — choose a joint type, or an emitter as First")
+        fail(f"{type_name(p.type)} holds an emitter's particles, not a rigid body — choose a "
+             "joint type, or an emitter as First")
     if p.object2 is not None and p.object2 == p.object1:
         fail("its First and Second objects are the same — choose two different objects")
     body_b = index.get(p.object2.name, FRAME) if p.object2 is not None else FRAME

@@ -22,7 +22,7 @@ from ..core.springs import (Attachment, SpringDrive, SpringMeshBuilder, SpringMe
 from ..core.transforms import inverse_affine, transform_points
 from . import convert, limits
 from .cache_paths import spring_cache_dir
-from .extract import attachments, world_matrix
+from .extract import attachments, type_name, world_matrix
 from .mesh_read import evaluated_mesh
 
 MODIFIER = "physanim"
@@ -60,8 +60,8 @@ def attachment(constraint, weights: dict, count: int, frame: int) -> Attachment:
         raise PhysanimError(message, obj=constraint.name, frame=frame, kind="constraint")
 
     if p.type not in ATTACHABLE:
-        fail(f"a spring mesh's vertices can only be held (Fixed or Ball), not by a "
-             f"{p.type.replace('_', ' ').title()} joint — choose Fixed or Ball")
+        fail(f"a spring mesh's vertices can only be held (Fixed or Ball), not by "
+             f"{type_name(p.type)} — choose Fixed or Ball")
     if p.object2 is not None and p.object2 == p.object1:
         fail("its First and Second objects are the same — choose two different objects")
     if p.use_breaking:

@@ -129,6 +129,17 @@ def build_scene(seed: int):
         objects.append(ob)
     if rng.random() < 0.25:
         _absurd(rng, scene, objects)
+    if rng.random() < 0.35:  # a constraint holding one of them (any type, maybe a wrong one)
+        held = bpy.data.objects.new("Constraint", None)
+        scene.collection.objects.link(held)
+        held.location = tuple(rng.uniform(-2, 2, 3))
+        c = held.physanim.constraint
+        c.enabled = True
+        _randomise(rng, c)
+        c.object1 = objects[int(rng.integers(len(objects)))]
+        if rng.random() < 0.5:
+            c.object2 = objects[int(rng.integers(len(objects)))]
+        objects.append(held)
     return rng, objects
 
 

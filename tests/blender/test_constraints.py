@@ -337,7 +337,8 @@ def test_a_rigid_box_hangs_from_a_cloth_which_it_pulls(physanim_ext, tmp_path):
 
 
 @pytest.mark.parametrize("change, message", [
-    ({"type": 'HINGE'}, "can only be held (Fixed or Ball), not by a Hinge joint"),
+    ({"type": 'HINGE'}, "can only be held (Fixed or Ball), not by Hinge"),
+    ({"type": 'ON_CIRCLE'}, "can only be held (Fixed or Ball), not by On Wire"),
     ({"group1": "Nope"}, '"Nope" is not a vertex group of "Grid"'),
     ({"use_breaking": True}, "cannot break"),
 ])
@@ -416,3 +417,25 @@ def test_a_spring_constraint_at_its_defaults_bounces_a_cube_on_it(physanim_ext, 
     down = np.nonzero((z[:-1] > 0.0) & (z[1:] <= 0.0))[0]
     assert np.mean(np.diff(down)) / 24 == pytest.approx(2 * math.pi * math.sqrt(0.1), rel=0.05)
     assert cube.matrix_world.to_3x3().col[2].z > 1 - 1e-6
+
+
+def test_a_constraint_on_an_object_in_two_roles_holds_what_its_type_says(physanim_ext,
+                                                                         tmp_path):
+    """A mesh that is both a spring mesh and an emitter: On Plane holds its particles (they
+    stay in the plane) and leaves its vertices free (it falls); Ball holds its vertices (it
+    stays) and is no error for its particles."""
+    scene = _scene(tmp_path, end=24)
+    cloth = _cloth(pin_top=False)
+    cloth.physanim.emitter.enabled = True
+    rail = _constraint("Rail", (0.0, 0.0, 0.0), cloth, kind='ON_PLANE')
+    rail.rotation_euler = (math.pi / 2, 0.0, 0.0)
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    x = np.concatenate([a["position"] for a in _particle_frames(physanim_ext, cloth)
+                        if len(a["id"])])
+    np.testing.assert_allclose(x[:, 1], 0.0, atol=1e-5)
+    assert _pc2_world(physanim_ext, cloth)[-1][:, 2].max() < 1.5  # its vertices fell
+    rail.physanim.constraint.type = 'BALL'
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    mesh = _pc2_world(physanim_ext, cloth)
+    np.testing.assert_allclose(mesh[-1], mesh[0], atol=1e-6)
+    assert scene.physanim.frame_end == 24
