@@ -19,15 +19,16 @@ the holding impulses to the body one frame late instead blew up within 30 frames
 on a default cloth, the sway mode growing fourfold per frame.) The mesh's velocities take their
 response to du at once; the body takes the impulses.
 
-The impulse on a held vertex over a sub-step is what backward Euler leaves unexplained by the
-mesh's own forces at the step's end: r_i = m_i dv_i - h f_i(x1, v1). Summed over every vertex
-the mesh's internal forces cancel exactly (one evaluation of equal and opposite pairs), so the
-sum is the momentum change minus h times the external forces: what the held vertices took is
-exactly what the mesh gained from its attachments, and the bodies get the opposite. The free
-vertices' share of that sum is the solver's own residual (an inexact conjugate-gradient solve);
-it is taken out of the free vertices' velocities, evenly, so the mesh and the bodies together
-conserve momentum to rounding (vertices on colliders are left alone: their share is the
-collider's push).
+The impulse on a held vertex over a sub-step is the implicit step's residual there
+(:meth:`~.implicit.BaraffWitkin.residual`): with the step's linearised forces f,
+M dv = h f + r, and the mesh's internal forces (equal and opposite pairs, and their Jacobian
+blocks) cancel in any sum over vertices, so the sum of r is the momentum change less h times
+the external forces — what the held vertices took is exactly what the mesh gained from its
+attachments, and the bodies get the opposite; the coupling's correction adds its own linear
+change of r. The free vertices' share of r is the solve's error (an inexact conjugate-gradient
+solve): it is taken out of the free vertices' velocities, evenly, so the mesh and the bodies
+together conserve momentum to rounding (vertices on colliders are left alone: their share is
+the collider's push, which goes back to the collider when it is a body).
 """
 from __future__ import annotations
 
@@ -40,7 +41,6 @@ from ..errors import PhysanimError
 from ..transforms import TransformPath, inverse_affine, quaternion_to_matrix, transform_points
 from ..world import Reaction
 from .model import SpringMeshModel, SpringMeshState
-
 
 
 @dataclass
