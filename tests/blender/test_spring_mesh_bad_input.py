@@ -302,7 +302,8 @@ def test_zero_scale_key_mid_bake_names_the_frame(physanim_ext, tmp_path, pinned)
     baked.assert_intact()
 
 
-def test_nan_key_on_an_attach_target_names_it_and_the_frame(physanim_ext, tmp_path):
+def _hooked_cloth():
+    """An Empty "Hook" and a cloth whose top row is the vertex group "hooked"."""
     scene = _scene()
     hook = bpy.data.objects.new("Hook", None)
     scene.collection.objects.link(hook)
@@ -310,6 +311,11 @@ def test_nan_key_on_an_attach_target_names_it_and_the_frame(physanim_ext, tmp_pa
     co = _local(ob.data)
     top = np.nonzero(np.isclose(co[:, 1], co[:, 1].max()))[0]
     ob.vertex_groups.new(name="hooked").add(top.tolist(), 1.0, 'REPLACE')
+    return scene, hook, ob
+
+
+def test_nan_key_on_an_attach_target_names_it_and_the_frame(physanim_ext, tmp_path):
+    scene, hook, ob = _hooked_cloth()
     group = ob.physanim.spring_mesh.virtual_springs.add()
     group.mode, group.vertex_group, group.target = 'ATTACH', "hooked", hook
     _save(tmp_path)
@@ -324,13 +330,7 @@ def test_nan_key_on_what_a_constraint_holds_a_mesh_on_names_it_and_the_frame(phy
                                                                             tmp_path):
     """The same through a Constraint object holding the mesh's vertex group on the Empty (an
     attachment): the message calls it the attachment target, and the previous bake stays."""
-    scene = _scene()
-    hook = bpy.data.objects.new("Hook", None)
-    scene.collection.objects.link(hook)
-    ob = _cloth(pin_top=False)
-    co = _local(ob.data)
-    top = np.nonzero(np.isclose(co[:, 1], co[:, 1].max()))[0]
-    ob.vertex_groups.new(name="hooked").add(top.tolist(), 1.0, 'REPLACE')
+    scene, hook, ob = _hooked_cloth()
     tie = bpy.data.objects.new("Tie", None)
     scene.collection.objects.link(tie)
     c = tie.physanim.constraint
