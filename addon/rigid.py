@@ -19,7 +19,8 @@ from ..core.rigid.mass import (box_mass, capsule_mass, polyhedron_mass, sphere_m
                                with_override)
 from ..core.rigid.joints import FRAME, JointSettings
 from ..core.rigid.model import RigidBodyBuilder, RigidBodySettings
-from ..core.rigid.solver import RigidBodySolver, RigidBodySystem, RigidPaths
+from ..core.rigid.frame_inputs import RigidPaths
+from ..core.rigid.solver import RigidBodySolver, RigidBodySystem
 from ..core.transforms import decompose
 from . import limits
 from .cache_paths import rigid_cache_dir

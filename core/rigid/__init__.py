@@ -4,8 +4,9 @@ by a broad phase and a narrow phase per shape pair (sphere, box, capsule, convex
 ground), and a soft-step contact solver with manifold blocks, warm starting and friction."""
 from .mass import MassProperties, box_mass, capsule_mass, polyhedron_mass, sphere_mass
 from .model import SHAPES, RigidBodyBuilder, RigidBodyModel, RigidBodySettings, RigidBodyState
-from .solver import RigidBodySolver, RigidBodySystem, RigidFrameInputs, RigidReport
+from .frame_inputs import RigidFrameInputs, RigidPaths, RigidReport
+from .solver import RigidBodySolver, RigidBodySystem
 
 __all__ = ["SHAPES", "MassProperties", "RigidBodyBuilder", "RigidBodyModel", "RigidBodySettings",
            "RigidBodySolver", "RigidBodyState", "RigidBodySystem", "RigidFrameInputs",
-           "RigidReport", "box_mass", "capsule_mass", "polyhedron_mass", "sphere_mass"]
+           "RigidPaths", "RigidReport", "box_mass", "capsule_mass", "polyhedron_mass", "sphere_mass"]
