@@ -34,6 +34,7 @@ import numpy as np
 from ..integrators import bicgstab
 from ..validate import non_negative
 from .constraint_rows import NO_POINT, Rows, gather
+from .springs import scatter_add
 
 DENSE_ROWS = 600  # up to this many rows the system is solved directly
 CG_ITERATIONS = 4000  # cap of the conjugate-gradient solve of larger systems
@@ -192,14 +193,13 @@ def _row_dot(rows: Rows, u: np.ndarray) -> np.ndarray:
 
 
 def _scatter(rows: Rows, y: np.ndarray, n: int) -> np.ndarray:
-    out = np.zeros(3 * n)
+    """J^T y: each row's impulse y along its gradient, summed per point (n, 3)."""
+    out = np.zeros((n, 3))
     for slot in (0, 1):
         p = rows.point[:, slot]
         used = p != NO_POINT
-        flat = (p[used][:, None] * 3 + np.arange(3)).ravel()
-        out += np.bincount(flat, weights=(rows.jac[used, slot] * y[used, None]).ravel(),
-                           minlength=3 * n)
-    return out.reshape(n, 3)
+        scatter_add(out, p[used], rows.jac[used, slot] * y[used, None])
+    return out
 
 
 class HardConstraints:
