@@ -28,6 +28,10 @@ Differences handled:
 """
 from __future__ import annotations
 
+import functools
+import importlib
+import os
+import sys
 from typing import Any
 
 import bpy
@@ -244,3 +248,31 @@ BLEND_RELATIVE_PATH_OPTIONS: set[str] = (
     {'PATH_SUPPORTS_BLEND_RELATIVE'}
     if "is_path_supports_blend_relative" in bpy.types.Property.bl_rna.properties else set()
 )
+
+
+# --------------------------------------------------------------------------------------------
+# USD (pxr)
+# --------------------------------------------------------------------------------------------
+
+@functools.cache  # the import path is fixed for the process
+def usd_modules() -> tuple | None:
+    """``(Usd, UsdGeom, Vt, Sdf)`` from Blender's bundled USD, or None where there is none.
+
+    A Blender binary (4.2 and newer) has ``pxr`` on its Python path. The ``bpy`` module from
+    PyPI ships it in 4.5 and 5.0 under ``<resources>/python/lib/pythonX.Y/site-packages``, off
+    the path (appended here); the 4.2 module has none.
+    """
+    try:
+        importlib.import_module("pxr")
+    except ImportError:
+        version = f"python{sys.version_info.major}.{sys.version_info.minor}"
+        folder = os.path.join(bpy.utils.resource_path('LOCAL'), "python", "lib", version,
+                              "site-packages")
+        if not os.path.isdir(os.path.join(folder, "pxr")):
+            return None
+        sys.path.append(folder)
+    try:
+        from pxr import Sdf, Usd, UsdGeom, Vt
+    except ImportError:
+        return None
+    return Usd, UsdGeom, Vt, Sdf

@@ -8,7 +8,8 @@ from ..core.cache import CacheWriter
 from ..core.contact import ColliderPaths
 from ..core.errors import PhysanimError, SimulationError
 from ..core.particles import ParticleSolver, ParticleSystem, emitter_arrays
-from . import convert, limits
+from ..core.usd_points import MAX_FLOAT_ID
+from . import convert, limits, native_points
 from .cache_paths import emitter_cache_dir
 
 STREAM = "points"
@@ -30,6 +31,9 @@ class ParticleBake:
         for ob in emitters:
             self.writers[ob.name] = CacheWriter(emitter_cache_dir(scene, ob))
         self.objects_limit = {ob.name for ob in emitters if ob.physanim.emitter.output == 'OBJECTS'}
+        # Emitters whose result plays without the extension: a USD layer per frame as well.
+        self.usd = {ob.name for ob in emitters if ob.physanim.emitter.output == 'USD_POINTS'}
+        self.usd_extension = native_points.file_extension() if self.usd else ""
         self.births = {ob.name: 0 for ob in emitters}
         self.stats = stats
         self.system: ParticleSystem | None = None
@@ -88,8 +92,23 @@ class ParticleBake:
             arrays = emitter_arrays(self.model, state, i, frame=frame)
             for key in ("age", "life"):  # frames, as Blender shows them
                 arrays[key] = convert.seconds_to_frames(self.scene, arrays[key]).astype(np.float32)
-            self.writers[ob.name].write_frame(STREAM, frame, arrays)
+            writer = self.writers[ob.name]
+            writer.write_frame(STREAM, frame, arrays)
+            if ob.name in self.usd:
+                self._check_usd_ids(ob, arrays["id"], frame)
+                writer.write_file(native_points.STREAM,
+                                  native_points.frame_file_name(frame, self.usd_extension),
+                                  native_points.save_frame, (arrays, frame))
         self.stats["peak"] = max(self.stats["peak"], state.particle_count)
+
+    @staticmethod
+    def _check_usd_ids(ob, ids: np.ndarray, frame: int) -> None:
+        """USD point files carry ids as floats: exact up to 2**24 (see core.usd_points)."""
+        if len(ids) and int(ids.max()) > MAX_FLOAT_ID:
+            raise PhysanimError(
+                f"particle id {int(ids.max()):,} is beyond {MAX_FLOAT_ID:,}, the largest id the "
+                "Points output's USD files carry exactly — choose Output: Points (Extension), or "
+                "lower the rates or bake fewer frames", obj=ob.name, frame=frame, kind="emitter")
 
     def _check_cache_range(self, state, frame: int) -> None:
         """Positions and velocities must fit the float32 cache: a value beyond it would be

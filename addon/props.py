@@ -43,9 +43,15 @@ DIRECTION_ITEMS = [
     ('RANDOM', "Random", "In every direction"),
 ]
 AXIS_ITEMS = [(a, a, f"Local {a} axis") for a in ("X", "Y", "Z", "-X", "-Y", "-Z")]
+# Explicit numbers: files store the number, and 'POINTS' (0) and 'OBJECTS' (1) came first.
 OUTPUT_ITEMS = [
-    ('POINTS', "Points", "A point cloud with attributes, instanced by Geometry Nodes (any count)"),
-    ('OBJECTS', "Objects", "One keyframed object per particle (small counts)"),
+    ('USD_POINTS', "Points", "A point cloud read from a USD file per frame by Blender's Mesh "
+     "Sequence Cache modifier and instanced by Geometry Nodes (any count): plays and renders "
+     "without PhysAnim, e.g. on a render farm; ids up to 16,777,216", 2),
+    ('POINTS', "Points (Extension)", "A points mesh the extension loads from the bake's cache on "
+     "every frame change, instanced by Geometry Nodes (any count): needs PhysAnim enabled "
+     "wherever the scene plays or renders", 0),
+    ('OBJECTS', "Objects", "One keyframed object per particle (small counts)", 1),
 ]
 COLLIDER_SHAPE_ITEMS = [
     ('AUTO', "Automatic", "What you see: a mesh that is exactly a box or a filled rectangle "
@@ -148,7 +154,8 @@ class PHYSANIM_PG_emitter(bpy.types.PropertyGroup):
                             description="Links are rods of fixed length (hard constraints): a "
                                         "rope that never stretches; stiffness and damping unused",
                             options=STATIC)
-    output: EnumProperty(name="Output", items=OUTPUT_ITEMS, default='POINTS', options=STATIC)
+    output: EnumProperty(name="Output", items=OUTPUT_ITEMS, default='USD_POINTS',
+                         options=STATIC)
     instance_object: PointerProperty(name="Instance", type=bpy.types.Object,
                                      description="Object drawn at each particle (default: a "
                                                  "sphere that shows the particle colors)")

@@ -13,9 +13,10 @@ import bpy
 import numpy as np
 from bpy.app.handlers import persistent
 
+from ..core import usd_points
 from ..core.cache import read_frame
 from ..core.errors import PhysanimError
-from . import compat, instancing, points
+from . import compat, instancing, native_points, points
 
 MAX_KEYED_OBJECTS = 20_000  # the Objects output makes one Blender object per particle
 EMPTY = {"position": np.zeros((0, 3), np.float32)}
@@ -44,26 +45,50 @@ def _collection_of(ob, scene):
     return ob.users_collection[0] if ob.users_collection else scene.collection
 
 
-def _result_object(scene, emitter_ob):
+def _result_object(scene, emitter_ob, kind: str):
+    """The emitter's result object, of type ``kind`` ('MESH' or 'POINTCLOUD'): a result of the
+    other type (the output was switched) is replaced by one of the same name and collections."""
     p = emitter_ob.physanim.emitter
     res = p.result
-    if res is None or res.name not in bpy.data.objects:
-        mesh = bpy.data.meshes.new(f"{emitter_ob.name}_particles")
-        res = bpy.data.objects.new(f"{emitter_ob.name}_particles", mesh)
-        _collection_of(emitter_ob, scene).objects.link(res)
-        p.result = res
+    if res is not None and res.name in bpy.data.objects and res.type == kind:
+        return res
+    name, collections = f"{emitter_ob.name}_particles", None
+    if res is not None and res.name in bpy.data.objects:
+        name, collections = res.name, list(res.users_collection)
+        _remove_object(res)
+    if kind == 'POINTCLOUD':
+        data = bpy.data.pointclouds.new(name)
+    else:
+        data = bpy.data.meshes.new(name)
+    res = bpy.data.objects.new(name, data)
+    for coll in collections or [_collection_of(emitter_ob, scene)]:
+        coll.objects.link(res)
+    p.result = res
     return res
+
+
+def _remove_object(res) -> None:
+    """Delete a result object and its data (not its cache)."""
+    native_points.remove_reader(res)
+    data = res.data
+    bpy.data.objects.remove(res)
+    if data is not None and data.users == 0:
+        (bpy.data.pointclouds if isinstance(data, bpy.types.PointCloud)
+         else bpy.data.meshes).remove(data)
 
 
 def attach(context, scene, emitter_ob, cache_rel: str, frame_start: int, frame_end: int,
            inputs_hash: str = "") -> None:
     """Point the emitter's result object at a finished bake and build its output."""
     p = emitter_ob.physanim.emitter
-    res = _result_object(scene, emitter_ob)
+    native = p.output == 'USD_POINTS'
+    res = _result_object(scene, emitter_ob, 'POINTCLOUD' if native else 'MESH')
     res.physanim.result.cache = cache_rel
     res.physanim.result.emitter = emitter_ob.name
     res.physanim.result.hash = inputs_hash
     instance = p.instance_object or instancing.default_particle_object()
+    if native:
+        _attach_usd(res, cache_rel, frame_start, frame_end)
     instancing.ensure_instancer(res, instance)
     keyed = keyed_collection(scene, emitter_ob, create=False)
     if p.output == 'OBJECTS':
@@ -73,7 +98,22 @@ def attach(context, scene, emitter_ob, cache_rel: str, frame_start: int, frame_e
         if keyed is not None:
             remove_collection(keyed)
         res.hide_render = False
-    refresh(res, scene.frame_current)
+    if not native:
+        refresh(res, scene.frame_current)
+
+
+def _attach_usd(res, cache_rel: str, frame_start: int, frame_end: int) -> None:
+    """Point a point cloud result at the bake's USD frames (``usd/`` beside the npz stream)."""
+    folder = os.path.dirname(bpy.path.abspath(cache_rel).rstrip("/\\"))
+    usd_dir = os.path.join(folder, native_points.STREAM)
+    files = sorted(os.listdir(usd_dir)) if os.path.isdir(usd_dir) else []
+    first = read_frame(bpy.path.abspath(cache_rel), frame_start)
+    if not files or first is None:
+        raise PhysanimError(f'the bake has no USD point files in "{usd_dir}"',
+                            obj=res.physanim.result.emitter, frame=frame_start, kind="emitter")
+    layout = usd_points.attribute_layout(first)
+    rel = cache_rel.rstrip("/").rsplit("/", 1)[0] + f"/{native_points.STREAM}/{files[0]}"
+    native_points.ensure_reader(res, rel, layout, frame_start, frame_end)
 
 
 def refresh(res, frame: int) -> None:
@@ -191,7 +231,8 @@ def write_keyed_objects(scene, emitter_ob, cache_rel: str, frame_start: int, fra
 
 def result_objects(scene) -> list:
     """Every bake result in ``scene`` (whether or not its emitter still exists or is enabled)."""
-    return [ob for ob in scene.objects if ob.type == 'MESH' and ob.physanim.result.cache]
+    return [ob for ob in scene.objects
+            if ob.type in ('MESH', 'POINTCLOUD') and ob.physanim.result.cache]
 
 
 def free_result(scene, res) -> None:
@@ -210,11 +251,9 @@ def free_result(scene, res) -> None:
         remove_collection(keyed)
     if emitter is not None and emitter.physanim.emitter.result == res:
         emitter.physanim.emitter.result = None
-    mesh = res.data
-    bpy.data.objects.remove(res)
-    if mesh is not None and mesh.users == 0:
-        bpy.data.meshes.remove(mesh)
+    _remove_object(res)
     instancing.remove_unused()
+    native_points.remove_unused()
 
 
 HANDLERS = (("frame_change_pre", on_frame_change), ("load_post", on_load_post))

@@ -18,7 +18,8 @@ import shutil
 import uuid
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -86,20 +87,26 @@ class CacheWriter:
         The arrays must not be modified afterwards (they may still be queued for writing).
         Errors of earlier queued writes are raised here or by :meth:`commit`.
         """
+        data = {k: np.ascontiguousarray(v) for k, v in arrays.items()}
+        return self.write_file(stream, frame_file(".", frame).name, _save, data)
+
+    def write_file(self, stream: str, name: str, save: Callable[[Path, Any], None],
+                   data: Any) -> Path:
+        """Queue ``save(path, data)`` for the file ``name`` of ``stream`` (one frame of an
+        export format, say) on the writer thread; returns the path it is written to."""
         if self._closed:
             raise RuntimeError("cache writer already committed or aborted")
         stream_dir = self.partial_dir / stream
         if stream not in self._streams:
             stream_dir.mkdir(parents=True, exist_ok=True)
             self._streams.add(stream)
-        path = frame_file(stream_dir, frame)
-        data = {k: np.ascontiguousarray(v) for k, v in arrays.items()}
+        path = stream_dir / name
         if self._pool is None:
-            _save(path, data)
+            save(path, data)
             return path
         while len(self._pending) >= WRITES_IN_FLIGHT:
             self._pending.pop(0).result()
-        self._pending.append(self._pool.submit(_save, path, data))
+        self._pending.append(self._pool.submit(save, path, data))
         return path
 
     def flush(self) -> None:

@@ -79,21 +79,51 @@ def ground(scene, size: float = 20.0, color=(0.18, 0.2, 0.22)):
     return ob
 
 
+#: Attribute type -> (foreach_get key, components, dtype).
+_READ = {'INT': ("value", 1, np.int32), 'FLOAT': ("value", 1, np.float32),
+         'FLOAT_VECTOR': ("vector", 3, np.float32), 'FLOAT_COLOR': ("color", 4, np.float32)}
+INSTANCER = "physanim_instances"  # the instancing modifier PhysAnim adds to a result
+
+
+def result_points(res) -> dict[str, np.ndarray]:
+    """Every point attribute of a particle result object as Blender shows it now, read before
+    its instancing modifier: a point cloud's evaluated geometry (the Points output, read from
+    USD files by Blender's own modifiers) or a points mesh (the extension's output)."""
+    instancer = res.modifiers.get(INSTANCER)
+    shown = instancer.show_viewport if instancer is not None else None
+    if instancer is not None:
+        instancer.show_viewport = False
+    try:
+        data = res.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
+        n = len(data.points) if res.type == 'POINTCLOUD' else len(data.vertices)
+        out = {}
+        for attribute in data.attributes:
+            if (attribute.name.startswith(".") or attribute.domain != 'POINT'
+                    or attribute.data_type not in _READ):
+                continue
+            key, width, dtype = _READ[attribute.data_type]
+            buffer = np.empty(n * width, dtype)
+            if n:
+                attribute.data.foreach_get(key, buffer)
+            out[attribute.name] = buffer.reshape(n, width) if width > 1 else buffer
+    finally:
+        if instancer is not None:
+            instancer.show_viewport = shown
+    out.setdefault("position", np.empty((0, 3), np.float32))
+    return out
+
+
 def points(scene, emitter_name: str, frame: int) -> dict[str, np.ndarray]:
-    """Attributes of an emitter's result points at ``frame`` (read back from Blender)."""
+    """Attributes of an emitter's result points at ``frame`` (read back from Blender); an empty
+    frame has every interface attribute, empty."""
     scene.frame_set(frame)
-    res = bpy.data.objects[emitter_name].physanim.emitter.result
-    me = res.data
-    n = len(me.vertices)
-    out = {}
-    for name, comp, size in (("position", "vector", 3), ("id", "value", 1), ("age", "value", 1),
-                             ("velocity", "vector", 3), ("color", "color", 4),
-                             ("size", "value", 1)):
-        buf = np.zeros(n * size, np.int32 if name == "id" else np.float32)
-        attr = me.attributes.get(name)
-        if n and attr is not None:  # an empty mesh has no attributes at all
-            attr.data.foreach_get(comp, buf)
-        out[name] = buf.reshape(n, size) if size > 1 else buf
+    out = result_points(bpy.data.objects[emitter_name].physanim.emitter.result)
+    n = len(out["position"])
+    for name, width, dtype in (("id", 1, np.int32), ("age", 1, np.float32),
+                               ("velocity", 3, np.float32), ("color", 4, np.float32),
+                               ("size", 1, np.float32)):
+        if name not in out:
+            out[name] = np.zeros((n, width) if width > 1 else n, dtype)
     return out
 
 

@@ -15,6 +15,8 @@ import bpy
 import numpy as np
 import pytest
 
+from sample_scenes._common import result_points
+
 FRAME_START, FRAME_END = 2, 9
 SHOWN_FRAMES = (3, 7)
 
@@ -91,18 +93,7 @@ def _leftovers(folder: Path) -> list[Path]:
 
 
 def _shown(res) -> dict[str, np.ndarray]:
-    me = res.data
-    out = {}
-    for attribute in me.attributes:
-        if attribute.is_internal or attribute.domain != 'POINT':
-            continue
-        key = {'FLOAT_VECTOR': "vector", 'FLOAT_COLOR': "color"}.get(attribute.data_type, "value")
-        width = {'FLOAT_VECTOR': 3, 'FLOAT_COLOR': 4}.get(attribute.data_type, 1)
-        buffer = np.empty(len(me.vertices) * width,
-                          np.int32 if attribute.data_type == 'INT' else np.float32)
-        attribute.data.foreach_get(key, buffer)
-        out[attribute.name] = buffer
-    return out
+    return result_points(res)
 
 
 class Baked:

@@ -13,8 +13,11 @@ from pathlib import Path
 
 import bpy
 import numpy as np
+import pytest
 from bpy_extras.object_utils import world_to_camera_view
 from mathutils import Vector
+
+from sample_scenes._common import result_points
 
 ATTRIBUTE_TYPES = {"id": 'INT', "age": 'FLOAT', "velocity": 'FLOAT_VECTOR', "size": 'FLOAT',
                    "color": 'FLOAT_COLOR'}
@@ -73,23 +76,21 @@ def _cached(ext, ob, frame: int) -> dict[str, np.ndarray]:
 
 
 def _result_points(ob) -> dict[str, np.ndarray]:
-    """The result object's points and interface attributes, as Blender holds them now."""
-    mesh = ob.physanim.emitter.result.data
-    n = len(mesh.vertices)
-    out = {"position": np.empty(n * 3, np.float32)}
-    if n:
-        mesh.attributes["position"].data.foreach_get("vector", out["position"])
-    out["position"] = out["position"].reshape(n, 3)
-    for name in ATTRIBUTE_TYPES:
-        attribute = mesh.attributes.get(name)
-        if attribute is None:
-            continue
-        key, width, dtype = _READ[attribute.data_type]
-        buffer = np.empty(n * width, dtype)
-        if n:
-            attribute.data.foreach_get(key, buffer)
-        out[name] = buffer.reshape(n, width) if width > 1 else buffer
-    return out
+    """The result object's points and attributes, as Blender shows them now (before the
+    instancing modifier)."""
+    return result_points(ob.physanim.emitter.result)
+
+
+def _shown_types(ob) -> dict[str, tuple[str, str]]:
+    """Attribute name -> (data type, domain) of the result's geometry before instancing."""
+    res = ob.physanim.emitter.result
+    instancer = res.modifiers["physanim_instances"]
+    instancer.show_viewport = False
+    try:
+        data = res.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
+        return {a.name: (a.data_type, a.domain) for a in data.attributes}
+    finally:
+        instancer.show_viewport = True
 
 
 def _assert_shows_frame(ext, ob, frame: int) -> None:
@@ -153,17 +154,20 @@ def _fcurves(ob):
 
 # ---------------------------------------------------------------------- result and cache
 
-def test_result_holds_exactly_the_particles_alive_at_each_frame(physanim_ext, tmp_path):
+@pytest.mark.parametrize("output, kind", [('USD_POINTS', 'POINTCLOUD'), ('POINTS', 'MESH')])
+def test_result_holds_exactly_the_particles_alive_at_each_frame(physanim_ext, tmp_path, output,
+                                                                kind):
+    """Both Points outputs: USD files read by Blender's modifiers, and the extension's mesh."""
     scene = _setup(frame_end=12)
-    a = _emitter("A", seed=1)
-    b = _emitter("B", location=(3.0, 0.0, 0.0), seed=2, rate=4.0)
+    a = _emitter("A", seed=1, output=output)
+    b = _emitter("B", location=(3.0, 0.0, 0.0), seed=2, rate=4.0, output=output)
     _save(tmp_path)
 
     assert bpy.ops.physanim.bake() == {'FINISHED'}
 
     for ob in (a, b):
         res = ob.physanim.emitter.result
-        assert res is not None and res.type == 'MESH' and res.name in scene.objects
+        assert res is not None and res.type == kind and res.name in scene.objects
         # the bake goes back to the frame it started from and shows that frame
         _assert_shows_frame(physanim_ext, ob, scene.frame_current)
     for frame in (6, 12, 3, 1, 9, 2, 12, 7):  # scrubbing backwards and forwards
@@ -171,10 +175,10 @@ def test_result_holds_exactly_the_particles_alive_at_each_frame(physanim_ext, tm
         for ob in (a, b):
             _assert_shows_frame(physanim_ext, ob, frame)
     scene.frame_set(8)
-    attributes = a.physanim.emitter.result.data.attributes
+    attributes = _shown_types(a)
     for name, data_type in ATTRIBUTE_TYPES.items():
-        assert attributes[name].data_type == data_type and attributes[name].domain == 'POINT'
-    assert len(a.physanim.emitter.result.data.vertices) > 5
+        assert attributes[name] == (data_type, 'POINT')
+    assert len(_result_points(a)["position"]) > 5
 
     # ids: unique across the bake (both emitters), each alive over one unbroken run of frames
     lives: dict[int, list[int]] = {}
@@ -197,8 +201,9 @@ def test_result_holds_exactly_the_particles_alive_at_each_frame(physanim_ext, tm
         assert (nxt["age"] < 4.0 + 1.5 + 1e-4).all()
 
     # outside the baked range the result is empty
-    scene.frame_set(40)
-    assert len(a.physanim.emitter.result.data.vertices) == 0
+    for frame in (40, 0):
+        scene.frame_set(frame)
+        assert len(_result_points(a)["position"]) == 0
 
 
 def test_velocity_is_in_metres_per_second(physanim_ext, tmp_path):
@@ -230,7 +235,7 @@ def test_result_follows_frames_after_save_and_reload(physanim_ext, tmp_path):
     for frame in (4, 9, 2, 10):
         scene.frame_set(frame)
         _assert_shows_frame(physanim_ext, ob, frame)
-        assert len(ob.physanim.emitter.result.data.vertices) > 0
+        assert len(_result_points(ob)["position"]) > 0
 
 
 def test_headless_animation_render_shows_the_particles(physanim_ext, tmp_path):

@@ -35,6 +35,7 @@ def test_result_object_shows_a_million_particles_per_frame(physanim_ext, tmp_pat
             "color": np.ones((count, 4), np.float32),
         })
     path = writer.commit({"kind": "particles"})
+    emitter.physanim.emitter.output = 'POINTS'  # the extension's mesh, loaded per frame change
     results.attach(bpy.context, scene, emitter, "//physanim_cache/Big/points", 1, 2)
     res = emitter.physanim.emitter.result
     for frame, count in ((1, n), (2, n // 2), (1, n), (3, 0)):

@@ -1,0 +1,230 @@
+"""The Points output plays and renders without the extension: USD files per frame, read by
+Blender's own Mesh Sequence Cache modifier and Geometry Nodes (see ``addon/native_points.py``).
+
+The decisive test renders a baked file in a fresh process in which PhysAnim was never installed
+and compares its pixels with the render of the same file where PhysAnim is enabled, and with the
+render of the extension's own Points output.
+"""
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import bpy
+import numpy as np
+import pytest
+
+from sample_scenes._common import result_points
+
+NATIVE_MODIFIERS = [("physanim_cache", 'MESH_SEQUENCE_CACHE'), ("physanim_attributes", 'NODES'),
+                    ("physanim_instances", 'NODES')]
+
+
+def _scene(tmp_path: Path, frame_end: int = 12):
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    scene = bpy.context.scene
+    scene.physanim.frame_start, scene.physanim.frame_end = 1, frame_end
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "shot.blend"))
+    return scene
+
+
+def _default_emitter(scene):
+    """An emitter with nothing set but its switch: a plane, as a user adds one."""
+    bpy.ops.mesh.primitive_plane_add(size=2.0)
+    ob = bpy.context.object
+    ob.physanim.emitter.enabled = True
+    return ob
+
+
+def _addon(ext, name: str):
+    return sys.modules[f"{ext.__name__}.addon.{name}"]
+
+
+def test_points_at_the_defaults_are_read_by_native_modifiers_only(physanim_ext, tmp_path):
+    scene = _scene(tmp_path)
+    ob = _default_emitter(scene)
+    assert ob.physanim.emitter.output == 'USD_POINTS'
+
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+
+    res = ob.physanim.emitter.result
+    assert res.type == 'POINTCLOUD'
+    assert [(m.name, m.type) for m in res.modifiers] == NATIVE_MODIFIERS
+    cache = res.modifiers["physanim_cache"]
+    assert cache.object_path == "/particles"
+    cache_file = cache.cache_file
+    assert cache_file.is_sequence and cache_file.filepath.startswith("//")
+    files = sorted(Path(bpy.path.abspath(cache_file.filepath)).parent.iterdir())
+    assert [int(p.stem.rsplit("_", 1)[1]) for p in files] == list(range(1, 13))
+    # Nothing of PhysAnim runs on a frame change of this object: no handler loads it.
+    scene.frame_set(7)
+    shown = result_points(res)
+    cache = sys.modules[f"{physanim_ext.__name__}.core.cache"]
+    cached = cache.read_frame(bpy.path.abspath(res.physanim.result.cache), 7)
+    assert len(shown["id"]) == len(cached["id"]) > 50
+    for name in ("id", "position", "velocity", "age", "size", "color"):
+        assert shown[name].dtype == cached[name].dtype
+        np.testing.assert_array_equal(shown[name], cached[name], err_msg=name)
+    np.testing.assert_array_equal(shown["radius"], shown["size"])
+
+
+_RENDER = textwrap.dedent('''
+    import sys
+    import bpy
+    blend, frame, out = sys.argv[1], int(sys.argv[2]), sys.argv[3]
+    bpy.ops.wm.open_mainfile(filepath=blend)
+    loaded = [m for m in sys.modules if "physanim" in m]
+    enabled = [a.module for a in bpy.context.preferences.addons if "physanim" in a.module]
+    assert not loaded and not enabled, (loaded, enabled)
+    scene = bpy.context.scene
+    scene.frame_set(frame)
+    scene.render.filepath = out
+    bpy.ops.render.render(write_still=True)
+    print("rendered", out)
+''')
+
+
+def _camera_scene(scene) -> None:
+    camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    scene.collection.objects.link(camera)
+    camera.location = (0.0, -9.0, 1.5)
+    camera.rotation_euler = (math.radians(85.0), 0.0, 0.0)
+    scene.camera = camera
+    render = scene.render
+    render.engine = 'CYCLES'
+    scene.cycles.device, scene.cycles.samples, scene.cycles.use_denoising = 'CPU', 4, False
+    render.resolution_x, render.resolution_y, render.resolution_percentage = 96, 64, 100
+    render.film_transparent = True
+    render.image_settings.file_format = 'PNG'
+    render.image_settings.color_mode = 'RGBA'
+    scene.view_settings.view_transform = 'Standard'
+
+
+def _pixels(path: Path) -> np.ndarray:
+    image = bpy.data.images.load(str(path))
+    width, height = image.size
+    pixels = np.empty(width * height * 4, np.float32)
+    image.pixels.foreach_get(pixels)
+    bpy.data.images.remove(image)
+    return pixels.reshape(height, width, 4)
+
+
+def _render_here(scene, path: Path, frame: int) -> np.ndarray:
+    scene.frame_set(frame)
+    scene.render.filepath = str(path)
+    bpy.ops.render.render(write_still=True)
+    return _pixels(path)
+
+
+def test_renders_the_same_pixels_where_physanim_is_not_installed(physanim_ext, tmp_path):
+    scene = _scene(tmp_path, frame_end=10)
+    ob = _default_emitter(scene)
+    p = ob.physanim.emitter
+    p.speed, p.spread, p.lifetime = 4.0, 0.6, 8.0
+    stops = p.color_stops
+    stops[0].color, stops[-1].color = (1.0, 0.1, 0.05, 1.0), (0.1, 0.3, 1.0, 1.0)
+    _camera_scene(scene)
+    blend = tmp_path / "shot.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    frame = 9
+    with_extension = _render_here(scene, tmp_path / "with.png", frame)
+    alpha = with_extension[..., 3]
+    assert 0.01 < (alpha > 0.5).mean() < 0.6, "the particles are not in the picture"
+    red = (with_extension[..., 0] > 2 * with_extension[..., 2]) & (alpha > 0.5)
+    blue = (with_extension[..., 2] > 2 * with_extension[..., 0]) & (alpha > 0.5)
+    assert red.any() and blue.any(), "the colours over life did not reach the render"
+
+    script = tmp_path / "render.py"
+    script.write_text(_RENDER)
+    env = {k: v for k, v in os.environ.items() if k != "BLENDER_USER_RESOURCES"}
+    env["BLENDER_USER_SCRIPTS"] = str(tmp_path / "no_scripts")  # nothing user-installed either
+    done = subprocess.run([sys.executable, str(script), str(blend), str(frame),
+                           str(tmp_path / "without.png")], capture_output=True, text=True,
+                          env=env, timeout=300)
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    without = _pixels(tmp_path / "without.png")
+    np.testing.assert_array_equal(without, with_extension)
+
+    # ... and the same pixels as the extension's own Points output of the same bake
+    p.output = 'POINTS'
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    assert p.result.type == 'MESH'
+    np.testing.assert_array_equal(_render_here(scene, tmp_path / "mesh.png", frame),
+                                  with_extension)
+
+
+def test_switching_the_output_replaces_the_result_and_leaves_nothing_behind(physanim_ext,
+                                                                             tmp_path):
+    scene = _scene(tmp_path, frame_end=6)
+    ob = _default_emitter(scene)
+    p = ob.physanim.emitter
+    group = bpy.data.collections.new("FX")
+    scene.collection.children.link(group)
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    res = p.result
+    name = res.name
+    for coll in list(res.users_collection):
+        coll.objects.unlink(res)
+    group.objects.link(res)  # the user moved the result into a collection of their own
+
+    for output, kind in (('POINTS', 'MESH'), ('OBJECTS', 'MESH'), ('USD_POINTS', 'POINTCLOUD'),
+                         ('USD_POINTS', 'POINTCLOUD')):
+        p.output = output
+        assert bpy.ops.physanim.bake() == {'FINISHED'}
+        res = p.result
+        assert (res.type, res.name, list(res.users_collection)) == (kind, name, [group])
+        scene.frame_set(5)
+        assert len(result_points(res)["id"]) == 5 * 20  # the default rate: 20 a frame
+        assert len(bpy.data.cache_files) == (1 if kind == 'POINTCLOUD' else 0)
+        assert len(bpy.data.pointclouds) == (1 if kind == 'POINTCLOUD' else 0)
+    assert bpy.ops.physanim.free_bake() == {'FINISHED'}
+    assert p.result is None and name not in bpy.data.objects
+    assert len(bpy.data.cache_files) == 0 and len(bpy.data.pointclouds) == 0
+    assert not [g for g in bpy.data.node_groups if "physanim_usd_layout" in g]
+
+
+def test_a_rebake_shows_at_once_without_a_frame_change(physanim_ext, tmp_path):
+    """Blender keeps a reader open per cache file: the rebake must not show the old frame."""
+    scene = _scene(tmp_path, frame_end=6)
+    ob = _default_emitter(scene)
+    scene.frame_set(4)
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    before = result_points(ob.physanim.emitter.result)["position"]
+    ob.physanim.emitter.seed += 1
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    assert scene.frame_current == 4
+    after = result_points(ob.physanim.emitter.result)["position"]
+    assert before.shape == after.shape and not np.array_equal(before, after)
+
+
+def test_stretch_instance_transforms_are_rebuilt_as_vectors(physanim_ext, tmp_path):
+    scene = _scene(tmp_path, frame_end=5)
+    ob = _default_emitter(scene)
+    ob.physanim.emitter.stretch = 0.5
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    scene.frame_set(5)
+    shown = result_points(ob.physanim.emitter.result)
+    cache = sys.modules[f"{physanim_ext.__name__}.core.cache"]
+    cached = cache.read_frame(bpy.path.abspath(ob.physanim.emitter.result.physanim.result.cache), 5)
+    for name in ("instance_scale", "instance_rotation", "velocity", "color", "id"):
+        np.testing.assert_array_equal(shown[name], cached[name], err_msg=name)
+    assert not any(k.startswith(("instance_scale_", "color_", "physanim_id")) for k in shown)
+
+
+def test_ids_beyond_float_precision_fail_naming_emitter_and_frame(physanim_ext):
+    particles_bake = _addon(physanim_ext, "particles_bake")
+    errors = sys.modules[f"{physanim_ext.__name__}.core.errors"]
+    ob = bpy.data.objects.new("Spray", None)
+    ids = np.array([5, 2 ** 24 + 1], np.int64)
+    with pytest.raises(errors.PhysanimError) as caught:
+        particles_bake.ParticleBake._check_usd_ids(ob, ids, 812)
+    message = str(caught.value)
+    assert '"Spray"' in message and "frame 812" in message and "16,777,217" in message
+    assert "Points (Extension)" in message
+    particles_bake.ParticleBake._check_usd_ids(ob, ids[:1], 812)
