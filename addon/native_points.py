@@ -42,8 +42,16 @@ def file_extension() -> str:
     return ".usdc" if compat.usd_modules() is not None else ".usda"
 
 
-def frame_file_name(frame: int, extension: str) -> str:
-    return os.path.splitext(usd_points.frame_file_name(frame))[0] + extension
+def file_number(frame: int, frame_start: int) -> int:
+    """The number in the file name of ``frame``: the frame itself, or for a bake starting below
+    frame 1, its place counted from 1. Blender reads the number from the digits before the
+    extension, without a minus sign; it does not apply the cache file's frame offset to a
+    sequence, so a driver maps scene frames to numbers (:func:`_number_driver`)."""
+    return frame if frame_start >= 1 else frame - frame_start + 1
+
+
+def frame_file_name(number: int, extension: str) -> str:
+    return os.path.splitext(usd_points.frame_file_name(number))[0] + extension
 
 
 def save_frame(path, data) -> None:
@@ -100,6 +108,8 @@ def ensure_reader(res, file_rel: str, layout: dict, frame_start: int, frame_end:
     # A fresh cache file for every bake: Blender keeps an open reader per cache file, which
     # would go on showing the replaced bake's frame until the frame changes.
     cache.cache_file = _new_cache_file(file_rel, res.name)
+    if frame_start < 1:
+        _number_driver(cache.cache_file, file_number(0, frame_start))
     if previous is not None and previous.users == 0 and previous.library is None:
         bpy.data.batch_remove([previous])  # cache_files has no remove()
     cache.object_path = usd_points.PRIM_PATH
@@ -131,6 +141,15 @@ def _new_cache_file(file_rel: str, label: str):
     cache_file.filepath = file_rel
     cache_file.is_sequence = True
     return cache_file
+
+
+def _number_driver(cache_file, shift: int) -> None:
+    """Look files up by ``frame + shift``: a driver with a simple expression, which Blender
+    evaluates without Python (so it plays where scripts are disabled or PhysAnim is missing)."""
+    cache_file.override_frame = True
+    curve = cache_file.driver_add("frame")
+    curve.driver.type = 'SCRIPTED'
+    curve.driver.expression = f"frame + {shift}"
 
 
 def _override() -> dict:

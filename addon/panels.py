@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import extract, inputs_hash, props
+from . import extract, inputs_hash, native_points, props
 
 # larger meshes show their Automatic collider shape only when baking (the panel redraws often)
 AUTO_SHAPE_PREVIEW_LIMIT = 100_000
@@ -135,6 +135,12 @@ class PHYSANIM_PT_emitter_look(_PhysicsPanel, bpy.types.Panel):
         layout = self.layout
         layout.use_property_split = True
         layout.prop(p, "output")
+        note = {'USD_POINTS': ("Plays and renders without PhysAnim (USD files, "
+                               f"{native_points.file_extension()[1:]})", 'CHECKMARK'),
+                'POINTS': ("Needs PhysAnim wherever it plays or renders", 'INFO'),
+                'OBJECTS': ("Keyframed objects: no PhysAnim needed to play", 'CHECKMARK')}
+        text, icon = note[p.output]
+        layout.label(text=text, icon=icon)
         layout.prop(p, "instance_object")
         layout.prop(p, "stretch")
         if p.result is not None:

@@ -34,6 +34,7 @@ class ParticleBake:
         # Emitters whose result plays without the extension: a USD layer per frame as well.
         self.usd = {ob.name for ob in emitters if ob.physanim.emitter.output == 'USD_POINTS'}
         self.usd_extension = native_points.file_extension() if self.usd else ""
+        self.first_frame = 0  # set by start()
         self.births = {ob.name: 0 for ob in emitters}
         self.stats = stats
         self.system: ParticleSystem | None = None
@@ -62,6 +63,7 @@ class ParticleBake:
         one-frame burst). When an emitter's window holds the first frame, that interval lies
         before the bake: ``pre_roll()`` gives its inputs, simulated for the particles alone,
         which start the bake with ages up to one frame."""
+        self.first_frame = frame
         inputs = pre_roll()
         state = self.model.state(convert.frame_time(self.scene, frame - (inputs is not None)))
         self.system = ParticleSystem(self.solver, state)
@@ -96,8 +98,9 @@ class ParticleBake:
             writer.write_frame(STREAM, frame, arrays)
             if ob.name in self.usd:
                 self._check_usd_ids(ob, arrays["id"], frame)
+                number = native_points.file_number(frame, self.first_frame)
                 writer.write_file(native_points.STREAM,
-                                  native_points.frame_file_name(frame, self.usd_extension),
+                                  native_points.frame_file_name(number, self.usd_extension),
                                   native_points.save_frame, (arrays, frame))
         self.stats["peak"] = max(self.stats["peak"], state.particle_count)
 

@@ -54,3 +54,17 @@ def evaluated_instance_attributes(obj: bpy.types.Object, depsgraph: bpy.types.De
         attribute.data.foreach_get(key, buffer)
         result[name] = buffer.reshape(count, width) if width > 1 else buffer
     return result
+
+
+class LabelRecorder:
+    """A stand-in for a panel's ``layout`` that records the labels ``draw()`` shows, accepting
+    any other call (rows, props, operators)."""
+
+    def __init__(self, labels: list):
+        self.labels = labels
+
+    def label(self, text: str = "", **_kw):
+        self.labels.append(text)
+
+    def __getattr__(self, name):
+        return lambda *args, **kw: LabelRecorder(self.labels)

@@ -18,6 +18,7 @@ import bpy
 import numpy as np
 import pytest
 
+from physanim.tests.blender.probes import LabelRecorder
 from sample_scenes._common import result_points
 
 NATIVE_MODIFIERS = [("physanim_cache", 'MESH_SEQUENCE_CACHE'), ("physanim_attributes", 'NODES'),
@@ -189,6 +190,31 @@ def test_switching_the_output_replaces_the_result_and_leaves_nothing_behind(phys
     assert not [g for g in bpy.data.node_groups if "physanim_usd_layout" in g]
 
 
+def test_frames_below_one_play_from_their_own_files(physanim_ext, tmp_path):
+    """Blender reads a file's number without its sign: files are numbered from the bake's first
+    frame and the cache file's frame offset maps them back."""
+    scene = _scene(tmp_path)
+    scene.physanim.frame_start, scene.physanim.frame_end = -4, 6
+    ob = _default_emitter(scene)
+    ob.physanim.emitter.frame_start = -4
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    res = ob.physanim.emitter.result
+    (driver,) = res.modifiers["physanim_cache"].cache_file.animation_data.drivers
+    assert driver.driver.is_simple_expression  # evaluated without Python
+    cache = sys.modules[f"{physanim_ext.__name__}.core.cache"]
+    folder = bpy.path.abspath(res.physanim.result.cache)
+    for frame in (-4, -1, 0, 1, 3, 6, -5, 7):
+        scene.frame_set(frame)
+        cached = cache.read_frame(folder, frame)
+        shown = result_points(res)
+        if cached is None:
+            assert len(shown["position"]) == 0, frame
+            continue
+        assert len(cached["id"]) == 20 * (frame + 5)
+        np.testing.assert_array_equal(shown["id"], cached["id"], err_msg=str(frame))
+        np.testing.assert_array_equal(shown["position"], cached["position"], err_msg=str(frame))
+
+
 def test_a_rebake_shows_at_once_without_a_frame_change(physanim_ext, tmp_path):
     """Blender keeps a reader open per cache file: the rebake must not show the old frame."""
     scene = _scene(tmp_path, frame_end=6)
@@ -228,3 +254,20 @@ def test_ids_beyond_float_precision_fail_naming_emitter_and_frame(physanim_ext):
     assert '"Spray"' in message and "frame 812" in message and "16,777,217" in message
     assert "Points (Extension)" in message
     particles_bake.ParticleBake._check_usd_ids(ob, ids[:1], 812)
+
+
+def test_the_render_panel_says_where_each_output_plays(physanim_ext):
+    panels = _addon(physanim_ext, "panels")
+    ob = bpy.data.objects.new("Spray", None)
+    ob.physanim.emitter.enabled = True
+    context = type("Context", (), {"object": ob})()
+    shown = {}
+    for output in ('USD_POINTS', 'POINTS', 'OBJECTS'):
+        ob.physanim.emitter.output = output
+        labels: list[str] = []
+        panels.PHYSANIM_PT_emitter_look.draw(type("Panel", (), {"layout": LabelRecorder(labels)})(),
+                                             context)
+        shown[output] = " ".join(labels)
+    assert "without PhysAnim" in shown['USD_POINTS']
+    assert "usdc" in shown['USD_POINTS'] or "usda" in shown['USD_POINTS']
+    assert "Needs PhysAnim" in shown['POINTS']

@@ -12,6 +12,8 @@ import bpy
 import numpy as np
 import pytest
 
+from sample_scenes._common import result_points
+
 FRAME_START, FRAME_END = 1, 48
 
 
@@ -264,11 +266,9 @@ def test_particles_land_on_a_falling_rigid_cube(physanim_ext, tmp_path):
     assert bpy.ops.physanim.bake() == {'FINISHED'}
     scene.frame_set(FRAME_END)
     res = emitter.physanim.emitter.result
-    me = res.data  # the points mesh holds the frame's particles (world positions)
-    co = np.empty(len(me.vertices) * 3, np.float32)
-    me.vertices.foreach_get("co", co)
+    co = result_points(res)["position"]  # the frame's particles (world positions)
     m = np.array(res.matrix_world)
-    x = co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]
+    x = co @ m[:3, :3].T + m[:3, 3]
     top = cube.matrix_world.translation.z + 1.0
     assert abs(cube.matrix_world.translation.z - 1.0) < 0.01  # the cube rests on the plane
     over = (np.abs(x[:, 0]) < 0.95) & (np.abs(x[:, 1]) < 0.95)

@@ -17,6 +17,8 @@ import bpy
 import numpy as np
 import pytest
 
+from physanim.tests.blender.probes import LabelRecorder
+
 FRAME_START, FRAME_END = 2, 9
 SHOWN_FRAMES = (FRAME_START, 5, FRAME_END)
 
@@ -391,19 +393,6 @@ def _wire(bm):
         bm.edges.new((a, b))
 
 
-class _Layout:
-    """Records what a panel's draw() puts on the screen (labels), accepting any other call."""
-
-    def __init__(self, labels: list):
-        self.labels = labels
-
-    def label(self, text: str = "", **_kw):
-        self.labels.append(text)
-
-    def __getattr__(self, name):
-        return lambda *args, **kw: _Layout(self.labels)
-
-
 @pytest.mark.parametrize("bend_mode", ["ANGULAR", "DISTANCE"])
 def test_mesh_without_faces_bakes_edge_springs_only(physanim_ext, tmp_path, bend_mode):
     bake = _module(physanim_ext, "addon.bake")
@@ -434,9 +423,9 @@ def test_mesh_without_faces_bakes_edge_springs_only(physanim_ext, tmp_path, bend
     # the panel says why shear and bending do nothing here (and not for a mesh with faces)
     labels: list[str] = []
     context = type("Context", (), {"object": ob})()
-    panels.PHYSANIM_PT_spring_mesh.draw(type("Panel", (), {"layout": _Layout(labels)})(), context)
+    panels.PHYSANIM_PT_spring_mesh.draw(type("Panel", (), {"layout": LabelRecorder(labels)})(), context)
     assert any("No faces" in t and "only edge springs" in t for t in labels), labels
     labels.clear()
     context.object = _cloth("Sheet")
-    panels.PHYSANIM_PT_spring_mesh.draw(type("Panel", (), {"layout": _Layout(labels)})(), context)
+    panels.PHYSANIM_PT_spring_mesh.draw(type("Panel", (), {"layout": LabelRecorder(labels)})(), context)
     assert not any("No faces" in t for t in labels), labels
