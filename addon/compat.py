@@ -19,8 +19,9 @@ Differences handled:
   generic. ``attributes.new`` returns None (and prints a warning) instead of raising when a
   layer cannot be created, on all three.
 * **Node sockets** — the shader Attribute node's factor output is ``Fac`` in 4.x and ``Factor``
-  in 5.0 (PhysAnim only uses ``Color`` and ``Alpha``, identical everywhere). The geometry node
-  group ``interface`` API and all geometry node/socket names PhysAnim uses are identical.
+  in 5.0 (:func:`attribute_factor`). Points to Volume's resolution mode is a node property in
+  4.x and a menu input socket in 5.0 (:func:`volume_resolution_by_size`). The geometry node
+  group ``interface`` API and the other node/socket names PhysAnim uses are identical.
 * **Evaluated instances** — ``Object.evaluated_geometry()`` (a ``GeometrySet`` with the
   instances' attributes) exists from 4.5 on (not in 4.2); :data:`HAS_GEOMETRY_SET`. On 4.5 each
   call leaves one 15-byte block that the exit leak checker reports ("Not freed memory blocks:
@@ -239,6 +240,21 @@ def set_material_alpha(material: bpy.types.Material) -> None:
     """
     material.surface_render_method = 'DITHERED'
     material.use_transparent_shadow = True
+
+
+def attribute_factor(node: bpy.types.Node) -> bpy.types.NodeSocket:
+    """The shader Attribute node's scalar output: ``Fac`` in 4.x, ``Factor`` in 5.0."""
+    return node.outputs["Fac"] if "Fac" in node.outputs else node.outputs["Factor"]
+
+
+def volume_resolution_by_size(node: bpy.types.Node) -> None:
+    """Make a Points to Volume node take its Voxel Size input: a node property
+    (``resolution_mode = 'VOXEL_SIZE'``) in 4.2 and 4.5, a menu input socket (``'Size'``) in 5.0.
+    """
+    if hasattr(node, "resolution_mode"):
+        node.resolution_mode = 'VOXEL_SIZE'
+    else:
+        node.inputs["Resolution Mode"].default_value = 'Size'
 
 
 #: ``options`` for path properties that may hold '//'-relative paths. 4.5 added

@@ -34,7 +34,7 @@ INSTANCE_INPUT = "Instance"
 #: asked for (Blender appends ".001" when a user's data block already has that name). A node
 #: group or material with an older version is rebuilt; one without the tag (a user's) is never
 #: touched.
-_TAG = "physanim_builder"
+_TAG = BUILT_TAG = "physanim_builder"
 _NAME_TAG = "physanim_name"
 _GROUP_VERSION = 1
 _MATERIAL_VERSION = 1
@@ -61,7 +61,15 @@ def ensure_instancer(result_obj: bpy.types.Object, instance_obj: bpy.types.Objec
     Returns:
         The Geometry Nodes modifier.
     """
-    group = _ensure_group(name)
+    group = ensure_group(name, _build_group, _GROUP_VERSION)
+    return ensure_modifier(result_obj, group,
+                           {INSTANCE_INPUT: instance_obj or default_particle_object()})
+
+
+def ensure_modifier(result_obj: bpy.types.Object, group: bpy.types.NodeTree,
+                    inputs: dict) -> bpy.types.NodesModifier:
+    """The render modifier ``physanim_instances`` of a result, using ``group`` with ``inputs``
+    (input name -> value); a modifier of that name of another type is replaced."""
     modifier = result_obj.modifiers.get(MODIFIER_NAME)
     if modifier is not None and modifier.type != 'NODES':
         result_obj.modifiers.remove(modifier)
@@ -70,14 +78,14 @@ def ensure_instancer(result_obj: bpy.types.Object, instance_obj: bpy.types.Objec
         modifier = result_obj.modifiers.new(MODIFIER_NAME, 'NODES')
     if modifier.node_group != group:
         modifier.node_group = group
-    if instance_obj is None:
-        instance_obj = default_particle_object()
-    socket = next(s for s in compat.interface_sockets(group, 'INPUT') if s.name == INSTANCE_INPUT)
-    compat.set_modifier_input(modifier, socket, instance_obj)
+    sockets = {s.name: s for s in compat.interface_sockets(group, 'INPUT')}
+    for input_name, value in inputs.items():
+        compat.set_modifier_input(modifier, sockets[input_name], value)
     return modifier
 
 
-def default_particle_object(name: str = DEFAULT_OBJECT_NAME) -> bpy.types.Object:
+def default_particle_object(name: str = DEFAULT_OBJECT_NAME,
+                            material=None) -> bpy.types.Object:
     """The default particle shape: an icosphere of radius 1 [m] with the particle material.
 
     With radius 1, the instance scale equals the particle ``size`` and gives a sphere of that
@@ -88,13 +96,15 @@ def default_particle_object(name: str = DEFAULT_OBJECT_NAME) -> bpy.types.Object
 
     Args:
         name: object (and mesh) name.
+        material: called for the sphere's material (default :func:`particle_material`).
     """
+    material = material or particle_material
     obj = bpy.data.objects.get(name)
     if not _usable_shape(obj):
         obj = _find_built(bpy.data.objects, name)
     if _usable_shape(obj):
         if obj.data.library is None and not obj.data.materials:
-            obj.data.materials.append(particle_material())
+            obj.data.materials.append(material())
         return obj
     mesh = bpy.data.meshes.new(name)
     sphere = bmesh.new()
@@ -104,7 +114,7 @@ def default_particle_object(name: str = DEFAULT_OBJECT_NAME) -> bpy.types.Object
     finally:
         sphere.free()
     mesh.shade_smooth()
-    mesh.materials.append(particle_material())
+    mesh.materials.append(material())
     obj = bpy.data.objects.new(name, mesh)
     _tag(mesh, name, _SHAPE_VERSION)
     _tag(obj, name, _SHAPE_VERSION)
@@ -169,17 +179,28 @@ def remove_unused() -> int:
     return removed
 
 
-def _ensure_group(name: str) -> bpy.types.NodeTree:
-    """The instancing node group ``name``: reused, rebuilt when outdated, or created."""
+def ensure_group(name: str, build, version: int) -> bpy.types.NodeTree:
+    """The node group ``name`` that ``build(group)`` makes: reused, rebuilt when built by
+    another ``version``, or created."""
     group = _find_built(bpy.data.node_groups, name)
     if group is None or group.bl_idname != 'GeometryNodeTree':
         group = bpy.data.node_groups.new(name, 'GeometryNodeTree')
-        _build_group(group)
-        _tag(group, name, _GROUP_VERSION)
-    elif group.get(_TAG) != _GROUP_VERSION:
-        _build_group(group)
-        _tag(group, name, _GROUP_VERSION)
+        build(group)
+        _tag(group, name, version)
+    elif group.get(_TAG) != version:
+        build(group)
+        _tag(group, name, version)
     return group
+
+
+def find_built(collection, name: str):
+    """The local data block PhysAnim built when asked for ``name`` (see :func:`tag`)."""
+    return _find_built(collection, name)
+
+
+def tag(item, name: str, version: int) -> None:
+    """Mark ``item`` as PhysAnim's, built for ``name`` with layout ``version``."""
+    _tag(item, name, version)
 
 
 def _find_built(collection: bpy.types.bpy_prop_collection, name: str) -> bpy.types.ID | None:
@@ -199,7 +220,7 @@ def _usable_shape(obj: bpy.types.Object | None) -> bool:
     return obj is not None and obj.library is None and obj.type == 'MESH'
 
 
-def _named_attribute(group: bpy.types.NodeTree, name: str, data_type: str,
+def named_attribute(group: bpy.types.NodeTree, name: str, data_type: str,
                      location: tuple[float, float]) -> bpy.types.Node:
     node = group.nodes.new('GeometryNodeInputNamedAttribute')
     node.data_type = data_type  # set enums by name: their order differs between versions
@@ -216,39 +237,32 @@ def _switch(group: bpy.types.NodeTree, input_type: str,
     return node
 
 
-def _build_group(group: bpy.types.NodeTree) -> None:
-    """(Re)build the instancing node tree and interface in place (see the module docstring)."""
+def new_group_interface(group: bpy.types.NodeTree, inputs: list[tuple[str, str]]) -> None:
+    """Clear ``group`` and give it Geometry in/out plus ``inputs`` ((name, socket type))."""
     group.nodes.clear()
     group.interface.clear()
     compat.new_interface_socket(group, "Geometry", 'INPUT', 'NodeSocketGeometry')
-    compat.new_interface_socket(group, INSTANCE_INPUT, 'INPUT', 'NodeSocketObject')
+    for name, socket_type in inputs:
+        compat.new_interface_socket(group, name, 'INPUT', socket_type)
     compat.new_interface_socket(group, "Geometry", 'OUTPUT', 'NodeSocketGeometry')
     group.is_modifier = True
+
+
+def instance_on_points(group: bpy.types.NodeTree, points, instance, x: float = 0.0):
+    """Instance on Points of ``instance`` (a geometry socket) on ``points``, scaled by the
+    points' ``instance_scale``, else ``size``, else 1, and turned by ``instance_rotation``.
+    Returns the node."""
     nodes, links = group.nodes, group.links
-
-    group_in = nodes.new('NodeGroupInput')
-    group_in.location = (-800, 0)
-    info = nodes.new('GeometryNodeObjectInfo')
-    info.transform_space = 'ORIGINAL'
-    info.inputs["As Instance"].default_value = False
-    info.location = (-500, -100)
-
-    # Scale: "instance_scale" when the points have it, else uniform "size", else 1.
-    scale = _named_attribute(group, "instance_scale", 'FLOAT_VECTOR', (-800, -300))
-    size = _named_attribute(group, "size", 'FLOAT', (-800, -450))
-    size_or_one = _switch(group, 'FLOAT', (-500, -450))
+    scale = named_attribute(group, "instance_scale", 'FLOAT_VECTOR', (x - 800, -300))
+    size = named_attribute(group, "size", 'FLOAT', (x - 800, -450))
+    size_or_one = _switch(group, 'FLOAT', (x - 500, -450))
     size_or_one.inputs["False"].default_value = 1.0
-    scale_or_size = _switch(group, 'VECTOR', (-300, -350))
-    rotation = _named_attribute(group, "instance_rotation", 'FLOAT_VECTOR', (-500, -600))
-
+    scale_or_size = _switch(group, 'VECTOR', (x - 300, -350))
+    rotation = named_attribute(group, "instance_rotation", 'FLOAT_VECTOR', (x - 500, -600))
     on_points = nodes.new('GeometryNodeInstanceOnPoints')
-    on_points.location = (0, 0)
-    group_out = nodes.new('NodeGroupOutput')
-    group_out.location = (250, 0)
-
-    links.new(group_in.outputs["Geometry"], on_points.inputs["Points"])
-    links.new(group_in.outputs[INSTANCE_INPUT], info.inputs["Object"])
-    links.new(info.outputs["Geometry"], on_points.inputs["Instance"])
+    on_points.location = (x, 0)
+    links.new(points, on_points.inputs["Points"])
+    links.new(instance, on_points.inputs["Instance"])
     links.new(size.outputs["Exists"], size_or_one.inputs["Switch"])
     links.new(size.outputs["Attribute"], size_or_one.inputs["True"])
     links.new(scale.outputs["Exists"], scale_or_size.inputs["Switch"])
@@ -256,4 +270,27 @@ def _build_group(group: bpy.types.NodeTree) -> None:
     links.new(scale.outputs["Attribute"], scale_or_size.inputs["True"])
     links.new(scale_or_size.outputs["Output"], on_points.inputs["Scale"])
     links.new(rotation.outputs["Attribute"], on_points.inputs["Rotation"])  # Euler -> rotation
-    links.new(on_points.outputs["Instances"], group_out.inputs["Geometry"])
+    return on_points
+
+
+def object_geometry(group: bpy.types.NodeTree, object_socket, location):
+    """The geometry of the object at ``object_socket``, in its own space (see the module
+    docstring). Returns the Geometry output."""
+    info = group.nodes.new('GeometryNodeObjectInfo')
+    info.transform_space = 'ORIGINAL'
+    info.inputs["As Instance"].default_value = False
+    info.location = location
+    group.links.new(object_socket, info.inputs["Object"])
+    return info.outputs["Geometry"]
+
+
+def _build_group(group: bpy.types.NodeTree) -> None:
+    """(Re)build the instancing node tree and interface in place (see the module docstring)."""
+    new_group_interface(group, [(INSTANCE_INPUT, 'NodeSocketObject')])
+    group_in = group.nodes.new('NodeGroupInput')
+    group_in.location = (-800, 0)
+    instance = object_geometry(group, group_in.outputs[INSTANCE_INPUT], (-500, -100))
+    on_points = instance_on_points(group, group_in.outputs["Geometry"], instance)
+    group_out = group.nodes.new('NodeGroupOutput')
+    group_out.location = (250, 0)
+    group.links.new(on_points.outputs["Instances"], group_out.inputs["Geometry"])

@@ -141,8 +141,21 @@ class PHYSANIM_PT_emitter_look(_PhysicsPanel, bpy.types.Panel):
                 'OBJECTS': ("Keyframed objects: no PhysAnim needed to play", 'CHECKMARK')}
         text, icon = note[p.output]
         layout.label(text=text, icon=icon)
-        layout.prop(p, "instance_object")
-        layout.prop(p, "stretch")
+        layout.prop(p, "render_as")
+        mode = p.render_as
+        if mode in ('OBJECT', 'STREAKS'):
+            layout.prop(p, "instance_object")
+        if mode == 'GLOW':
+            layout.prop(p, "glow_strength")
+        elif mode == 'STREAKS':
+            layout.prop(p, "streak_time")
+        elif mode == 'BILLBOARD':
+            layout.template_ID(p, "sprite", open="image.open")
+        elif mode == 'BLOBS':
+            layout.prop(p, "blob_size")
+            layout.prop(p, "blob_resolution")
+        if mode == 'OBJECT':
+            layout.prop(p, "stretch")
         if p.result is not None:
             layout.prop(p, "result")
         for curve, stops, field in (('COLOR', p.color_stops, "color"), ('SIZE', p.size_stops, "value")):

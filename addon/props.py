@@ -14,7 +14,9 @@ from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProp
 
 from ..core.bounds import DEFAULT_POSITION, DEFAULT_SPEED
 from ..core.integrators import INTEGRATORS
+from . import render_modes
 from .compat import BLEND_RELATIVE_PATH_OPTIONS
+from .render_modes import RENDER_ITEMS
 
 # Read once per bake (topology, seeds, shapes of curves, solver settings): not keyframable, so
 # no one keys them expecting an effect. Everything else is sampled per frame by the extract step.
@@ -81,6 +83,13 @@ class PHYSANIM_PG_stop(bpy.types.PropertyGroup):
                                description="Color and alpha (alpha 0 = fully transparent)", options=STATIC)
     value: FloatProperty(name="Size", min=0.0, max=1.0e3, soft_max=2.0, default=1.0,
                          description="Size factor", options=STATIC)
+
+
+def _on_render_changed(self, context):
+    """A render setting changed: set up the baked result (if any) again, at once."""
+    res = self.result
+    if res is not None and res.name in bpy.data.objects and res.physanim.result.cache:
+        render_modes.apply(res, self)
 
 
 def _on_emitter_enabled(self, context):
@@ -158,7 +167,31 @@ class PHYSANIM_PG_emitter(bpy.types.PropertyGroup):
                          options=STATIC)
     instance_object: PointerProperty(name="Instance", type=bpy.types.Object,
                                      description="Object drawn at each particle (default: a "
-                                                 "sphere that shows the particle colors)")
+                                                 "sphere that shows the particle colors)",
+                                     update=_on_render_changed)
+    # How the result renders: applied to a baked result at once, no re-bake (render_modes.py).
+    render_as: EnumProperty(name="Render As", items=RENDER_ITEMS, default='OBJECT',
+                            options=STATIC, update=_on_render_changed)
+    sprite: PointerProperty(name="Sprite", type=bpy.types.Image, update=_on_render_changed,
+                            description="Image on each billboard, tinted by the particle colour "
+                                        "(default: a soft round dot)")
+    glow_strength: FloatProperty(name="Glow Strength", min=0.0, max=1.0e4, soft_max=50.0,
+                                 default=5.0, options=STATIC, update=_on_render_changed,
+                                 description="Light emitted by each glowing point (W/m², "
+                                             "times its colour's alpha)")
+    streak_time: FloatProperty(name="Streak Time", min=0.0, max=10.0, soft_max=0.2,
+                               default=0.04, unit='TIME_ABSOLUTE', options=STATIC,
+                               update=_on_render_changed,
+                               description="Each streak covers the path its particle travels "
+                                           "in this time, s")
+    blob_size: FloatProperty(name="Blob Size", min=0.01, max=100.0, soft_max=5.0, default=2.0,
+                             options=STATIC, update=_on_render_changed,
+                             description="Radius of each particle's blob, in particle sizes: "
+                                         "blobs that overlap merge into one surface")
+    blob_resolution: FloatProperty(name="Blob Resolution", min=1.0, max=64.0, default=6.0,
+                                   options=STATIC, update=_on_render_changed,
+                                   description="Voxels across one blob's radius: higher is "
+                                               "smoother and slower")
     result: PointerProperty(name="Result", type=bpy.types.Object,
                             description="Points object made by the bake")
 

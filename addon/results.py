@@ -16,7 +16,7 @@ from bpy.app.handlers import persistent
 from ..core import usd_points
 from ..core.cache import read_frame
 from ..core.errors import PhysanimError
-from . import compat, instancing, native_points, points
+from . import compat, instancing, native_points, points, render_modes
 
 MAX_KEYED_OBJECTS = 20_000  # the Objects output makes one Blender object per particle
 EMPTY = {"position": np.zeros((0, 3), np.float32)}
@@ -89,7 +89,7 @@ def attach(context, scene, emitter_ob, cache_rel: str, frame_start: int, frame_e
     instance = p.instance_object or instancing.default_particle_object()
     if native:
         _attach_usd(res, cache_rel, frame_start, frame_end)
-    instancing.ensure_instancer(res, instance)
+    render_modes.apply(res, p)
     keyed = keyed_collection(scene, emitter_ob, create=False)
     if p.output == 'OBJECTS':
         write_keyed_objects(scene, emitter_ob, cache_rel, frame_start, frame_end, instance)
