@@ -20,6 +20,7 @@ README_FRAME = 100
 def build(scene) -> None:
     _common.stage(scene, (0.0, -75.0, 14.0), (0.0, 0.0, 20.0), frame_end=150)
     scene.world.color = (0.005, 0.005, 0.015)
+    scene.cycles.transparent_max_bounces = 128  # every glow a ray passes is one bounce
     _common.ground(scene, size=60.0, color=(0.05, 0.05, 0.06))
     launcher = bpy.data.objects.new("Rockets", None)
     scene.collection.objects.link(launcher)
@@ -36,7 +37,7 @@ def build(scene) -> None:
     r.seed = 3
     r.color_stops[0].color = (1.0, 0.8, 0.4, 1.0)
     r.color_stops[1].color = (1.0, 0.5, 0.1, 1.0)
-    r.stretch = 0.08
+    r.render_as, r.streak_time = 'STREAKS', 0.12  # trails behind the rising rockets
     sparks = bpy.data.objects.new("Sparks", None)
     scene.collection.objects.link(sparks)
     s = sparks.physanim.emitter
@@ -48,7 +49,7 @@ def build(scene) -> None:
     s.lifetime, s.lifetime_random = 45.0, 12.0
     s.size, s.size_random = 0.12, 0.04
     s.mass = 0.05
-    s.stretch = 0.05
+    s.render_as, s.glow_strength = 'GLOW', 25.0  # sparks: light without a body, adding up
     s.seed = 7
     s.color_stops.clear()
     for pos, col in ((0.0, (1.0, 1.0, 0.9, 1.0)), (0.15, (1.0, 0.3, 0.6, 1.0)),

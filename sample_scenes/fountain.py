@@ -39,6 +39,7 @@ def build(scene) -> None:
     p.color_stops[0].color = (0.75, 0.9, 1.0, 1.0)
     p.color_stops[1].color = (0.05, 0.3, 0.9, 0.0)
     p.size_stops[1].value = 0.6
+    p.render_as = 'BILLBOARD'  # soft round drops of spray, facing the camera
     col = scene.objects["Ground"].physanim.collider
     col.restitution, col.friction = 0.45, 0.3
     drag = bpy.data.objects.new("Air", None)

@@ -55,6 +55,7 @@ def build(scene) -> None:
     p.size = 0.04
     p.color_stops[0].color = (0.9, 0.95, 1.0, 1.0)
     p.color_stops[1].color = (0.3, 0.6, 1.0, 1.0)
+    p.render_as, p.blob_size, p.blob_resolution = 'BLOBS', 1.8, 4.0  # a liquid's surface
     scene.physanim.substeps = 3
 
 
