@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import extract, inputs_hash, native_points, props
+from . import extract, native_points, props
 
 # larger meshes show their Automatic collider shape only when baking (the panel redraws often)
 AUTO_SHAPE_PREVIEW_LIMIT = 100_000
@@ -12,28 +12,10 @@ AUTO_SHAPE_PREVIEW_LIMIT = 100_000
 
 def bake_status(scene) -> tuple[str, str]:
     """(text, icon) telling whether each emitter's and spring mesh's bake matches the scene."""
-    from . import springs
+    from . import farm
 
     try:
-        roles = extract.gather(scene)
-        missing, outdated = [], []
-        for ob in roles.emitters:
-            res = ob.physanim.emitter.result
-            if res is None or not res.physanim.result.cache:
-                missing.append(ob.name)
-            elif res.physanim.result.hash != inputs_hash.emitter_hash(scene, ob, roles):
-                outdated.append(ob.name)
-        for ob in roles.spring_meshes:
-            if springs.cache_modifier(ob) is None:
-                missing.append(ob.name)
-            elif ob.physanim.spring_mesh.bake_hash != inputs_hash.inputs_hash(
-                    scene, ob, "spring_mesh", roles):
-                outdated.append(ob.name)
-        if roles.rigid_bodies:
-            current = inputs_hash.rigid_hash(scene, roles.rigid_bodies, roles)
-            for ob in roles.rigid_bodies:
-                baked = ob.physanim.rigid_body.bake_hash
-                (missing if not baked else outdated if baked != current else []).append(ob.name)
+        roles, missing, outdated = farm.bake_state(scene)
     except Exception as exc:  # a panel must draw whatever the scene holds
         return f"Cannot check bake: {exc}", 'ERROR'
     if outdated:

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Create (when missing) and print the path of a venv holding the pinned `bpy` wheel (or, for
 # "lint", the pinned ruff).
-# Usage: tools/venv.sh [4.5|4.2|5.0|lint]   (default 4.5, the primary LTS)
+# Usage: tools/venv.sh [4.5|4.2|5.0|lint|farm]   (default 4.5, the primary LTS; "farm" holds the
+# Open Job Description tools the farm tests validate and run the job templates with)
 # Venvs live under $PHYSANIM_VENVS (default ~/.cache/physanim/venvs) so CI and repeated runs reuse them.
 set -euo pipefail
 ver="${1:-4.5}"
@@ -10,10 +11,14 @@ case "$ver" in
   4.5) pins="bpy==4.5.4" ;;
   5.0) pins="bpy==5.0.1" ;;
   lint) pins="ruff==0.17.6" ;;
-  *) echo "tools/venv.sh: unknown Blender version '$ver' (use 4.2, 4.5, 5.0 or lint)" >&2; exit 2 ;;
+  farm) pins="openjd-cli==0.8.0 openjd-model==0.13.0 openjd-sessions==0.13.0" ;;
+  *) echo "tools/venv.sh: unknown Blender version '$ver' (use 4.2, 4.5, 5.0, lint or farm)" >&2; exit 2 ;;
 esac
 root="${PHYSANIM_VENVS:-$HOME/.cache/physanim/venvs}"
-if [ "$ver" = lint ]; then venv="$root/lint"; want="$pins"; else venv="$root/bpy-$ver"; want="$pins pytest==8.3.3"; fi
+case "$ver" in
+  lint|farm) venv="$root/$ver"; want="$pins" ;;
+  *) venv="$root/bpy-$ver"; want="$pins pytest==8.3.3" ;;
+esac
 stamp="$venv/.physanim-ready"
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   py="${PYTHON:-python3.11}"
@@ -24,7 +29,7 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   "$venv/bin/python" -m pip install --quiet $want >&2
   echo "$want" > "$stamp"
 fi
-if [ "$ver" = lint ]; then echo "$venv"; exit 0; fi
+if [ "$ver" = lint ] || [ "$ver" = farm ]; then echo "$venv"; exit 0; fi
 # The bpy wheel links against X11/GL/EGL system libraries; a bare machine may lack them.
 if ! "$venv/bin/python" -c "import bpy" >/dev/null 2>&1; then
   libs="libx11-6 libxrender1 libxi6 libxxf86vm1 libxfixes3 libxkbcommon0 libsm6 libice6 libgl1

@@ -19,6 +19,8 @@ def test_package_leaves_out_tests_and_sample_scenes(physanim_ext):
     root = os.path.dirname(physanim_ext.__file__)
     names = set(os.listdir(root))
     assert {"blender_manifest.toml", "core", "addon", "__init__.py"} <= names
+    farm = set(os.listdir(os.path.join(root, "farm", "openjd")))
+    assert {"physanim_shot.yaml", "physanim_wedge.yaml"} <= farm  # the farm job templates ship
     assert not names & {"tests", "sample_scenes", "tools", ".ci", "pytest.ini"}
 
 
