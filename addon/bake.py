@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import contextlib
 import os
+import pickle
+import re
 import time
 
 import bpy
@@ -25,9 +27,18 @@ import bpy
 from ..core.contact import ColliderPaths
 from ..core.errors import PhysanimError
 from ..core.world import World
-from . import budget, convert, extract, inputs_hash, limits, rigid, rigid_keys, springs
+from . import budget, convert, extract, inputs_hash, limits, native_points, rigid, rigid_keys
+from . import resume as checkpoint
+from . import springs
 from .cache_paths import relative_path
 from .particles_bake import STREAM, ParticleBake
+
+#: What each system's bake wrapper carries from frame to frame, saved in a checkpoint (the core
+#: objects among them are shared with the world and pickled together with it).
+_RESUMED = {"particles": ("model", "solver", "system", "births", "first_frame"),
+            "mesh": ("model", "solver", "state", "system", "sample"),
+            "rigid": ("model", "solver", "system", "kinematic", "simulated", "_last",
+                      "joint_values")}
 
 
 class BakeJob:
@@ -35,13 +46,25 @@ class BakeJob:
 
     Args:
         context: Blender context. only: names of emitters and spring meshes to bake (None: all).
+        resume: go on from the scene's checkpoint (:mod:`.resume`): a cut-off bake continues
+            where it stopped, a finished one is extended to the scene's frame end.
+        checkpoint_every: seconds of baking between checkpoints (0: every frame; None:
+            :func:`.resume.interval`).
     """
 
-    def __init__(self, context, only: set[str] | None = None):
+    def __init__(self, context, only: set[str] | None = None, resume: bool = False,
+                 checkpoint_every: float | None = None):
         self.scene = context.scene
+        self.checkpoints = checkpoint.Checkpoints(checkpoint_every)
+        self._resume_from = self._resume_data(only) if resume else None
+        if self._resume_from is not None:
+            only = self._resume_from["only"]
+        self._owns_checkpoint = False  # replaced the scene's checkpoint with one of this bake
+        self._keep_partial = False  # suspended: the partial folders stay for a resume
         self.view_layer = context.view_layer
         self.settings = self.scene.physanim
         self.original_frame = self.scene.frame_current
+        self._only = only
         self.roles = self._roles(only)
         limits.check_scene(self.scene, self.frame_start, self.frame_end)
         budget.check_budget(self.scene, self.roles)
@@ -65,9 +88,132 @@ class BakeJob:
         self.rigid_suspended = {ob.name: rigid_keys.suspend(ob) for ob in self.roles.rigid_bodies}
         try:
             self._prepare(context)
+            if self._resume_from is not None:
+                self._restore(self._resume_from)
         except BaseException:
             self.abort()
             raise
+
+    # -- resuming -------------------------------------------------------------------------------
+    def _resume_data(self, only):
+        """The scene's checkpoint, checked against the scene; raises when there is none to
+        resume or the scene changed."""
+        scene = self.scene
+        data = checkpoint.load(scene)
+        if data is None:
+            raise PhysanimError("nothing to resume: no bake of this scene was cut off or "
+                                "finished with a checkpoint — bake from the start",
+                                obj=scene.name, kind="scene")
+        settings = scene.physanim
+        end = settings.frame_end
+        try:  # the hashes include the frame range: compare at the checkpoint's own
+            settings.frame_end = data["frame_end"]
+            hashes = self._hash_record(extract.gather(scene, data["only"]))
+        finally:
+            settings.frame_end = end
+        checkpoint.check(scene, data, hashes)
+        return data
+
+    def _hash_record(self, roles, all_roles=None) -> dict[str, str]:
+        """Every system's inputs hash, keyed as :meth:`partial_folders` keys its folder."""
+        all_roles = all_roles or extract.gather(self.scene)
+        record = {f"emitter {ob.name}": inputs_hash.emitter_hash(self.scene, ob, all_roles)
+                  for ob in roles.emitters}
+        record.update({f"spring_mesh {ob.name}": inputs_hash.inputs_hash(
+            self.scene, ob, "spring_mesh", all_roles) for ob in roles.spring_meshes})
+        if roles.rigid_bodies:
+            record["rigid_bodies"] = inputs_hash.rigid_hash(self.scene, roles.rigid_bodies,
+                                                            all_roles)
+        return record
+
+    def hash_record(self) -> dict[str, str]:
+        """The inputs hash of each system still baking."""
+        record = {f"emitter {ob.name}": self.hashes[ob.name]
+                  for ob in (self.particles.emitters if self.particles is not None else [])}
+        record.update({f"spring_mesh {m.ob.name}": self.mesh_hashes[m.ob.name]
+                       for m in self.meshes})
+        if self.rigid is not None:
+            record["rigid_bodies"] = self.rigid_hash
+        return record
+
+    def partial_folders(self) -> dict[str, str]:
+        """The folder each system's frames are being written to."""
+        out = {}
+        if self.particles is not None:
+            out.update({f"emitter {name}": str(w.partial_dir)
+                        for name, w in self.particles.writers.items()})
+        out.update({f"spring_mesh {m.ob.name}": str(m.writer.partial_dir) for m in self.meshes})
+        if self.rigid is not None:
+            out["rigid_bodies"] = str(self.rigid.writer.partial_dir)
+        return out
+
+    def checkpoint_state(self) -> bytes:
+        """Everything the bake carries to the next frame, pickled in one piece (shared objects
+        stay shared)."""
+        state = {"world": self.world, "sample": self.sample, "colliders": self.colliders,
+                 "stats": self.stats, "only": self._only,
+                 "particles": self._fields(self.particles, "particles"),
+                 "meshes": {m.ob.name: self._fields(m, "mesh") for m in self.meshes},
+                 "rigid": self._fields(self.rigid, "rigid")}
+        return pickle.dumps(state, protocol=pickle.HIGHEST_PROTOCOL)
+
+    @staticmethod
+    def _fields(wrapper, kind: str) -> dict | None:
+        if wrapper is None:
+            return None
+        return {name: getattr(wrapper, name) for name in _RESUMED[kind]}
+
+    def _save_checkpoint(self, finished: bool = False, folders=None, state=None) -> None:
+        if not self._owns_checkpoint and self._resume_from is None:
+            checkpoint.discard(self.scene)  # an earlier cut-off bake's partial folders go
+        self.checkpoints.save(self, finished, folders, state)
+        if not self._owns_checkpoint and self._resume_from is not None:
+            # the new checkpoint holds the frames resumed from (linked): their folders go
+            checkpoint.release(self._resume_from)
+        self._owns_checkpoint = True
+
+    def _restore(self, data: dict) -> None:
+        """Continue from ``data``: the frames up to its checkpoint linked from its folders into
+        this bake's, every system's state loaded from it."""
+        frame = data["frame"]
+        samples = frame - self.frame_start + 1
+        state = checkpoint.state_of(data)
+        folders = self.partial_folders()
+        missing = sorted(set(data["folders"]) - set(folders))
+        if missing:
+            raise PhysanimError(f"cannot resume: {', '.join(missing)} did not bake again (see "
+                                "the report) — bake from the start", obj=self.scene.name,
+                                kind="scene")
+        last_file = native_points.file_number(frame, self.frame_start)
+
+        def baked(rel: str) -> bool:  # a frame file up to the checkpoint (the PC2 is cut apart)
+            usd = rel.startswith(native_points.STREAM + os.sep)
+            return not rel.endswith(".pc2") and _numbered_within(rel, last_file if usd else frame)
+
+        for key, source in data["folders"].items():
+            if not os.path.isdir(source):
+                raise PhysanimError(f'cannot resume: the frames of {key} are gone ("{source}") '
+                                    "— bake from the start", obj=self.scene.name, kind="scene")
+            checkpoint.link_frames(source, folders[key], baked)
+        for mesh in self.meshes:
+            source = os.path.join(data["folders"][f"spring_mesh {mesh.ob.name}"],
+                                  springs.CACHE_FILE)
+            mesh.pc2.close()
+            mesh.pc2 = checkpoint.cut_pc2(source, mesh.pc2.path, samples)
+        self.world, self.sample, self.colliders = (state["world"], state["sample"],
+                                                   state["colliders"])
+        self.stats.update(state["stats"])
+        for wrapper, fields in ((self.particles, state["particles"]),
+                                (self.rigid, state["rigid"]),
+                                *((m, state["meshes"][m.ob.name]) for m in self.meshes)):
+            for name, value in (fields or {}).items():
+                setattr(wrapper, name, value)
+        if self.particles is not None:
+            self.particles.stats = self.stats
+        for mesh in self.meshes:
+            mesh.colliders = self.colliders
+        self.frame = frame
+        self.scene.frame_set(frame)
 
     # -- set-up ---------------------------------------------------------------------------------
     def _roles(self, only: set[str] | None) -> extract.Roles:
@@ -227,6 +373,8 @@ class BakeJob:
         self._write(report, mesh_samples, nxt)
         self.sample = sample
         self.frame = nxt
+        if self.frame < self.frame_end and self.checkpoints.due():
+            self._save_checkpoint()
         return self.frame >= self.frame_end
 
     def _interval(self, frame: int, start):
@@ -291,6 +439,8 @@ class BakeJob:
 
         meta = {"frame_start": self.frame_start, "frame_end": self.frame_end,
                 "fps": convert.fps(self.scene), "kind": "particles"}
+        final_state = self.checkpoint_state()  # the last frame's, for a later extension
+        final_record = self.hash_record()
         self.colliders.release()
         for mesh in self.meshes:  # every frame on disk before any bake is swapped in
             mesh.close()
@@ -315,6 +465,12 @@ class BakeJob:
                 ob.physanim.rigid_body.bake_hash = self.rigid_hash
             self.breaks = self.rigid.record_breaks()
             self.rigid_suspended.clear()
+        folders = {f"emitter {name}": str(path) for name, path in paths.items()}
+        folders.update({f"spring_mesh {name}": str(path) for name, path in mesh_paths.items()})
+        if rigid_path is not None:
+            folders["rigid_bodies"] = str(rigid_path)
+        if set(folders) == set(final_record):
+            self._save_checkpoint(finished=True, folders=folders, state=final_state)
         for ob in emitters:
             results.attach(context, self.scene, ob,
                            relative_path(os.path.join(paths[ob.name], STREAM)),
@@ -361,34 +517,57 @@ class BakeJob:
         return (f"{failed} — not baked (previous bake kept): {names}; the rest baked "
                 f"({info.removeprefix('baked ')})")
 
+    def suspend(self) -> None:
+        """Cancelled (Esc, Ctrl+C): keep the frames baked so far and a checkpoint, so Resume
+        can go on; restore the scene as :meth:`abort` does. The previous bake is untouched."""
+        try:
+            for mesh in self.meshes:
+                mesh.writer.flush()
+            if self.particles is not None:
+                self.particles.flush()
+            if self.rigid is not None:
+                self.rigid.flush()
+            self._save_checkpoint()
+        except (OSError, pickle.PicklingError, PhysanimError):
+            self.abort()
+            raise
+        self._keep_partial = True
+        self.abort()
+
     def abort(self) -> None:
         """Delete partial caches and restore the frame; the previous bake is untouched."""
         from . import results
 
+        keep = self._keep_partial
+        if self._owns_checkpoint and not keep:
+            checkpoint.discard(self.scene)  # it named this bake's partial folders
         self.colliders.release()
         for mesh in self.meshes:
-            mesh.abort()
+            mesh.detach() if keep else mesh.abort()
         if self.particles is not None:
-            self.particles.abort()
+            self.particles.detach() if keep else self.particles.abort()
         for ob in self.roles.spring_meshes:
             springs.restore_modifier(ob, self.suspended.get(ob.name))
         self.suspended.clear()
         if self.rigid is not None:
-            self.rigid.abort()
+            self.rigid.detach() if keep else self.rigid.abort()
         self._restore_rigid()
         results.resume_refresh(self.scene)
         if self.scene.frame_current != self.original_frame:
             self.scene.frame_set(self.original_frame)
 
 
-def run(context, only: set[str] | None = None, on_frame=None) -> tuple[str, str | None]:
-    """Bake synchronously. ``on_frame(job)`` is called after each frame (progress, logging).
+def run(context, only: set[str] | None = None, on_frame=None,
+        resume: bool = False) -> tuple[str, str | None]:
+    """Bake synchronously. ``on_frame(job)`` is called after each frame (progress, logging);
+    ``resume``: go on from the scene's checkpoint (see :class:`BakeJob`).
 
     Returns the summary line and the failure report of systems that failed while others baked
     (None when none failed); raises PhysanimError/OSError/ValueError after aborting, leaving
-    the previous bake intact, when nothing could bake.
+    the previous bake intact, when nothing could bake. Ctrl+C (KeyboardInterrupt) keeps what
+    baked so far for a later resume.
     """
-    job = BakeJob(context, only)
+    job = BakeJob(context, only, resume)
     try:
         if on_frame is not None:
             on_frame(job)
@@ -399,6 +578,15 @@ def run(context, only: set[str] | None = None, on_frame=None) -> tuple[str, str 
             on_frame(job)
         info = job.finish(context)
         return info, job.failure_report(info)
+    except KeyboardInterrupt:
+        job.suspend()
+        raise
     except BaseException:
         job.abort()
         raise
+
+
+def _numbered_within(name: str, last: int) -> bool:
+    """Whether the last number in a frame file's name is at most ``last``."""
+    numbers = re.findall(r"-?\d+", os.path.basename(name))
+    return bool(numbers) and int(numbers[-1]) <= last

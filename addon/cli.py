@@ -27,6 +27,9 @@ def _parser() -> argparse.ArgumentParser:
                    "to bake (default: all)")
     b.add_argument("--scene", help="scene name (default: the active scene)")
     b.add_argument("--save", action="store_true", help="save the .blend after baking")
+    b.add_argument("--resume", action="store_true", help="go on from the last checkpoint: a bake "
+                   "cut off (Ctrl+C, a killed process) continues where it stopped, a finished "
+                   "one extends to the frame end (--frames A-B sets a new end)")
     f = sub.add_parser("free", help="free every PhysAnim bake of the scene")
     f.add_argument("blend", nargs="?")
     f.add_argument("--scene")
@@ -110,7 +113,7 @@ def _bake_command(scene, args) -> int:
     only = None
     if args.objects:
         only = {n.strip() for n in args.objects.split(",") if n.strip()}
-    if 'FINISHED' not in _bake(scene, only):
+    if 'FINISHED' not in _bake(scene, only, args.resume):
         return 1
     return _save(args.save)
 
@@ -246,19 +249,27 @@ def _open(path: str) -> bool:
     return True
 
 
-def _bake(scene, only) -> set:
+def _bake(scene, only, resume: bool = False) -> set:
     from . import bake
     from ..core.errors import PhysanimError
 
+    first = []
+
     def log_frame(job):
-        if job.frame == job.frame_start:
-            _log(f'baking frames {job.frame_start}-{job.frame_end} of scene "{scene.name}"')
+        if not first:
+            first.append(job.frame)
+            what = "baking" if job.frame == job.frame_start else "resuming at frame"
+            _log(f'{what} {job.frame if first[0] != job.frame_start else job.frame_start}-'
+                 f'{job.frame_end} of scene "{scene.name}"')
         _log(f"frame {job.frame}: {job.alive:,} particles")
 
     try:
-        info, failed = bake.run(bpy.context, only, log_frame)
+        info, failed = bake.run(bpy.context, only, log_frame, resume)
     except (PhysanimError, OSError, ValueError) as exc:
         _log(f"error: {exc}")
+        return {'CANCELLED'}
+    except KeyboardInterrupt:
+        _log("interrupted: the frames baked so far are kept; bake --resume goes on from them")
         return {'CANCELLED'}
     _log(info)
     if failed:  # the other systems baked; the exit code still says something failed

@@ -32,6 +32,9 @@ class PHYSANIM_OT_bake(bpy.types.Operator):
 
     only_selected: BoolProperty(name="Only Selected", default=False,
                                 description="Bake only the selected emitters (and their parents)")
+    resume: BoolProperty(name="Resume", default=False,
+                         description="Go on from the last checkpoint: a cut-off bake continues "
+                                     "where it stopped, a finished one extends to the frame end")
 
     _job = None
     _timer = None
@@ -41,7 +44,7 @@ class PHYSANIM_OT_bake(bpy.types.Operator):
         if only is not None and not only:
             raise PhysanimError("no selected object is a PhysAnim emitter", obj=context.scene.name,
                                 kind="scene")
-        return bake.BakeJob(context, only)
+        return bake.BakeJob(context, only, self.resume)
 
     def execute(self, context):
         only = _selected_names(context) if self.only_selected else None
@@ -59,7 +62,7 @@ class PHYSANIM_OT_bake(bpy.types.Operator):
             if only is not None and not only:
                 raise PhysanimError("no selected object is a PhysAnim emitter",
                                     obj=context.scene.name, kind="scene")
-            info, failed = bake.run(context, only, progress)
+            info, failed = bake.run(context, only, progress, self.resume)
         except (PhysanimError, OSError, ValueError) as exc:
             self.report({'ERROR'}, str(exc))
             return {'CANCELLED'}
@@ -84,8 +87,15 @@ class PHYSANIM_OT_bake(bpy.types.Operator):
 
     def modal(self, context, event):
         if event.type == 'ESC':
-            self.cancel(context)
-            self.report({'WARNING'}, "PhysAnim bake cancelled; the previous bake is unchanged")
+            job, self._job = self._job, None
+            try:
+                job.suspend()  # the frames so far stay for Resume
+                note = f"frames up to {job.frame} kept: Resume goes on from there"
+            except Exception as exc:  # nothing to keep, or no room for it
+                note = f"nothing kept ({exc})"
+            self._end(context)
+            self.report({'WARNING'}, f"PhysAnim bake cancelled; the previous bake is unchanged; "
+                                     f"{note}")
             return {'CANCELLED'}
         if event.type != 'TIMER':
             # Swallow other input while baking: an undo, delete or scene switch mid-bake would
@@ -100,7 +110,7 @@ class PHYSANIM_OT_bake(bpy.types.Operator):
             context.window_manager.progress_update(job.frame - job.frame_start)
             context.workspace.status_text_set(
                 f"PhysAnim: baking frame {job.frame}/{job.frame_end} — "
-                f"{job.alive:,} particles (Esc to cancel)")
+                f"{job.alive:,} particles (Esc to stop; Resume goes on later)")
             if not done:
                 return {'RUNNING_MODAL'}
             info = job.finish(context)

@@ -29,12 +29,19 @@ def bake_status(scene) -> tuple[str, str]:
 
 
 def draw_bake_buttons(layout, scene) -> None:
+    from . import resume
+
     text, icon = bake_status(scene)
     layout.label(text=text, icon=icon)
+    cached = resume.status(scene)
+    if cached is not None:
+        layout.label(text=cached[0], icon='FILE_CACHE')
     row = layout.row(align=True)
     row.operator("physanim.bake", text="Bake", icon='PHYSICS').only_selected = False
     row.operator("physanim.bake", text="Bake Selected").only_selected = True
     row.operator("physanim.free_bake", text="Free", icon='TRASH').only_selected = False
+    if cached is not None and cached[1]:
+        layout.operator("physanim.bake", text="Resume", icon='PLAY').resume = True
 
 
 class _PhysicsPanel:

@@ -153,6 +153,12 @@ class ParticleBake:
         self.writers.clear()
         return paths
 
+    def detach(self) -> None:
+        """Stop, keeping the partial caches for a resume; the previous bakes stay as they were."""
+        for writer in self.writers.values():
+            writer.detach()
+        self.writers.clear()
+
     def abort(self) -> None:
         """Delete the partial caches; the previous bakes stay as they were."""
         for writer in self.writers.values():

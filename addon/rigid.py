@@ -283,5 +283,9 @@ class RigidBake:
         return self.writer.commit(dict(meta, kind="rigid_bodies",
                                        objects=[ob.name for ob in self.objects]))
 
+    def detach(self) -> None:
+        """Stop, keeping the partial frames for a resume."""
+        self.writer.detach()
+
     def abort(self) -> None:
         self.writer.abort()

@@ -220,6 +220,11 @@ class SpringMeshBake:
         self.close()
         return self.writer.commit(meta)
 
+    def detach(self) -> None:
+        """Stop, keeping the partial cache for a resume; the previous bake stays as it was."""
+        self.close()
+        self.writer.detach()
+
     def abort(self) -> None:
         """Delete the partial cache; the previous bake stays as it was."""
         self.close()

@@ -150,6 +150,17 @@ class CacheWriter:
         self._closed = True
         return self.cache_dir
 
+    def detach(self) -> Path:
+        """Stop writing and keep the partial folder as it is (every queued frame written), for
+        a later resume; returns it. The previous bake (if any) is untouched."""
+        if not self._closed:
+            try:
+                self.flush()
+            finally:
+                self._shutdown()
+                self._closed = True
+        return self.partial_dir
+
     def abort(self) -> None:
         """Delete the partial bake; the previous bake (if any) is untouched."""
         if not self._closed:

@@ -34,6 +34,32 @@ class Pc2Writer:
                                      float(sample_rate), 0))
         self._file.flush()  # a file with no sample yet is already a valid (empty) PC2
 
+    @classmethod
+    def resume(cls, path: str | os.PathLike, source: str | os.PathLike,
+               samples: int) -> Pc2Writer:
+        """A writer on ``path`` that starts as the first ``samples`` samples of the PC2 file
+        ``source`` (copied in chunks: memory does not grow with the file), ready to append."""
+        with open(source, "rb") as handle:
+            header = handle.read(HEADER.size)
+            magic, version, points, start, rate, count = HEADER.unpack(header)
+            if magic != MAGIC or count < samples:
+                raise ValueError(f'"{source}" holds {count} samples, not the {samples} to resume '
+                                 "from")
+            writer = cls(path, points, start, rate)
+            left = samples * points * 12
+            while left:
+                chunk = handle.read(min(left, 1 << 24))
+                if not chunk:
+                    raise ValueError(f'"{source}" ends before its sample {samples}')
+                writer._file.write(chunk)
+                left -= len(chunk)
+        writer.samples = samples
+        writer._file.seek(SAMPLE_COUNT_OFFSET)
+        writer._file.write(struct.pack("<i", samples))
+        writer._file.seek(0, os.SEEK_END)
+        writer._file.flush()
+        return writer
+
     def append(self, points: np.ndarray) -> None:
         data = np.ascontiguousarray(points, dtype="<f4")
         if data.shape != (self.point_count, 3):

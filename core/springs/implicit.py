@@ -325,7 +325,7 @@ class BaraffWitkin(Integrator):
         a = matrix.diagonal()
         inv = inverse3(np.where(free[:, None, None], a, np.eye(3)))
         inv[~free] = 0.0
-        return lambda r: np.matmul(inv, r[:, :, None])[:, :, 0]
+        return BlockJacobi(inv)
 
     @staticmethod
     def _friction(v1, pressed, normal, contact, reaction, mass) -> np.ndarray:
@@ -342,3 +342,14 @@ class BaraffWitkin(Integrator):
         out = np.zeros_like(v1)
         out[pressed] = -(stop / np.where(speed > 1e-12, speed, np.inf))[:, None] * vt
         return out
+
+
+class BlockJacobi:
+    """r -> D^-1 r with the inverse 3 x 3 diagonal blocks ``inverse`` (n, 3, 3); a plain
+    callable (not a closure) so a bake's state can be saved and resumed."""
+
+    def __init__(self, inverse: np.ndarray):
+        self.inverse = inverse
+
+    def __call__(self, r: np.ndarray) -> np.ndarray:
+        return np.matmul(self.inverse, r[:, :, None])[:, :, 0]

@@ -94,38 +94,49 @@ class AggregationHierarchy:
             self.levels.append(level)
             current = level.coarse
 
-    def preconditioner(self, matrix: BlockMatrix):
+    def preconditioner(self, matrix: BlockMatrix) -> VCycle:
         """u -> approximately A^-1 u, (n, 3) -> (n, 3)."""
-        matrices = [matrix]
-        for level in self.levels:
-            matrices.append(level.restrict(matrices[-1]))
-        inverses = [inverse3(m.diagonal()) for m in matrices]
-        last = matrices[-1]
-        inverse = np.linalg.inv(_dense(last)) if last.pattern.n <= DIRECT_LIMIT else None
-        levels = self.levels
+        return VCycle(self.levels, matrix)
 
-        def restrict(level: _Level, r: np.ndarray) -> np.ndarray:
-            """P^T r: the residuals of every aggregate summed."""
-            return np.bincount(level.flat_owner, weights=r.ravel(),
-                               minlength=3 * level.coarse.n).reshape(-1, 3)
 
-        def cycle(depth: int, r: np.ndarray) -> np.ndarray:
-            if depth == len(levels):
-                if inverse is None:
-                    return np.matmul(inverses[depth], r[:, :, None])[:, :, 0]
-                return (inverse @ r.ravel()).reshape(r.shape)
-            a, level = matrices[depth], levels[depth]
-            jacobi = np.matmul(inverses[depth], r[:, :, None])[:, :, 0]
-            if depth == 0:  # additive: Jacobi + coarse correction, no product with A
-                return jacobi + np.take(cycle(1, restrict(level, r)), level.owner, axis=0,
-                                        mode="clip")
-            x = SMOOTHING * jacobi
-            x += np.take(cycle(depth + 1, restrict(level, r - a @ x)), level.owner, axis=0,
-                         mode="clip")
-            x += SMOOTHING * np.matmul(inverses[depth], (r - a @ x)[:, :, None])[:, :, 0]
-            return x
+class VCycle:
+    """One V-cycle of the hierarchy on a matrix: a callable r -> approximately A^-1 r, (n, 3)
+    -> (n, 3). A plain object (not a closure) so a bake's state can be saved and resumed."""
 
-        return lambda r: cycle(0, r)
+    def __init__(self, levels: list, matrix: BlockMatrix):
+        self.levels = levels
+        self.matrices = [matrix]
+        for level in levels:
+            self.matrices.append(level.restrict(self.matrices[-1]))
+        self.inverses = [inverse3(m.diagonal()) for m in self.matrices]
+        last = self.matrices[-1]
+        self.inverse = np.linalg.inv(_dense(last)) if last.pattern.n <= DIRECT_LIMIT else None
+
+    def __call__(self, r: np.ndarray) -> np.ndarray:
+        return self._cycle(0, r)
+
+    @staticmethod
+    def _restrict(level: _Level, r: np.ndarray) -> np.ndarray:
+        """P^T r: the residuals of every aggregate summed."""
+        return np.bincount(level.flat_owner, weights=r.ravel(),
+                           minlength=3 * level.coarse.n).reshape(-1, 3)
+
+    def _cycle(self, depth: int, r: np.ndarray) -> np.ndarray:
+        levels, inverses = self.levels, self.inverses
+        if depth == len(levels):
+            if self.inverse is None:
+                return np.matmul(inverses[depth], r[:, :, None])[:, :, 0]
+            return (self.inverse @ r.ravel()).reshape(r.shape)
+        a, level = self.matrices[depth], levels[depth]
+        jacobi = np.matmul(inverses[depth], r[:, :, None])[:, :, 0]
+        if depth == 0:  # additive: Jacobi + coarse correction, no product with A
+            return jacobi + np.take(self._cycle(1, self._restrict(level, r)), level.owner,
+                                    axis=0, mode="clip")
+        x = SMOOTHING * jacobi
+        x += np.take(self._cycle(depth + 1, self._restrict(level, r - a @ x)), level.owner,
+                     axis=0, mode="clip")
+        x += SMOOTHING * np.matmul(inverses[depth], (r - a @ x)[:, :, None])[:, :, 0]
+        return x
 
 
 def _dense(matrix: BlockMatrix) -> np.ndarray:

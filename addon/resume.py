@@ -1,0 +1,197 @@
+"""Bakes that resume or extend: a checkpoint of the whole simulation, saved as the bake goes.
+
+A checkpoint is one pickle of everything the bake carries from frame to frame — the core world
+(every system, its solver with warm starts and caches, its state, its random generators), the
+last scene sample and the colliders' paths — with the frame it belongs to, the bake's frame
+range, the inputs hash of each system and the folder each system's frames are in. It lives in
+``<cache>/<scene>/.resume/checkpoint.pkl`` and is replaced (atomically) at most every
+:data:`EVERY_SECONDS` of baking, when a bake is cancelled, and when one finishes.
+
+- A bake cut off (Esc, Ctrl+C, a killed process) keeps its partial folders; **Resume** builds
+  the bake again, links the frames up to the checkpoint from those folders into new ones, loads
+  the checkpoint and goes on. The result is bit-identical to a bake that was never cut off.
+- A finished bake's checkpoint is its last frame in its committed folders: **Resume** with a
+  later frame end extends it the same way.
+- The scene must be as it was (every system's inputs hash, the frame range apart from its end):
+  otherwise resuming is refused, naming what changed. A fresh bake discards the checkpoint and
+  the partial folders it kept.
+"""
+from __future__ import annotations
+
+import os
+import pickle
+import shutil
+import time
+from pathlib import Path
+
+from ..core.errors import PhysanimError
+from ..core.pc2 import Pc2Writer
+from .cache_paths import cache_root, safe_name
+
+CHECKPOINT = "checkpoint.pkl"
+#: The extension's own package (``bl_ext.<repository>.physanim``): checkpoints name classes by
+#: module, and another machine (a farm node) may have installed PhysAnim from another repository.
+PACKAGE = __name__.rsplit(".addon.", 1)[0]
+#: Seconds of baking between checkpoints: the work a cut-off bake can lose (each checkpoint costs
+#: a pickle of the state). PHYSANIM_CHECKPOINT_SECONDS overrides it (:func:`interval`).
+EVERY_SECONDS = 10.0
+FORMAT = 1
+
+
+def folder(scene) -> Path:
+    return Path(cache_root(scene)) / safe_name(scene.name) / ".resume"
+
+
+def load(scene) -> dict | None:
+    """The scene's checkpoint, or None (none, unreadable, or from another format)."""
+    try:
+        path = folder(scene) / CHECKPOINT
+    except PhysanimError:  # no cache folder (an unsaved file with a '//' cache)
+        return None
+    if not path.is_file():
+        return None
+    try:
+        with open(path, "rb") as handle:
+            data = pickle.load(handle)
+    except (OSError, pickle.UnpicklingError, EOFError, AttributeError, ImportError):
+        return None
+    return data if isinstance(data, dict) and data.get("format") == FORMAT else None
+
+
+def status(scene) -> tuple[str, bool] | None:
+    """(what the panel says of the checkpoint: which frames are cached and what Resume would
+    do, whether Resume can run), or None without a checkpoint."""
+    data = load(scene)
+    if data is None:
+        return None
+    first, last, end = data["frame_start"], data["frame"], data["frame_end"]
+    target = scene.physanim.frame_end
+    if data["finished"]:
+        if target > end:
+            return f"Frames {first}-{end} cached: Resume extends the bake to {target}", True
+        return f"Frames {first}-{end} cached", False
+    return (f"Frames {first}-{last} of {first}-{end} cached (cut off): Resume continues from "
+            f"frame {last}", True)
+
+
+def release(data: dict) -> None:
+    """Delete the partial folders a checkpoint kept (never a finished bake's folders)."""
+    for path in data["folders"].values():
+        if ".partial-" in os.path.basename(path):
+            shutil.rmtree(path, ignore_errors=True)
+
+
+def discard(scene) -> None:
+    """Forget the checkpoint; delete the partial folders it kept (never a finished bake)."""
+    data = load(scene)
+    if data is not None:
+        release(data)
+    try:
+        shutil.rmtree(folder(scene), ignore_errors=True)
+    except PhysanimError:
+        pass
+
+
+def interval() -> float:
+    """Seconds between checkpoints: PHYSANIM_CHECKPOINT_SECONDS when it is a number >= 0 (e.g.
+    often on preemptible farm nodes), else :data:`EVERY_SECONDS`."""
+    try:
+        seconds = float(os.environ.get("PHYSANIM_CHECKPOINT_SECONDS", EVERY_SECONDS))
+    except ValueError:
+        return EVERY_SECONDS
+    return seconds if seconds >= 0.0 else EVERY_SECONDS
+
+
+class Checkpoints:
+    """Saves a job's checkpoints: after a frame when :meth:`due`, and at the end or on cancel.
+    ``every``: seconds between checkpoints (0: every frame)."""
+
+    def __init__(self, every: float | None = None):
+        every = interval() if every is None else every
+        self.every = every
+        self.last = time.perf_counter()
+
+    def due(self) -> bool:
+        return time.perf_counter() - self.last >= self.every
+
+    def save(self, job, finished: bool, folders: dict[str, str] | None = None,
+             state: bytes | None = None) -> None:
+        """Write the checkpoint of ``job`` at its frame (``state``: its pickled state, taken
+        earlier; ``folders``: where its frames are, default its partial folders)."""
+        data = {"format": FORMAT, "package": PACKAGE, "frame": job.frame, "frame_start": job.frame_start,
+                "frame_end": job.frame_end, "finished": finished, "hashes": job.hash_record(),
+                "only": sorted(job._only) if job._only is not None else None,
+                "folders": folders or job.partial_folders(),
+                "state": state if state is not None else job.checkpoint_state()}
+        target = folder(job.scene)
+        target.mkdir(parents=True, exist_ok=True)
+        partial = target / f".{CHECKPOINT}.tmp"
+        with open(partial, "wb") as handle:
+            pickle.dump(data, handle, protocol=pickle.HIGHEST_PROTOCOL)
+        os.replace(partial, target / CHECKPOINT)
+        self.last = time.perf_counter()
+
+
+class _Unpickler(pickle.Unpickler):
+    """Finds PhysAnim's classes under this installation's package, whatever the package was
+    where the checkpoint was written."""
+
+    def __init__(self, file, package: str):
+        super().__init__(file)
+        self.package = package
+
+    def find_class(self, module: str, name: str):
+        if module == self.package or module.startswith(self.package + "."):
+            module = PACKAGE + module[len(self.package):]
+        return super().find_class(module, name)
+
+
+def state_of(data: dict):
+    """The pickled simulation state of a checkpoint, loaded."""
+    import io
+
+    return _Unpickler(io.BytesIO(data["state"]), data["package"]).load()
+
+
+def check(scene, data: dict, hashes: dict) -> None:
+    """Refuse to resume when the scene is no longer what the checkpoint was baked from."""
+    s = scene.physanim
+    if s.frame_start != data["frame_start"]:
+        raise PhysanimError(f"the bake started at frame {data['frame_start']}, the scene now at "
+                            f"{s.frame_start} — bake from the start", obj=scene.name,
+                            kind="scene")
+    if s.frame_end < data["frame"] or (data["finished"] and s.frame_end == data["frame_end"]):
+        raise PhysanimError(f"nothing to resume: frames {data['frame_start']}-{data['frame']} "
+                            f"are cached and the frame end is {s.frame_end}", obj=scene.name,
+                            kind="scene")
+    changed = sorted(name for name in set(data["hashes"]) | set(hashes)
+                     if data["hashes"].get(name) != hashes.get(name))
+    if changed:
+        raise PhysanimError(f"the scene changed since frames {data['frame_start']}-"
+                            f"{data['frame']} were baked ({', '.join(changed)}) — bake from the "
+                            "start", obj=scene.name, kind="scene")
+
+
+def link_frames(source: str, target: str, keep) -> None:
+    """Hard-link (or copy) the files of ``source`` into ``target`` (same layout), except those
+    for which ``keep(relative path)`` is False; a PC2 file is cut to its samples kept."""
+    for root, _dirs, files in os.walk(source):
+        relative = os.path.relpath(root, source)
+        for name in files:
+            rel = os.path.normpath(os.path.join(relative, name))
+            if name == "meta.json" or not keep(rel):
+                continue
+            destination = os.path.join(target, rel)
+            os.makedirs(os.path.dirname(destination), exist_ok=True)
+            if os.path.exists(destination):
+                os.remove(destination)
+            try:
+                os.link(os.path.join(root, name), destination)
+            except OSError:  # another file system, or no hard links there
+                shutil.copy2(os.path.join(root, name), destination)
+
+
+def cut_pc2(source: str, writer_path: str, samples: int) -> Pc2Writer:
+    """A PC2 writer on ``writer_path`` holding the first ``samples`` samples of ``source``,
+    ready to append the next."""
+    return Pc2Writer.resume(writer_path, source, samples)

@@ -1,0 +1,211 @@
+"""Bakes that resume (addon/resume.py): a bake cut off — cancelled, or its process killed — goes
+on from its last checkpoint, and a finished bake extends to a later frame end, both
+bit-identical to a bake that ran through; a changed scene is refused, a fresh bake cleans up."""
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import bpy
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _module(ext, name: str):
+    return sys.modules[f"{ext.__name__}.addon.{name}"]
+
+
+def _shot(folder: Path, frame_end: int = 24, cloth: int = 6) -> Path:
+    """Every system: particles (USD points) on a ground collider, a spring mesh, three rigid
+    boxes falling onto the ground."""
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / "shot.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    scene = bpy.context.scene
+    scene.physanim.frame_start, scene.physanim.frame_end = 1, frame_end
+    bpy.ops.mesh.primitive_plane_add(size=10.0)
+    bpy.context.object.physanim.collider.enabled = True
+    bpy.ops.mesh.primitive_plane_add(size=1.0, location=(0.0, 0.0, 3.0))
+    bpy.context.object.name = "Spray"
+    bpy.context.object.physanim.emitter.enabled = True
+    bpy.ops.mesh.primitive_grid_add(x_subdivisions=cloth, y_subdivisions=cloth, size=1.0,
+                                    location=(2.0, 0.0, 1.0))
+    bpy.context.object.name = "Sheet"
+    bpy.context.object.physanim.spring_mesh.enabled = True
+    for i in range(3):
+        bpy.ops.mesh.primitive_cube_add(size=0.5, location=(-2.0 + 0.1 * i, 0.0, 1.0 + 0.6 * i),
+                                        rotation=(0.2 * i, 0.1, 0.0))
+        bpy.context.object.physanim.rigid_body.enabled = True
+    bpy.ops.wm.save_mainfile()
+    return path
+
+
+def _tree(folder: Path) -> dict[str, str]:
+    """Every frame file of the finished bakes (not a meta.json, which records the time the bake
+    took, nor partial folders or the checkpoint)."""
+    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(folder.rglob("*"))
+            if p.is_file() and p.name != "meta.json"
+            and not any(part == ".resume" or ".partial-" in part for part in p.parts)}
+
+
+def _partials(folder: Path) -> list[str]:
+    return sorted(p.name for p in folder.rglob("*") if ".partial-" in p.name)
+
+
+def _reference(bake, cache: Path) -> dict[str, str]:
+    """An uninterrupted bake's files. A first bake runs before it: rigid bodies read their pose
+    a last bit differently once they have been baked (keys and rotation mode set aside), so
+    every comparison here is between bakes that each had one before them."""
+    assert bake.run(bpy.context)[1] is None
+    assert bake.run(bpy.context)[1] is None
+    return _tree(cache)
+
+
+def test_a_cancelled_bake_resumes_bit_identical(physanim_ext, tmp_path):
+    path = _shot(tmp_path / "shot")
+    bake, resume = _module(physanim_ext, "bake"), _module(physanim_ext, "resume")
+    cache = path.parent / "physanim_cache"
+    reference = _reference(bake, cache)
+    assert len(reference) > 70
+
+    job = bake.BakeJob(bpy.context, checkpoint_every=0)
+    while job.frame < 13:
+        job.step(bpy.context)
+    job.suspend()  # as Esc does
+    assert _tree(cache) == reference  # the previous bake is untouched ...
+    assert len(_partials(cache)) == 3  # ... and the frames so far are kept
+    scene = bpy.context.scene
+    text, can = resume.status(scene)
+    assert can and text.startswith("Frames 1-13 of 1-24 cached (cut off)")
+
+    info, failed = bake.run(bpy.context, resume=True)
+    assert failed is None and "frames 1-24" in info
+    assert _tree(cache) == reference
+    assert _partials(cache) == []
+    assert resume.status(scene) == ("Frames 1-24 cached", False)
+    panels = _module(physanim_ext, "panels")
+    assert panels.bake_status(scene)[1] == 'CHECKMARK'
+
+
+def test_a_killed_bake_resumes_bit_identical(physanim_ext, tmp_path):
+    """The process baking is killed outright (SIGKILL: no clean-up at all) mid-bake."""
+    path = _shot(tmp_path / "shot", frame_end=60, cloth=24)
+    bake, resume = _module(physanim_ext, "bake"), _module(physanim_ext, "resume")
+    cache = path.parent / "physanim_cache"
+    reference = _reference(bake, cache)
+    bpy.ops.wm.save_mainfile()
+    env = {k: v for k, v in os.environ.items() if k != "BLENDER_USER_RESOURCES"}
+    env["PHYSANIM_CHECKPOINT_SECONDS"] = "0"
+    process = subprocess.Popen([sys.executable, str(ROOT / "tools" / "physanim.py"), "bake",
+                                str(path)], env=env, stdout=subprocess.DEVNULL,
+                               stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.time() + 120
+        checkpoint = resume.folder(bpy.context.scene) / resume.CHECKPOINT
+        while time.time() < deadline:
+            data = resume.load(bpy.context.scene)
+            if data is not None and not data["finished"] and data["frame"] >= 20:
+                break
+            assert process.poll() is None, "the bake ended before it could be cut off"
+            time.sleep(0.05)
+        else:
+            pytest.fail("no checkpoint at frame 20 within 2 minutes")
+        process.send_signal(signal.SIGKILL)
+        process.wait()
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert checkpoint.is_file() and _partials(cache)
+    cut = resume.load(bpy.context.scene)["frame"]
+    assert 20 <= cut < 60
+    info, failed = bake.run(bpy.context, resume=True)
+    assert failed is None
+    assert _tree(cache) == reference
+    assert _partials(cache) == []
+
+
+def test_a_finished_bake_extends_to_a_later_frame_end(physanim_ext, tmp_path):
+    path = _shot(tmp_path / "shot", frame_end=16)
+    bake, resume = _module(physanim_ext, "bake"), _module(physanim_ext, "resume")
+    cache = path.parent / "physanim_cache"
+    assert bake.run(bpy.context)[1] is None
+    assert bake.run(bpy.context)[1] is None
+    scene = bpy.context.scene
+    scene.physanim.frame_end = 26
+    text, can = resume.status(scene)
+    assert can and text == "Frames 1-16 cached: Resume extends the bake to 26"
+    assert bake.run(bpy.context, resume=True)[1] is None
+    extended = _tree(cache)
+    shutil.rmtree(cache)
+    assert bake.run(bpy.context)[1] is None  # one bake 1-26 from the start (not the first)
+    assert _tree(cache) == extended
+    # nothing left to extend: Resume says so
+    from physanim.core.errors import PhysanimError  # noqa: F401  (the source tree's name)
+    with pytest.raises(Exception, match="nothing to resume: frames 1-26 are cached"):
+        bake.run(bpy.context, resume=True)
+
+
+def test_resuming_a_changed_scene_is_refused_and_a_fresh_bake_cleans_up(physanim_ext, tmp_path,
+                                                                         capsys):
+    path = _shot(tmp_path / "shot")
+    bake, resume = _module(physanim_ext, "bake"), _module(physanim_ext, "resume")
+    cache = path.parent / "physanim_cache"
+    job = bake.BakeJob(bpy.context, checkpoint_every=0)
+    for _ in range(5):
+        job.step(bpy.context)
+    job.suspend()
+    kept = _partials(cache)
+    assert len(kept) == 3
+    bpy.data.objects["Sheet"].physanim.spring_mesh.stiffness *= 2.0
+    with pytest.raises(Exception, match=r"the scene changed since frames 1-6 were baked "
+                                        r"\(spring_mesh Sheet\) — bake from the start"):
+        bake.run(bpy.context, resume=True)
+    assert _partials(cache) == kept  # refusing changes nothing
+    cli = _module(physanim_ext, "cli")
+    assert cli.main(["bake", "--resume"]) == 1
+    assert "the scene changed since" in capsys.readouterr().out
+    assert bake.run(bpy.context)[1] is None  # a fresh bake: the cut-off frames go
+    assert _partials(cache) == []
+    assert resume.status(bpy.context.scene) == ("Frames 1-24 cached", False)
+
+
+def test_a_failed_bake_leaves_no_checkpoint_behind(physanim_ext, tmp_path):
+    _shot(tmp_path / "shot")
+    bake, resume = _module(physanim_ext, "bake"), _module(physanim_ext, "resume")
+    job = bake.BakeJob(bpy.context, checkpoint_every=0)
+    for _ in range(4):
+        job.step(bpy.context)
+    assert resume.load(bpy.context.scene)["frame"] == 5
+    job.abort()  # what an error does
+    assert resume.load(bpy.context.scene) is None
+    assert _partials(tmp_path / "shot" / "physanim_cache") == []
+    with pytest.raises(Exception, match="nothing to resume"):
+        bake.run(bpy.context, resume=True)
+
+
+def test_the_panel_offers_resume_and_says_which_frames_are_cached(physanim_ext, tmp_path):
+    _shot(tmp_path / "shot")
+    bake, panels = _module(physanim_ext, "bake"), _module(physanim_ext, "panels")
+    from physanim.tests.blender.probes import LabelRecorder
+
+    job = bake.BakeJob(bpy.context, checkpoint_every=0)
+    for _ in range(7):
+        job.step(bpy.context)
+    job.suspend()
+    labels: list[str] = []
+    panels.draw_bake_buttons(LabelRecorder(labels), bpy.context.scene)
+    assert any("Frames 1-8 of 1-24 cached (cut off): Resume continues from frame 8" in t
+               for t in labels), labels
+    assert bpy.ops.physanim.bake(resume=True) == {'FINISHED'}
+    labels.clear()
+    panels.draw_bake_buttons(LabelRecorder(labels), bpy.context.scene)
+    assert "Frames 1-24 cached" in labels
