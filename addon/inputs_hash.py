@@ -77,7 +77,7 @@ def _input_modifiers(ob) -> list:
 
 
 RIGID_BAKE_PROPS = ("previous_action", "previous_slot", "previous_rotation_mode",
-                    "previous_basis", "baked_action")  # what a bake sets: not inputs
+                    "previous_basis", "previous_pose", "baked_action")  # what a bake sets: not inputs
 TRANSFORM_PATHS = ("location", "rotation_euler", "rotation_quaternion", "rotation_axis_angle",
                    "scale", "delta_location", "delta_rotation_euler", "delta_scale")
 

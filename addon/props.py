@@ -374,6 +374,9 @@ class PHYSANIM_PG_rigid_body(bpy.types.PropertyGroup):
     previous_slot: StringProperty(options={'HIDDEN'})
     previous_rotation_mode: StringProperty(options={'HIDDEN'})
     previous_basis: FloatVectorProperty(size=16, options={'HIDDEN'})
+    # location (3), Euler (3), quaternion (4), axis angle (4) and scale (3) as they were: given
+    # back exactly (through a matrix they would be rounded)
+    previous_pose: FloatVectorProperty(size=17, options={'HIDDEN'})
     baked_action: PointerProperty(type=bpy.types.Action, options={'HIDDEN'})
     bake_hash: StringProperty(name="Bake Hash", options={'HIDDEN'})
 

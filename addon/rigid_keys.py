@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import bpy
 import numpy as np
+from mathutils import Matrix
 
 from ..core.cache import read_frame
 from ..core.rigid import quaternion as quat
@@ -102,6 +103,8 @@ def _baked_action(ob) -> bpy.types.Action:
         p.previous_slot = slot.identifier if slot is not None else ""
         p.previous_rotation_mode = ob.rotation_mode
         p.previous_basis = [v for row in ob.matrix_basis for v in row]
+        p.previous_pose = [*ob.location, *ob.rotation_euler, *ob.rotation_quaternion,
+                           *ob.rotation_axis_angle, *ob.scale]
         p.baked_action = bpy.data.actions.new(f"PhysAnim {ob.name}")
     return p.baked_action
 
@@ -118,9 +121,19 @@ def _own_animation(ob) -> None:
             if slot is not None:
                 anim.action_slot = slot
     ob.rotation_mode = p.previous_rotation_mode or ob.rotation_mode
-    basis = np.array(p.previous_basis).reshape(4, 4)
-    if p.previous_action is None and np.any(basis):
-        ob.matrix_basis = [list(row) for row in basis]  # rows, as Matrix stores them
+    if p.previous_action is not None:
+        return
+    pose = list(p.previous_pose)
+    if any(pose):
+        ob.location, ob.rotation_euler = pose[:3], pose[3:6]
+        ob.rotation_quaternion, ob.rotation_axis_angle = pose[6:10], pose[10:14]
+        ob.scale = pose[14:]
+        return
+    basis = np.array(p.previous_basis).reshape(4, 4)  # set aside by an older version
+    if np.any(basis):
+        # a Matrix from rows: a nested list assigned to the property would be read as columns
+        # (the translation would land in the bottom row and the object at the origin)
+        ob.matrix_basis = Matrix(basis.tolist())
 
 
 def suspend(ob):
