@@ -61,6 +61,7 @@ class BakeJob:
             only = self._resume_from["only"]
         self._owns_checkpoint = False  # replaced the scene's checkpoint with one of this bake
         self._keep_partial = False  # suspended: the partial folders stay for a resume
+        self._no_checkpoint: str | None = None  # why this bake cannot save checkpoints
         self.view_layer = context.view_layer
         self.settings = self.scene.physanim
         self.original_frame = self.scene.frame_current
@@ -164,13 +165,25 @@ class BakeJob:
         return {name: getattr(wrapper, name) for name in _RESUMED[kind]}
 
     def _save_checkpoint(self, finished: bool = False, folders=None, state=None) -> None:
+        if self._no_checkpoint is not None:
+            return
         if not self._owns_checkpoint and self._resume_from is None:
             checkpoint.discard(self.scene)  # an earlier cut-off bake's partial folders go
-        self.checkpoints.save(self, finished, folders, state)
+        try:
+            self.checkpoints.save(self, finished, folders, state)
+        except (pickle.PicklingError, TypeError, AttributeError) as exc:
+            self._checkpoint_failed(exc)
+            return
         if not self._owns_checkpoint and self._resume_from is not None:
             # the new checkpoint holds the frames resumed from (linked): their folders go
             checkpoint.release(self._resume_from)
         self._owns_checkpoint = True
+
+    def _checkpoint_failed(self, exc: Exception) -> None:
+        """Something in the state cannot be saved: the bake goes on, without checkpoints (it
+        cannot be resumed or extended), and says so."""
+        self._no_checkpoint = f"no checkpoint ({exc}): this bake cannot be resumed or extended"
+        print(f"PhysAnim: {self._no_checkpoint}", flush=True)
 
     def _restore(self, data: dict) -> None:
         """Continue from ``data``: the frames up to its checkpoint linked from its folders into
@@ -439,7 +452,12 @@ class BakeJob:
 
         meta = {"frame_start": self.frame_start, "frame_end": self.frame_end,
                 "fps": convert.fps(self.scene), "kind": "particles"}
-        final_state = self.checkpoint_state()  # the last frame's, for a later extension
+        final_state = None  # the last frame's, for a later extension
+        if self._no_checkpoint is None:
+            try:
+                final_state = self.checkpoint_state()
+            except (pickle.PicklingError, TypeError, AttributeError) as exc:
+                self._checkpoint_failed(exc)
         final_record = self.hash_record()
         self.colliders.release()
         for mesh in self.meshes:  # every frame on disk before any bake is swapped in
@@ -469,7 +487,7 @@ class BakeJob:
         folders.update({f"spring_mesh {name}": str(path) for name, path in mesh_paths.items()})
         if rigid_path is not None:
             folders["rigid_bodies"] = str(rigid_path)
-        if set(folders) == set(final_record):
+        if final_state is not None and set(folders) == set(final_record):
             self._save_checkpoint(finished=True, folders=folders, state=final_state)
         for ob in emitters:
             results.attach(context, self.scene, ob,

@@ -258,9 +258,11 @@ def _bake(scene, only, resume: bool = False) -> set:
     def log_frame(job):
         if not first:
             first.append(job.frame)
-            what = "baking" if job.frame == job.frame_start else "resuming at frame"
-            _log(f'{what} {job.frame if first[0] != job.frame_start else job.frame_start}-'
-                 f'{job.frame_end} of scene "{scene.name}"')
+            if job.frame == job.frame_start:
+                _log(f'baking frames {job.frame_start}-{job.frame_end} of scene "{scene.name}"')
+            else:
+                _log(f'resuming frames {job.frame}-{job.frame_end} of scene "{scene.name}" '
+                     f"(frames {job.frame_start}-{job.frame} were baked)")
         _log(f"frame {job.frame}: {job.alive:,} particles")
 
     try:

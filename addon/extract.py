@@ -81,9 +81,9 @@ def type_name(identifier: str) -> str:
 
 
 def point_constraints(scene, ob, frame: int) -> list:
-    """Emitter ``ob``'s particle constraints at ``frame`` (the scene is there): (name, type,
-    world matrix, radius) each — the first is the constraint object — or an error naming the
-    constraint."""
+    """Emitter ``ob``'s particle constraints at ``frame`` (the scene is there): (constraint
+    object's name, type, world matrix, radius) each — plain data, as a bake's checkpoint
+    keeps it — or an error naming the constraint."""
     out = []
     for c in attachments(scene, ob, "particles"):
         p = c.physanim.constraint
@@ -92,7 +92,7 @@ def point_constraints(scene, ob, frame: int) -> list:
                                 f"Wire, not by a {type_name(p.type)} joint — choose one of "
                                 "those", obj=c.name, frame=frame, kind="constraint")
         _check_finite(c, frame, "constraint", {"radius": float(p.radius)})
-        out.append((c, p.type, world_matrix(c, frame, "constraint"), float(p.radius)))
+        out.append((c.name, p.type, world_matrix(c, frame, "constraint"), float(p.radius)))
     return out
 
 
@@ -198,13 +198,14 @@ def _check_finite(ob, frame: int, kind: str, values: dict) -> None:
                                 obj=ob.name, frame=frame, kind=kind)
 
 
-def _framed(ob, frame: int, kind: str, make, *args):
-    """Build a core input with ``make(*args)``; its validation error gains the frame."""
+def _framed(name: str, frame: int, kind: str, make, *args):
+    """Build a core input with ``make(*args)`` for the object ``name``; its validation error
+    gains the frame."""
     try:
         return make(*args)
     except ValueError as exc:
-        detail = str(exc).removeprefix(f'{kind} "{ob.name}": ')
-        raise PhysanimError(detail, obj=ob.name, frame=frame, kind=kind) from exc
+        detail = str(exc).removeprefix(f'{kind} "{name}": ')
+        raise PhysanimError(detail, obj=name, frame=frame, kind=kind) from exc
 
 
 @dataclass
@@ -400,9 +401,9 @@ class Extractor:
         emitters = []
         # the interval's births are frame b's: they use the emitter's values at b
         for i, ((m0, v0, start), (m1, v1, val)) in enumerate(zip(a.emitters, b.emitters)):
-            held = tuple(_framed(c, a.frame, "constraint", PointConstraint, c.name, kind, ma, mb,
+            held = tuple(_framed(name, a.frame, "constraint", PointConstraint, name, kind, ma, mb,
                                  radius)
-                         for (c, kind, ma, _), (_, _, mb, radius)
+                         for (name, kind, ma, _), (_, _, mb, radius)
                          in zip(start["constraints"], val["constraints"]))
             emitters.append(EmitterFrame(
                 rate=val["rate"], rate_random=val["rate_random"], speed=val["speed"],
@@ -412,12 +413,12 @@ class Extractor:
                 inherit_velocity=val["inherit_velocity"], active=val["active"],
                 matrix0=m0, matrix1=m1, matrices=keys(0, i, m0, m1), verts0=v0, verts1=v1,
                 constraints=held))
-        colliders = [_framed(ob, a.frame, "collider", ColliderFrame,
+        colliders = [_framed(ob.name, a.frame, "collider", ColliderFrame,
                              ob.name, shape, m0, m1, rest, fric, keys(1, i, m0, m1), thick,
                              v0, v1, self._collider_tris.get(ob.name))
                      for i, (ob, (m0, shape, rest, fric, thick, v0), (m1, *_, v1))
                      in enumerate(zip(self.roles.colliders, a.colliders, b.colliders))]
-        forces = [_framed(ob, a.frame, "force", self._force, ob, m, f)
+        forces = [_framed(ob.name, a.frame, "force", self._force, ob, m, f)
                   for ob, (m, f) in zip(self.roles.forces, a.forces)]
         return FrameInputs(frame=a.frame, t0=seconds(a.frame),
                            frame_dt=seconds(b.frame - a.frame),

@@ -205,3 +205,18 @@ def test_the_panel_offers_resume_and_says_which_frames_are_cached(physanim_ext, 
     labels.clear()
     panels.draw_bake_buttons(LabelRecorder(labels), bpy.context.scene)
     assert "Frames 1-24 cached" in labels
+
+
+def test_the_command_line_resumes(physanim_ext, tmp_path, capsys):
+    path = _shot(tmp_path / "shot")
+    bake, cli = _module(physanim_ext, "bake"), _module(physanim_ext, "cli")
+    job = bake.BakeJob(bpy.context, checkpoint_every=0)
+    for _ in range(9):
+        job.step(bpy.context)
+    job.suspend()
+    capsys.readouterr()
+    assert cli.main(["bake", str(path), "--resume", "--save"]) == 0
+    out = capsys.readouterr().out
+    assert 'resuming frames 10-24 of scene "Scene" (frames 1-10 were baked)' in out
+    assert "physanim: frame 9:" not in out and "physanim: frame 24:" in out
+    assert _partials(tmp_path / "shot" / "physanim_cache") == []

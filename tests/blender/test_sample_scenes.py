@@ -40,6 +40,11 @@ def test_sample_scene_bakes_and_passes_its_self_check(physanim_ext, tmp_path, na
     assert all(o.modifiers.get("physanim") is not None for o in meshes)
     assert all(o.physanim.rigid_body.baked_action is not None for o in rigid)
     assert module.check(scene) == []
+    # every feature a sample scene uses can be checkpointed: the bake can be extended
+    resume = sys.modules[f"{physanim_ext.__name__}.addon.resume"]
+    data = resume.load(scene)
+    assert data is not None and data["finished"] and data["frame"] == scene.physanim.frame_end
+    assert resume.state_of(data)["world"].systems
 
 
 def test_jelly_cube_needs_shear_and_angular_springs(physanim_ext, tmp_path):
