@@ -184,12 +184,11 @@ def run_physanim_bake(sc: Scene, folder: str) -> Run:
     scene, emitter = build_physanim_scene(sc, folder)
     _, wall, cpu = common.timed(_bake)
     scene.frame_set(sc.frames)
-    me = emitter.physanim.emitter.result.data
-    n = len(me.vertices)
-    pos = np.empty(n * 3, np.float32)
-    if n:
-        me.attributes["position"].data.foreach_get("vector", pos)
-    problems = check_points("physanim bake", pos.reshape(-1, 3)[:, 2], sc.count)
+    from sample_scenes._common import result_points  # the result as Blender shows it
+
+    pos = result_points(emitter.physanim.emitter.result)["position"]
+    n = len(pos)
+    problems = check_points("physanim bake", pos[:, 2], sc.count)
     info = scene.physanim.bake_info
     _cleanup_cache(folder)
     return Run("physanim bake (add-on, incl. cache)", wall, cpu, n, problems,
