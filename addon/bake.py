@@ -27,7 +27,8 @@ import bpy
 from ..core.contact import ColliderPaths
 from ..core.errors import PhysanimError
 from ..core.world import World
-from . import budget, convert, extract, inputs_hash, limits, native_points, rigid, rigid_keys
+from . import (budget, convert, extract, follow, inputs_hash, limits, native_points, rigid,
+               rigid_keys)
 from . import resume as checkpoint
 from . import springs
 from .cache_paths import relative_path
@@ -69,6 +70,8 @@ class BakeJob:
         self.roles = self._roles(only)
         limits.check_scene(self.scene, self.frame_start, self.frame_end)
         budget.check_budget(self.scene, self.roles)
+        for ob in self.roles.followers:  # refused before anything changes
+            follow.check(ob, self.frame_start)
         self.frame = self.frame_start
         self.started = time.perf_counter()
         self.failures: list[tuple[str, str]] = []  # (system, message) of systems that failed
@@ -498,11 +501,18 @@ class BakeJob:
             springs.attach(ob, relative_path(os.path.join(mesh_paths[ob.name], springs.CACHE_FILE)),
                            self.frame_start, self.mesh_hashes[ob.name], self.suspended.get(ob.name))
         self.suspended.clear()
+        # last: followers trail parents that may have just been baked
+        follow.bake(self.scene, self.roles.followers, self.frame_start, self.frame_end)
+        all_roles = extract.gather(self.scene)
+        follow_hashes = [inputs_hash.follow_hash(self.scene, ob, all_roles)
+                         for ob in self.roles.followers]
+        for ob, digest in zip(self.roles.followers, follow_hashes):
+            ob.physanim.follow.bake_hash = digest
         self.scene.frame_set(self.original_frame)
         self.settings.bake_hash = inputs_hash.scene_hash(
             [*(self.hashes[ob.name] for ob in emitters),
              *(self.mesh_hashes[mesh.ob.name] for mesh in self.meshes),
-             *([self.rigid_hash] if self.rigid is not None else [])])
+             *([self.rigid_hash] if self.rigid is not None else []), *follow_hashes])
         return self._summary(len(emitters))
 
     def _summary(self, emitters: int) -> str:
@@ -516,6 +526,8 @@ class BakeJob:
             parts.append(f"{count} rigid bod{'y' if count == 1 else 'ies'}")
             if self.rigid.constraints:
                 parts.append(f"{len(self.rigid.constraints)} constraint(s)")
+        if self.roles.followers:
+            parts.append(f"{len(self.roles.followers)} follower(s)")
         births = (f": {stats['births']:,} births, peak {stats['peak']:,} alive" if emitters
                   else "")
         info = (f"baked {', '.join(parts)}, frames {self.frame_start}-{self.frame_end}"

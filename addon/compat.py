@@ -130,6 +130,22 @@ def curves_of(action: bpy.types.Action | None, slot_identifier: str = "") -> lis
             for fc in strip.channelbag(slot).fcurves]
 
 
+def remove_fcurve(id_data: bpy.types.ID, fcurve: bpy.types.FCurve) -> None:
+    """Remove one of ``id_data``'s F-curves from its action (4.2) or from the channelbag that
+    holds it (4.4+)."""
+    action = id_data.animation_data.action
+    if not HAS_SLOTS:
+        action.fcurves.remove(fcurve)
+        return
+    slot = id_data.animation_data.action_slot
+    for layer in action.layers:
+        for strip in layer.strips:
+            bag = strip.channelbag(slot) if strip.type == 'KEYFRAME' else None
+            if bag is not None and any(fc == fcurve for fc in bag.fcurves):
+                bag.fcurves.remove(fcurve)
+                return
+
+
 def fcurve_ensure(bag: Any, data_path: str, index: int = 0) -> bpy.types.FCurve:
     """The F-curve ``data_path[index]`` of a channelbag (or 4.2 action), created when missing.
 

@@ -31,10 +31,11 @@ class Roles:
     spring_meshes: list = field(default_factory=list)
     rigid_bodies: list = field(default_factory=list)
     constraints: list = field(default_factory=list)  # every enabled constraint object
+    followers: list = field(default_factory=list)  # Follow-Through objects
 
     def __bool__(self) -> bool:
         """Whether anything bakes."""
-        return bool(self.emitters or self.spring_meshes or self.rigid_bodies)
+        return bool(self.emitters or self.spring_meshes or self.rigid_bodies or self.followers)
 
     @property
     def joints(self) -> list:
@@ -107,20 +108,22 @@ def gather(scene, only: set[str] | None = None) -> Roles:
     emitters = [o for o in objects if o.physanim.emitter.enabled]
     meshes = [o for o in objects if o.physanim.spring_mesh.enabled]
     rigid = [o for o in objects if o.physanim.rigid_body.enabled]
+    followers = [o for o in objects if o.physanim.follow.enabled]
     if only is not None:
-        unknown = only - {o.name for o in emitters + meshes + rigid}
+        unknown = only - {o.name for o in emitters + meshes + rigid + followers}
         if unknown:
-            raise PhysanimError(f"not an emitter, spring mesh or rigid body in scene "
+            raise PhysanimError(f"not an emitter, spring mesh, rigid body or follower in scene "
                                 f"\"{scene.name}\": {', '.join(sorted(unknown))}")
         meshes = [o for o in meshes if o.name in only]
         chosen = {a.name for o in emitters if o.name in only for a in emitter_chain(o)}
         emitters = [o for o in emitters if o.name in chosen]
         # rigid bodies push each other: choosing one bakes them all
         rigid = rigid if any(o.name in only for o in rigid) else []
+        followers = [o for o in followers if o.name in only]
     return Roles(emitters,
                  [o for o in objects if o.physanim.collider.enabled],
                  [o for o in objects if o.physanim.force.enabled], meshes, rigid,
-                 [o for o in objects if o.physanim.constraint.enabled])
+                 [o for o in objects if o.physanim.constraint.enabled], followers)
 
 
 def emitter_chain(ob) -> list:

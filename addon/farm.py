@@ -54,6 +54,12 @@ def bake_state(scene) -> tuple[object, list[str], list[str]]:
         for ob in roles.rigid_bodies:
             baked = ob.physanim.rigid_body.bake_hash
             (missing if not baked else outdated if baked != current else []).append(ob.name)
+    for ob in roles.followers:
+        baked = ob.physanim.follow.bake_hash
+        if not baked:
+            missing.append(ob.name)
+        elif baked != inputs_hash.follow_hash(scene, ob, roles):
+            outdated.append(ob.name)
     return roles, missing, outdated
 
 

@@ -200,3 +200,23 @@ def rigid_hash(scene, objects: list, roles: Roles | None = None) -> str:
             records.append(_object_record(c.physanim.constraint.object1, "spring_mesh"))
     h.update(json.dumps([settings, records], sort_keys=True).encode())
     return h.hexdigest()
+
+
+def follow_hash(scene, ob, roles: Roles | None = None) -> str:
+    """Digest of what a follower's bake depends on: its spring, its own motion (not the Delta
+    Location keys the bake writes), the frame range and rate, and its parent — through the
+    rigid bodies' hash when the parent is one (its motion is their bake's)."""
+    roles = roles if roles is not None else gather(scene)
+    own = [k for k in _animation_dump(ob) if k[0] != "delta_location"]
+    record = {"follow": _rna_dump(ob.physanim.follow), "own": own,
+              "location": [round(float(v), 7) for v in ob.location],
+              "parent_inverse": [round(float(v), 7) for row in ob.matrix_parent_inverse
+                                 for v in row],
+              "frames": (scene.physanim.frame_start, scene.physanim.frame_end),
+              "fps": convert.fps(scene)}
+    parent = ob.parent
+    if parent is not None and parent.physanim.rigid_body.enabled:
+        record["parent"] = rigid_hash(scene, roles.rigid_bodies, roles)
+    elif parent is not None:
+        record["parent"] = _object_record(parent, None)
+    return hashlib.sha256(json.dumps(record, sort_keys=True).encode()).hexdigest()

@@ -12,7 +12,7 @@ import bpy
 from bpy.props import BoolProperty, EnumProperty, IntProperty
 
 from ..core.errors import PhysanimError
-from . import bake, cache_paths, results, resume, rigid_keys, springs
+from . import bake, cache_paths, follow, results, resume, rigid_keys, springs
 
 FRAME_BUDGET_S = 0.05  # modal: simulate for at most this long per timer tick, then redraw
 
@@ -179,6 +179,10 @@ class PHYSANIM_OT_free_bake(bpy.types.Operator):
             if rigid and not any(ob.physanim.rigid_body.baked_action is not None
                                  for ob in scene.objects) and bpy.data.filepath:
                 remove_cache(cache_paths.rigid_cache_dir(scene))
+            for ob in scene.objects:  # followers: their Delta Location keys
+                if (chosen is None or ob.name in chosen) and follow.remove_keys(ob):
+                    ob.physanim.follow.bake_hash = ""
+                    freed += 1
             if freed and bpy.data.filepath:  # a checkpoint of freed frames resumes nothing
                 resume.discard(scene)
             # leftovers of results the user deleted by hand: keyed objects and cache folders

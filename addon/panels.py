@@ -20,7 +20,8 @@ def bake_status(scene) -> tuple[str, str]:
         return f"Cannot check bake: {exc}", 'ERROR'
     if outdated:
         return f"Bake is outdated (the scene changed): {', '.join(outdated)}", 'ERROR'
-    everything = len(roles.emitters) + len(roles.spring_meshes) + len(roles.rigid_bodies)
+    everything = (len(roles.emitters) + len(roles.spring_meshes) + len(roles.rigid_bodies)
+                  + len(roles.followers))
     if missing and len(missing) == everything:
         return "Not baked", 'INFO'
     if missing:
@@ -67,6 +68,7 @@ class PHYSANIM_PT_object(_PhysicsPanel, bpy.types.Panel):
             row.prop(p.spring_mesh, "enabled", toggle=True, icon='MOD_CLOTH')
             row.prop(p.rigid_body, "enabled", toggle=True, icon='RIGID_BODY')
         row.prop(p.constraint, "enabled", toggle=True, icon='CONSTRAINT')
+        row.prop(p.follow, "enabled", toggle=True, icon='CON_FOLLOWPATH')
         draw_bake_buttons(self.layout.box(), context.scene)
 
 
@@ -210,6 +212,27 @@ class PHYSANIM_PT_collider(_PhysicsPanel, bpy.types.Panel):
         layout.prop(p, "thickness")
 
 
+class PHYSANIM_PT_follow(_PhysicsPanel, bpy.types.Panel):
+    bl_label = "Follow-Through"
+    bl_parent_id = "PHYSANIM_PT_object"
+
+    @classmethod
+    def poll(cls, context):
+        return context.object is not None and context.object.physanim.follow.enabled
+
+    def draw(self, context):
+        ob = context.object
+        p = ob.physanim.follow
+        layout = self.layout
+        layout.use_property_split = True
+        if ob.parent is None:
+            layout.label(text="Parent it to what it should follow", icon='ERROR')
+        else:
+            layout.label(text=f"Trails {ob.parent.name} (Delta Location keys)", icon='INFO')
+        layout.prop(p, "frequency")
+        layout.prop(p, "damping")
+
+
 class PHYSANIM_PT_force(_PhysicsPanel, bpy.types.Panel):
     bl_label = "Force"
     bl_parent_id = "PHYSANIM_PT_object"
@@ -340,7 +363,8 @@ class PHYSANIM_PT_scene(bpy.types.Panel):
 
 
 CLASSES = (PHYSANIM_PT_object, PHYSANIM_PT_emitter, PHYSANIM_PT_emitter_look,
-           PHYSANIM_PT_emitter_springs, PHYSANIM_PT_collider, PHYSANIM_PT_force,
+           PHYSANIM_PT_emitter_springs, PHYSANIM_PT_collider, PHYSANIM_PT_follow,
+           PHYSANIM_PT_force,
            PHYSANIM_PT_spring_mesh, PHYSANIM_PT_spring_virtual, PHYSANIM_PT_scene)
 
 

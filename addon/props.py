@@ -484,6 +484,20 @@ class PHYSANIM_PG_result(bpy.types.PropertyGroup):
                          description="Digest of the inputs of the bake (outdated detection)")
 
 
+class PHYSANIM_PG_follow(bpy.types.PropertyGroup):
+    enabled: BoolProperty(name="Follow-Through", options=STATIC,
+                          description="This object trails its parent through a damped spring: it "
+                                      "runs on when the parent stops and swings back (baked to "
+                                      "Delta Location keys; its own animation stays)")
+    frequency: FloatProperty(name="Frequency", min=0.01, max=1000.0, soft_max=20.0, default=2.0,
+                             options=STATIC, description="How fast it swings, Hz: higher "
+                                                         "follows more tightly")
+    damping: FloatProperty(name="Damping", min=0.0, max=100.0, soft_max=2.0, default=0.3,
+                           options=STATIC, description="Damping ratio: 0 swings on forever, 1 "
+                                                       "settles without overshoot")
+    bake_hash: StringProperty(options={'HIDDEN'})
+
+
 class PHYSANIM_PG_object(bpy.types.PropertyGroup):
     emitter: PointerProperty(type=PHYSANIM_PG_emitter)
     collider: PointerProperty(type=PHYSANIM_PG_collider)
@@ -491,6 +505,7 @@ class PHYSANIM_PG_object(bpy.types.PropertyGroup):
     spring_mesh: PointerProperty(type=PHYSANIM_PG_spring_mesh)
     rigid_body: PointerProperty(type=PHYSANIM_PG_rigid_body)
     constraint: PointerProperty(type=PHYSANIM_PG_constraint)
+    follow: PointerProperty(type=PHYSANIM_PG_follow)
     result: PointerProperty(type=PHYSANIM_PG_result)
 
 
@@ -525,7 +540,7 @@ class PHYSANIM_PG_scene(bpy.types.PropertyGroup):
 
 CLASSES = (PHYSANIM_PG_stop, PHYSANIM_PG_emitter, PHYSANIM_PG_collider, PHYSANIM_PG_force,
            PHYSANIM_PG_virtual, PHYSANIM_PG_spring_mesh, PHYSANIM_PG_rigid_body,
-           PHYSANIM_PG_constraint, PHYSANIM_PG_result, PHYSANIM_PG_object,
+           PHYSANIM_PG_constraint, PHYSANIM_PG_result, PHYSANIM_PG_follow, PHYSANIM_PG_object,
            PHYSANIM_PG_scene)
 
 
