@@ -146,6 +146,10 @@ class PHYSANIM_PT_emitter_look(_PhysicsPanel, bpy.types.Panel):
             layout.prop(p, "blob_size")
             layout.prop(p, "blob_resolution")
         if mode == 'OBJECT':
+            layout.prop(p, "squash")
+            if p.squash > 0.0:
+                layout.prop(p, "squash_recovery")
+        if mode == 'OBJECT' and p.squash == 0.0:
             layout.prop(p, "stretch")
         if p.result is not None:
             layout.prop(p, "result")

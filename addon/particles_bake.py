@@ -7,6 +7,7 @@ import numpy as np
 from ..core.cache import CacheWriter
 from ..core.contact import ColliderPaths
 from ..core.errors import PhysanimError, SimulationError
+from ..core.controls import ImpactTracker, SquashSettings, euler_xyz, log_deformation, principal
 from ..core.particles import ParticleSolver, ParticleSystem, emitter_arrays
 from ..core.usd_points import MAX_FLOAT_ID
 from . import convert, limits, native_points
@@ -35,6 +36,11 @@ class ParticleBake:
         self.usd = {ob.name for ob in emitters if ob.physanim.emitter.output == 'USD_POINTS'}
         self.usd_extension = native_points.file_extension() if self.usd else ""
         self.first_frame = 0  # set by start()
+        # squash and stretch: each emitter's particles' last impacts, frame to frame
+        self.trackers = {ob.name: ImpactTracker(SquashSettings(ob.physanim.emitter.squash,
+                                                               ob.physanim.emitter.squash_recovery),
+                                                convert.gravity(scene))
+                         for ob in emitters if ob.physanim.emitter.squash > 0.0}
         self.births = {ob.name: 0 for ob in emitters}
         self.stats = stats
         self.system: ParticleSystem | None = None
@@ -94,6 +100,8 @@ class ParticleBake:
             arrays = emitter_arrays(self.model, state, i, frame=frame)
             for key in ("age", "life"):  # frames, as Blender shows them
                 arrays[key] = convert.seconds_to_frames(self.scene, arrays[key]).astype(np.float32)
+            if ob.name in self.trackers:
+                self._squash(self.trackers[ob.name], arrays)
             writer = self.writers[ob.name]
             writer.write_frame(STREAM, frame, arrays)
             if ob.name in self.usd:
@@ -103,6 +111,16 @@ class ParticleBake:
                                   native_points.frame_file_name(number, self.usd_extension),
                                   native_points.save_frame, (arrays, frame))
         self.stats["peak"] = max(self.stats["peak"], state.particle_count)
+
+    def _squash(self, tracker: ImpactTracker, arrays: dict) -> None:
+        """The instances' squash and stretch (their volume kept): instance_scale and
+        instance_rotation from the velocity and the last impact of each particle."""
+        impact, age = tracker.update(arrays["id"], arrays["velocity"],
+                                     convert.seconds_per_frame(self.scene))
+        axes, factors = principal(log_deformation(arrays["velocity"], impact, age,
+                                                  tracker.settings))
+        arrays["instance_scale"] = (arrays["size"][:, None] * factors).astype(np.float32)
+        arrays["instance_rotation"] = euler_xyz(axes).astype(np.float32)
 
     @staticmethod
     def _check_usd_ids(ob, ids: np.ndarray, frame: int) -> None:

@@ -148,6 +148,15 @@ class PHYSANIM_PG_emitter(bpy.types.PropertyGroup):
     seed: IntProperty(name="Seed", min=0, max=2**31 - 1, options=STATIC)
     color_stops: CollectionProperty(type=PHYSANIM_PG_stop)
     size_stops: CollectionProperty(type=PHYSANIM_PG_stop)
+    squash: FloatProperty(name="Squash & Stretch", min=0.0, max=20.0, soft_max=3.0, default=0.0,
+                          options=STATIC,
+                          description="Instances stretch along their velocity in flight and "
+                                      "squash along the contact normal on impact, their volume "
+                                      "kept (0: off; replaces Stretch); the particles' motion "
+                                      "stays as simulated")
+    squash_recovery: FloatProperty(name="Recovery", min=0.001, max=10.0, default=0.15,
+                                   unit='TIME_ABSOLUTE', options=STATIC,
+                                   description="Seconds for an impact's squash to fall to 1/e")
     stretch: FloatProperty(name="Stretch", min=0.0, max=100.0, soft_max=1.0, default=0.0,
                            description="Shape from velocity: stretch along the velocity by "
                                        "1 + stretch*speed (s/m); 0 keeps particles round", options=STATIC)
@@ -369,6 +378,14 @@ class PHYSANIM_PG_rigid_body(bpy.types.PropertyGroup):
                                  default=(1.0, 1.0, 1.0), options=STATIC,
                                  description="Principal moments about the object's X, Y, Z "
                                              "axes through the center of mass, kg m²")
+    squash: FloatProperty(name="Squash & Stretch", min=0.0, max=20.0, soft_max=3.0, default=0.0,
+                          options=STATIC,
+                          description="Keys scale so the body stretches along its velocity in "
+                                      "flight and squashes on impact, its volume kept (0: off); "
+                                      "the simulation itself stays rigid")
+    squash_recovery: FloatProperty(name="Recovery", min=0.001, max=10.0, default=0.15,
+                                   unit='TIME_ABSOLUTE', options=STATIC,
+                                   description="Seconds for an impact's squash to fall to 1/e")
     previous_action: PointerProperty(type=bpy.types.Action, options={'HIDDEN'},
                                      description="The animation the bake set aside")
     previous_slot: StringProperty(options={'HIDDEN'})

@@ -13,6 +13,7 @@ import numpy as np
 from mathutils import Matrix
 
 from ..core.cache import read_frame
+from ..core.controls import ImpactTracker, SquashSettings, log_deformation
 from ..core.rigid import quaternion as quat
 from . import compat, convert
 
@@ -90,6 +91,36 @@ def write_keys(scene, objects: list, folder: str, frame_start: int, frame_end: i
             compat.set_keys(compat.fcurve_ensure(bag, "rotation_quaternion", axis), f32,
                             q[:, axis])
         ob.rotation_mode = 'QUATERNION'
+        if ob.physanim.rigid_body.squash > 0.0:
+            factors = squash_factors(scene, ob, pos[:, i], rot[:, i])
+            own = np.array(ob.physanim.rigid_body.previous_pose[14:17])
+            for axis in range(3):
+                compat.set_keys(compat.fcurve_ensure(bag, "scale", axis), f32,
+                                own[axis] * factors[:, axis])
+
+
+def squash_factors(scene, ob, position: np.ndarray, rotation: np.ndarray) -> np.ndarray:
+    """(f, 3) scale factors along the body's own axes for squash and stretch (their product is
+    1): the world deformation (:mod:`..core.controls.squash`) from the baked motion, seen in the
+    body's axes. Exact when an axis lies along the motion or the contact normal (a ball dropped
+    without spin, a box landing flat); otherwise the nearest deformation along its axes."""
+    p = ob.physanim.rigid_body
+    settings = SquashSettings(p.squash, p.squash_recovery)
+    dt = convert.seconds_per_frame(scene)
+    velocity = np.zeros_like(position)  # over the frame just ended (the first: the next one)
+    if len(position) > 1:
+        velocity[1:] = np.diff(position, axis=0) / dt
+        velocity[0] = velocity[1]
+    tracker = ImpactTracker(settings, convert.gravity(scene))
+    axes = quat.to_matrix(rotation)
+    out = np.empty((len(position), 3))
+    for k in range(len(position)):
+        impact, age = tracker.update(np.zeros(1, np.int64), velocity[k:k + 1], dt)
+        world = log_deformation(velocity[k:k + 1], impact, age, settings)[0]
+        local = axes[k].T @ world @ axes[k]
+        diagonal = np.diag(local)
+        out[k] = np.exp(diagonal - diagonal.sum() / 3.0)
+    return out
 
 
 def _baked_action(ob) -> bpy.types.Action:

@@ -74,6 +74,10 @@ class PHYSANIM_PT_rigid_body(_PhysicsPanel, bpy.types.Panel):
         col.active = not p.kinematic
         col.prop(p, "initial_velocity")
         col.prop(p, "initial_angular_velocity")
+        col = layout.column(align=True)
+        col.prop(p, "squash")
+        if p.squash > 0.0:
+            col.prop(p, "squash_recovery")
         self._mass_overrides(layout, p, shape, props)
         layout.operator("physanim.connect", icon='CONSTRAINT')
 
