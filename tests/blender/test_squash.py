@@ -75,7 +75,7 @@ def test_a_rigid_box_stretches_as_it_falls_and_squashes_as_it_lands(physanim_ext
 
 
 def test_particle_instances_squash_on_the_ground_and_keep_their_volume(physanim_ext, tmp_path):
-    scene = _scene(tmp_path)
+    _scene(tmp_path)
     bpy.ops.mesh.primitive_plane_add(size=1.0, location=(0.0, 0.0, 3.0))
     emitter = bpy.context.object
     p = emitter.physanim.emitter
