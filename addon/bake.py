@@ -29,6 +29,7 @@ from ..core.errors import PhysanimError
 from ..core.world import World
 from . import (budget, convert, extract, follow, inputs_hash, limits, native_points, rigid,
                rigid_keys)
+from . import aim as aim_solver
 from . import resume as checkpoint
 from . import springs
 from .cache_paths import relative_path
@@ -51,10 +52,11 @@ class BakeJob:
             where it stopped, a finished one is extended to the scene's frame end.
         checkpoint_every: seconds of baking between checkpoints (0: every frame; None:
             :func:`.resume.interval`).
+        aim: first solve the launch of rigid bodies with a target (:mod:`.aim`).
     """
 
     def __init__(self, context, only: set[str] | None = None, resume: bool = False,
-                 checkpoint_every: float | None = None):
+                 checkpoint_every: float | None = None, aim: bool = True):
         self.scene = context.scene
         self.checkpoints = checkpoint.Checkpoints(checkpoint_every)
         self._resume_from = self._resume_data(only) if resume else None
@@ -72,6 +74,9 @@ class BakeJob:
         budget.check_budget(self.scene, self.roles)
         for ob in self.roles.followers:  # refused before anything changes
             follow.check(ob, self.frame_start)
+        # hit the mark: bodies with a target get the launch that reaches it (scratch bakes)
+        self.aim_notes = (aim_solver.solve(context, self.roles, self.frame_start, self.frame_end)
+                          if aim and self._resume_from is None else [])
         self.frame = self.frame_start
         self.started = time.perf_counter()
         self.failures: list[tuple[str, str]] = []  # (system, message) of systems that failed
@@ -534,6 +539,8 @@ class BakeJob:
                 f"{births}, {took:.2f} s")
         if self.breaks:
             info += "; " + "; ".join(self.breaks)
+        if self.aim_notes:
+            info += "; " + "; ".join(self.aim_notes)
         self.settings.bake_info = info
         return info
 

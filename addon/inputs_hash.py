@@ -189,6 +189,8 @@ def rigid_hash(scene, objects: list, roles: Roles | None = None) -> str:
     settings.update(fps=convert.fps(scene), gravity=convert.gravity(scene),
                     anim=_animation_dump(scene), role="rigid_body")
     records = [_object_record(o, "rigid_body") for o in objects]
+    records += [_object_record(o.physanim.rigid_body.target, None) for o in objects
+                if o.physanim.rigid_body.target is not None]  # where a body aims
     records += [_object_record(o, "collider") for o in roles.colliders]
     names = {o.name for o in objects}
     for c in roles.constraints:  # the joints, and the animated objects holding them

@@ -378,6 +378,12 @@ class PHYSANIM_PG_rigid_body(bpy.types.PropertyGroup):
                                  default=(1.0, 1.0, 1.0), options=STATIC,
                                  description="Principal moments about the object's X, Y, Z "
                                              "axes through the center of mass, kg m²")
+    target: PointerProperty(name="Target", type=bpy.types.Object,
+                            description="Hit the mark: the bake sets Initial Velocity so the "
+                                        "body's centre reaches this object's origin at Target "
+                                        "Frame (solved on the simulation itself)")
+    target_frame: IntProperty(name="Target Frame", default=48, options=STATIC,
+                              description="The frame the body arrives at its target")
     squash: FloatProperty(name="Squash & Stretch", min=0.0, max=20.0, soft_max=3.0, default=0.0,
                           options=STATIC,
                           description="Keys scale so the body stretches along its velocity in "

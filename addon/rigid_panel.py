@@ -75,6 +75,11 @@ class PHYSANIM_PT_rigid_body(_PhysicsPanel, bpy.types.Panel):
         col.prop(p, "initial_velocity")
         col.prop(p, "initial_angular_velocity")
         col = layout.column(align=True)
+        col.prop(p, "target")
+        if p.target is not None:
+            col.prop(p, "target_frame")
+            col.label(text="Initial Velocity is solved when baking", icon='INFO')
+        col = layout.column(align=True)
         col.prop(p, "squash")
         if p.squash > 0.0:
             col.prop(p, "squash_recovery")
