@@ -31,8 +31,14 @@ def _key_linear(ob, path: str, frames_values) -> None:
 
 
 def _curves(ob):
-    compat = sys.modules[[m for m in sys.modules if m.endswith("physanim.addon.compat")][0]]
-    return compat.action_fcurves(ob.animation_data)
+    """The object's F-curves through its action (slotted or not): what Blender plays."""
+    ad = ob.animation_data
+    if ad is None or ad.action is None:
+        return []
+    if not hasattr(ad, "action_slot"):  # 4.2: legacy actions
+        return list(ad.action.fcurves)
+    return [fc for layer in ad.action.layers for strip in layer.strips
+            for fc in strip.channelbag(ad.action_slot).fcurves]
 
 
 def _child(parent, location=(0.0, 0.0, -1.0)):
