@@ -68,3 +68,20 @@ class LabelRecorder:
 
     def __getattr__(self, name):
         return lambda *args, **kw: LabelRecorder(self.labels)
+
+
+def image_pixels(path) -> np.ndarray:
+    """(height, width, 4) float pixels of an image file; row 0 is the bottom row."""
+    image = bpy.data.images.load(str(path))
+    width, height = image.size
+    pixels = np.empty(width * height * 4, np.float32)
+    image.pixels.foreach_get(pixels)
+    bpy.data.images.remove(image)
+    return pixels.reshape(height, width, 4)
+
+
+def render_still(scene, path) -> np.ndarray:
+    """Render the scene's current frame to ``path`` and return its pixels."""
+    scene.render.filepath = str(path)
+    bpy.ops.render.render(write_still=True)
+    return image_pixels(path)

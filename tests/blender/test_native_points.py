@@ -18,7 +18,7 @@ import bpy
 import numpy as np
 import pytest
 
-from physanim.tests.blender.probes import LabelRecorder
+from physanim.tests.blender.probes import LabelRecorder, image_pixels, render_still
 from sample_scenes._common import result_points
 
 NATIVE_MODIFIERS = [("physanim_cache", 'MESH_SEQUENCE_CACHE'), ("physanim_attributes", 'NODES'),
@@ -109,20 +109,9 @@ def _camera_scene(scene) -> None:
     scene.view_settings.view_transform = 'Standard'
 
 
-def _pixels(path: Path) -> np.ndarray:
-    image = bpy.data.images.load(str(path))
-    width, height = image.size
-    pixels = np.empty(width * height * 4, np.float32)
-    image.pixels.foreach_get(pixels)
-    bpy.data.images.remove(image)
-    return pixels.reshape(height, width, 4)
-
-
 def _render_here(scene, path: Path, frame: int) -> np.ndarray:
     scene.frame_set(frame)
-    scene.render.filepath = str(path)
-    bpy.ops.render.render(write_still=True)
-    return _pixels(path)
+    return render_still(scene, path)
 
 
 @pytest.mark.parametrize("render_as", ['OBJECT', 'BILLBOARD', 'GLOW', 'BLOBS', 'STREAKS'])
@@ -160,7 +149,7 @@ def test_renders_the_same_pixels_where_physanim_is_not_installed(physanim_ext, t
                            str(tmp_path / "without.png")], capture_output=True, text=True,
                           env=env, timeout=300)
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
-    without = _pixels(tmp_path / "without.png")
+    without = image_pixels(tmp_path / "without.png")
     np.testing.assert_array_equal(without, with_extension)
 
     # ... and the same pixels as the extension's own Points output of the same bake

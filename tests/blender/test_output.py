@@ -436,14 +436,7 @@ def _render_scene(engine: str):
 
 
 def _render(scene, path) -> np.ndarray:
-    scene.render.filepath = str(path)
-    bpy.ops.render.render(write_still=True)
-    image = bpy.data.images.load(str(path))
-    width, height = image.size
-    pixels = np.empty(width * height * 4, np.float32)
-    image.pixels.foreach_get(pixels)
-    bpy.data.images.remove(image)
-    return pixels.reshape(height, width, 4)  # row 0 is the bottom row
+    return probes.render_still(scene, path)  # row 0 is the bottom row
 
 
 def _pixel(scene, pixels, position):

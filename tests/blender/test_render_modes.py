@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from mathutils import Vector
 
+from physanim.tests.blender.probes import render_still
 from sample_scenes._common import result_points
 
 FRAME = 10
@@ -52,14 +53,13 @@ def _baked(scene, mode: str, **props):
 
 
 def _render(scene, path: Path) -> np.ndarray:
-    scene.render.filepath = str(path)
-    bpy.ops.render.render(write_still=True)
-    image = bpy.data.images.load(str(path))
-    width, height = image.size
-    pixels = np.empty(width * height * 4, np.float32)
-    image.pixels.foreach_get(pixels)
-    bpy.data.images.remove(image)
-    return pixels.reshape(height, width, 4)
+    return render_still(scene, path)
+
+
+def _faces_camera(m, camera) -> bool:
+    """Whether an instance's local +Z (its face) points at the camera."""
+    normal = (m.to_3x3() @ Vector((0.0, 0.0, 1.0))).normalized()
+    return normal.dot((camera - m.translation).normalized()) > 0.9999
 
 
 def _instances(res) -> list:
@@ -102,16 +102,12 @@ def test_billboards_face_the_camera(physanim_ext, tmp_path):
     assert len(pairs) == len(points["position"]) > 50
     camera = scene.camera.matrix_world.translation
     for i, m in pairs:
-        normal = (m.to_3x3() @ Vector((0.0, 0.0, 1.0))).normalized()
-        towards = (camera - m.translation).normalized()
-        assert normal.dot(towards) > 0.9999
+        assert _faces_camera(m, camera)
         np.testing.assert_allclose(m.to_scale(), [points["size"][i]] * 3, rtol=1e-5)
     # the camera moves: they turn with it (the node tree looks up the active camera)
     scene.camera.location.x += 3.0
     camera = scene.camera.matrix_world.translation
-    for _i, m in _matched(points, _instances(res)):
-        normal = (m.to_3x3() @ Vector((0.0, 0.0, 1.0))).normalized()
-        assert normal.dot((camera - m.translation).normalized()) > 0.9999
+    assert all(_faces_camera(m, camera) for _i, m in _matched(points, _instances(res)))
     scene.camera.location.x -= 3.0
     image = _render(scene, tmp_path / "billboards.exr")
     alpha = image[..., 3]
@@ -149,9 +145,7 @@ def test_glowing_points_add_light_without_covering(physanim_ext, tmp_path):
     pairs = _matched(points, _instances(res))
     assert len(pairs) == len(points["position"]) > 50
     camera = scene.camera.matrix_world.translation
-    for _i, m in pairs:  # soft discs facing the camera
-        normal = (m.to_3x3() @ Vector((0.0, 0.0, 1.0))).normalized()
-        assert normal.dot((camera - m.translation).normalized()) > 0.9999
+    assert all(_faces_camera(m, camera) for _i, m in pairs)  # soft discs facing the camera
     dim = _render(scene, tmp_path / "dim.exr")
     ob.physanim.emitter.glow_strength = 1.0  # no re-bake: the setting applies at once
     bright = _render(scene, tmp_path / "bright.exr")

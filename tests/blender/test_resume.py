@@ -61,6 +61,15 @@ def _partials(folder: Path) -> list[str]:
     return sorted(p.name for p in folder.rglob("*") if ".partial-" in p.name)
 
 
+def _cut_off(bake, steps: int):
+    """A bake stopped after ``steps`` frames, as Esc does (checkpoint every frame)."""
+    job = bake.BakeJob(bpy.context, checkpoint_every=0)
+    for _ in range(steps):
+        job.step(bpy.context)
+    job.suspend()
+    return job
+
+
 def _reference(bake, cache: Path) -> dict[str, str]:
     """An uninterrupted bake's files (the scene's first bake: later ones must equal it)."""
     assert bake.run(bpy.context)[1] is None
@@ -155,10 +164,7 @@ def test_resuming_a_changed_scene_is_refused_and_a_fresh_bake_cleans_up(physanim
     path = _shot(tmp_path / "shot")
     bake, resume = _module(physanim_ext, "bake"), _module(physanim_ext, "resume")
     cache = path.parent / "physanim_cache"
-    job = bake.BakeJob(bpy.context, checkpoint_every=0)
-    for _ in range(5):
-        job.step(bpy.context)
-    job.suspend()
+    _cut_off(bake, 5)
     kept = _partials(cache)
     assert len(kept) == 3
     bpy.data.objects["Sheet"].physanim.spring_mesh.stiffness *= 2.0
@@ -193,10 +199,7 @@ def test_the_panel_offers_resume_and_says_which_frames_are_cached(physanim_ext, 
     bake, panels = _module(physanim_ext, "bake"), _module(physanim_ext, "panels")
     from physanim.tests.blender.probes import LabelRecorder
 
-    job = bake.BakeJob(bpy.context, checkpoint_every=0)
-    for _ in range(7):
-        job.step(bpy.context)
-    job.suspend()
+    _cut_off(bake, 7)
     labels: list[str] = []
     panels.draw_bake_buttons(LabelRecorder(labels), bpy.context.scene)
     assert any("Frames 1-8 of 1-24 cached (cut off): Resume continues from frame 8" in t
@@ -210,10 +213,7 @@ def test_the_panel_offers_resume_and_says_which_frames_are_cached(physanim_ext, 
 def test_the_command_line_resumes(physanim_ext, tmp_path, capsys):
     path = _shot(tmp_path / "shot")
     bake, cli = _module(physanim_ext, "bake"), _module(physanim_ext, "cli")
-    job = bake.BakeJob(bpy.context, checkpoint_every=0)
-    for _ in range(9):
-        job.step(bpy.context)
-    job.suspend()
+    _cut_off(bake, 9)
     capsys.readouterr()
     assert cli.main(["bake", str(path), "--resume", "--save"]) == 0
     out = capsys.readouterr().out
