@@ -57,14 +57,23 @@ def evaluated_instance_attributes(obj: bpy.types.Object, depsgraph: bpy.types.De
 
 
 class LabelRecorder:
-    """A stand-in for a panel's ``layout`` that records the labels ``draw()`` shows, accepting
-    any other call (rows, props, operators)."""
+    """A stand-in for a panel's ``layout`` that records the labels ``draw()`` shows, checks that
+    every property it draws exists, and accepts any other call (rows, operators)."""
 
     def __init__(self, labels: list):
         self.labels = labels
 
     def label(self, text: str = "", **_kw):
         self.labels.append(text)
+
+    def prop(self, data, name: str, **_kw):
+        if name not in data.bl_rna.properties:
+            raise AttributeError(f"the panel draws {type(data).__name__}.{name}, which does "
+                                 "not exist")
+        return LabelRecorder(self.labels)
+
+    def template_ID(self, data, name: str, **kw):  # Blender's name
+        return self.prop(data, name)
 
     def __getattr__(self, name):
         return lambda *args, **kw: LabelRecorder(self.labels)
