@@ -39,7 +39,7 @@ GLOW_MATERIAL = "physanim_glow"
 SPRITE_MATERIAL = "physanim_sprite"
 BLOB_MATERIAL = "physanim_blob"
 BLOB_COLOR = "pa_color"  # Cycles reads a realized attribute named exactly "color" as black
-_VERSION = 1
+_VERSION = 6
 
 
 def apply(res: bpy.types.Object, p) -> bpy.types.NodesModifier:
@@ -182,7 +182,7 @@ def _build_blobs(group) -> None:
     volume.location = (-900, 0)
     compat.volume_resolution_by_size(volume)
     links.new(group_in.outputs["Geometry"], volume.inputs["Points"])
-    links.new(group_in.outputs["Voxel Size"], volume.inputs["Voxel Size"])
+    links.new(_voxel_floor(group, group_in, radius.outputs[0]), volume.inputs["Voxel Size"])
     links.new(radius.outputs[0], volume.inputs["Radius"])
     surface = nodes.new('GeometryNodeVolumeToMesh')
     surface.location = (-700, 0)
@@ -209,7 +209,90 @@ def _build_blobs(group) -> None:
     material.location = (0, 0)
     links.new(store.outputs["Geometry"], material.inputs["Geometry"])
     links.new(group_in.outputs["Material"], material.inputs["Material"])
-    links.new(material.outputs["Geometry"], group_out.inputs["Geometry"])
+    # No points, no surface: Volume to Mesh of an empty volume crashes Blender (4.5), so the
+    # (lazy) switch does not build one at all.
+    count = nodes.new('GeometryNodeAttributeStatistic')
+    count.data_type, count.domain = 'FLOAT', 'POINT'
+    count.inputs["Attribute"].default_value = 1.0
+    count.location = (0, -300)
+    links.new(group_in.outputs["Geometry"], count.inputs["Geometry"])
+    some = nodes.new('FunctionNodeCompare')
+    some.data_type, some.operation = 'FLOAT', 'GREATER_THAN'
+    some.location = (200, -300)
+    links.new(count.outputs["Sum"], some.inputs[0])
+    any_points = _switch_geometry(group, (400, 0))
+    links.new(some.outputs[0], any_points.inputs["Switch"])
+    links.new(material.outputs["Geometry"], any_points.inputs["True"])
+    links.new(group_in.outputs["Geometry"], any_points.inputs["False"])
+    links.new(any_points.outputs["Output"], group_out.inputs["Geometry"])
+
+
+def _switch_geometry(group, location):
+    node = group.nodes.new('GeometryNodeSwitch')
+    node.input_type = 'GEOMETRY'
+    node.location = location
+    return node
+
+
+MAX_BLOB_VOXELS = 3.0e6  # a frame's blob volume at most (~12 MB of voxels, a few M vertices)
+MAX_BLOB_INDEX = 1.0e6  # voxels from the origin to the farthest point, per axis
+
+
+def _voxel_floor(group, group_in, radius):
+    """The voxel size the volume uses: the Voxel Size input, but never so small that the blobs
+    would need more than MAX_BLOB_VOXELS voxels (N points of radius up to r fill about
+    N (2 r / v)^3) or a point would lie more than MAX_BLOB_INDEX voxels out (OpenVDB's index
+    space) — a huge or far-flung cloud gets coarser blobs instead of exhausting memory."""
+    nodes, links = group.nodes, group.links
+    stats = nodes.new('GeometryNodeAttributeStatistic')
+    stats.data_type, stats.domain = 'FLOAT', 'POINT'
+    stats.location = (-1500, -700)
+    links.new(group_in.outputs["Geometry"], stats.inputs["Geometry"])
+    links.new(radius, stats.inputs["Attribute"])
+    count = nodes.new('GeometryNodeAttributeStatistic')
+    count.data_type, count.domain = 'FLOAT', 'POINT'
+    count.location = (-1500, -950)
+    count.inputs["Attribute"].default_value = 1.0
+    links.new(group_in.outputs["Geometry"], count.inputs["Geometry"])
+    share = _math(group, 'DIVIDE', (-1300, -950))
+    links.new(count.outputs["Sum"], share.inputs[0])
+    share.inputs[1].default_value = MAX_BLOB_VOXELS
+    root = _math(group, 'POWER', (-1150, -950))
+    links.new(share.outputs[0], root.inputs[0])
+    root.inputs[1].default_value = 1.0 / 3.0
+    crowd = _math(group, 'MULTIPLY', (-1000, -850))
+    links.new(stats.outputs["Max"], crowd.inputs[0])
+    links.new(root.outputs[0], crowd.inputs[1])
+    crowd_floor = _math(group, 'MULTIPLY', (-850, -850))
+    links.new(crowd.outputs[0], crowd_floor.inputs[0])
+    crowd_floor.inputs[1].default_value = 2.0
+    bounds = nodes.new('GeometryNodeBoundBox')
+    bounds.location = (-1500, -1200)
+    links.new(group_in.outputs["Geometry"], bounds.inputs["Geometry"])
+    far = []
+    for k, corner in enumerate(("Min", "Max")):
+        absolute = _math(group, 'ABSOLUTE', (-1300, -1150 - 100 * k), vector=True)
+        links.new(bounds.outputs[corner], absolute.inputs[0])
+        far.append(absolute.outputs["Vector"])
+    farthest = _math(group, 'MAXIMUM', (-1150, -1200), vector=True)
+    links.new(far[0], farthest.inputs[0])
+    links.new(far[1], farthest.inputs[1])
+    xyz = nodes.new('ShaderNodeSeparateXYZ')
+    xyz.location = (-1000, -1200)
+    links.new(farthest.outputs["Vector"], xyz.inputs["Vector"])
+    out = group_in.outputs["Voxel Size"]
+    floors = [crowd_floor.outputs[0]]
+    for axis in ("X", "Y", "Z"):  # a coordinate: at most MAX_BLOB_INDEX voxels out
+        scale = _math(group, 'DIVIDE', (-850, -1200))
+        links.new(xyz.outputs[axis], scale.inputs[0])
+        scale.inputs[1].default_value = MAX_BLOB_INDEX
+        floors.append(scale.outputs[0])
+    for scaled in floors:
+        larger = _math(group, 'MAXIMUM', (-700, -900))
+        links.new(out, larger.inputs[0])
+        links.new(scaled, larger.inputs[1])
+        out = larger.outputs[0]
+    return out
 
 
 def _store(group, data_type: str, name: str, location, domain: str = 'POINT'):
