@@ -19,7 +19,6 @@ from __future__ import annotations
 import contextlib
 import os
 import pickle
-import re
 import time
 
 import bpy
@@ -27,23 +26,15 @@ import bpy
 from ..core.contact import ColliderPaths
 from ..core.errors import PhysanimError
 from ..core.world import World
-from . import (budget, convert, extract, follow, inputs_hash, limits, native_points, rigid,
-               rigid_keys)
+from . import budget, convert, extract, follow, inputs_hash, limits, rigid, rigid_keys
 from . import aim as aim_solver
 from . import resume as checkpoint
 from . import springs
+from .bake_resume import Resumable
 from .cache_paths import relative_path
 from .particles_bake import STREAM, ParticleBake
 
-#: What each system's bake wrapper carries from frame to frame, saved in a checkpoint (the core
-#: objects among them are shared with the world and pickled together with it).
-_RESUMED = {"particles": ("model", "solver", "system", "births", "first_frame", "trackers"),
-            "mesh": ("model", "solver", "state", "system", "sample"),
-            "rigid": ("model", "solver", "system", "kinematic", "simulated", "_last",
-                      "joint_values")}
-
-
-class BakeJob:
+class BakeJob(Resumable):
     """Bake every (or the chosen) emitter and spring mesh of a scene, one frame per :meth:`step`.
 
     Args:
@@ -102,139 +93,6 @@ class BakeJob:
         except BaseException:
             self.abort()
             raise
-
-    # -- resuming -------------------------------------------------------------------------------
-    def _resume_data(self, only):
-        """The scene's checkpoint, checked against the scene; raises when there is none to
-        resume or the scene changed."""
-        scene = self.scene
-        data = checkpoint.load(scene)
-        if data is None:
-            raise PhysanimError("nothing to resume: no bake of this scene was cut off or "
-                                "finished with a checkpoint — bake from the start",
-                                obj=scene.name, kind="scene")
-        settings = scene.physanim
-        end = settings.frame_end
-        try:  # the hashes include the frame range: compare at the checkpoint's own
-            settings.frame_end = data["frame_end"]
-            hashes = self._hash_record(extract.gather(scene, data["only"]))
-        finally:
-            settings.frame_end = end
-        checkpoint.check(scene, data, hashes)
-        return data
-
-    def _hash_record(self, roles, all_roles=None) -> dict[str, str]:
-        """Every system's inputs hash, keyed as :meth:`partial_folders` keys its folder."""
-        all_roles = all_roles or extract.gather(self.scene)
-        record = {f"emitter {ob.name}": inputs_hash.emitter_hash(self.scene, ob, all_roles)
-                  for ob in roles.emitters}
-        record.update({f"spring_mesh {ob.name}": inputs_hash.inputs_hash(
-            self.scene, ob, "spring_mesh", all_roles) for ob in roles.spring_meshes})
-        if roles.rigid_bodies:
-            record["rigid_bodies"] = inputs_hash.rigid_hash(self.scene, roles.rigid_bodies,
-                                                            all_roles)
-        return record
-
-    def hash_record(self) -> dict[str, str]:
-        """The inputs hash of each system still baking."""
-        record = {f"emitter {ob.name}": self.hashes[ob.name]
-                  for ob in (self.particles.emitters if self.particles is not None else [])}
-        record.update({f"spring_mesh {m.ob.name}": self.mesh_hashes[m.ob.name]
-                       for m in self.meshes})
-        if self.rigid is not None:
-            record["rigid_bodies"] = self.rigid_hash
-        return record
-
-    def partial_folders(self) -> dict[str, str]:
-        """The folder each system's frames are being written to."""
-        out = {}
-        if self.particles is not None:
-            out.update({f"emitter {name}": str(w.partial_dir)
-                        for name, w in self.particles.writers.items()})
-        out.update({f"spring_mesh {m.ob.name}": str(m.writer.partial_dir) for m in self.meshes})
-        if self.rigid is not None:
-            out["rigid_bodies"] = str(self.rigid.writer.partial_dir)
-        return out
-
-    def checkpoint_state(self) -> bytes:
-        """Everything the bake carries to the next frame, pickled in one piece (shared objects
-        stay shared)."""
-        state = {"world": self.world, "sample": self.sample, "colliders": self.colliders,
-                 "stats": self.stats, "only": self._only,
-                 "particles": self._fields(self.particles, "particles"),
-                 "meshes": {m.ob.name: self._fields(m, "mesh") for m in self.meshes},
-                 "rigid": self._fields(self.rigid, "rigid")}
-        return pickle.dumps(state, protocol=pickle.HIGHEST_PROTOCOL)
-
-    @staticmethod
-    def _fields(wrapper, kind: str) -> dict | None:
-        if wrapper is None:
-            return None
-        return {name: getattr(wrapper, name) for name in _RESUMED[kind]}
-
-    def _save_checkpoint(self, finished: bool = False, folders=None, state=None) -> None:
-        if self._no_checkpoint is not None:
-            return
-        if not self._owns_checkpoint and self._resume_from is None:
-            checkpoint.discard(self.scene)  # an earlier cut-off bake's partial folders go
-        try:
-            self.checkpoints.save(self, finished, folders, state)
-        except (pickle.PicklingError, TypeError, AttributeError) as exc:
-            self._checkpoint_failed(exc)
-            return
-        if not self._owns_checkpoint and self._resume_from is not None:
-            # the new checkpoint holds the frames resumed from (linked): their folders go
-            checkpoint.release(self._resume_from)
-        self._owns_checkpoint = True
-
-    def _checkpoint_failed(self, exc: Exception) -> None:
-        """Something in the state cannot be saved: the bake goes on, without checkpoints (it
-        cannot be resumed or extended), and says so."""
-        self._no_checkpoint = f"no checkpoint ({exc}): this bake cannot be resumed or extended"
-        print(f"PhysAnim: {self._no_checkpoint}", flush=True)
-
-    def _restore(self, data: dict) -> None:
-        """Continue from ``data``: the frames up to its checkpoint linked from its folders into
-        this bake's, every system's state loaded from it."""
-        frame = data["frame"]
-        samples = frame - self.frame_start + 1
-        state = checkpoint.state_of(data)
-        folders = self.partial_folders()
-        missing = sorted(set(data["folders"]) - set(folders))
-        if missing:
-            raise PhysanimError(f"cannot resume: {', '.join(missing)} did not bake again (see "
-                                "the report) — bake from the start", obj=self.scene.name,
-                                kind="scene")
-        last_file = native_points.file_number(frame, self.frame_start)
-
-        def baked(rel: str) -> bool:  # a frame file up to the checkpoint (the PC2 is cut apart)
-            usd = rel.startswith(native_points.STREAM + os.sep)
-            return not rel.endswith(".pc2") and _numbered_within(rel, last_file if usd else frame)
-
-        for key, source in data["folders"].items():
-            if not os.path.isdir(source):
-                raise PhysanimError(f'cannot resume: the frames of {key} are gone ("{source}") '
-                                    "— bake from the start", obj=self.scene.name, kind="scene")
-            checkpoint.link_frames(source, folders[key], baked)
-        for mesh in self.meshes:
-            source = os.path.join(data["folders"][f"spring_mesh {mesh.ob.name}"],
-                                  springs.CACHE_FILE)
-            mesh.pc2.close()
-            mesh.pc2 = checkpoint.cut_pc2(source, mesh.pc2.path, samples)
-        self.world, self.sample, self.colliders = (state["world"], state["sample"],
-                                                   state["colliders"])
-        self.stats.update(state["stats"])
-        for wrapper, fields in ((self.particles, state["particles"]),
-                                (self.rigid, state["rigid"]),
-                                *((m, state["meshes"][m.ob.name]) for m in self.meshes)):
-            for name, value in (fields or {}).items():
-                setattr(wrapper, name, value)
-        if self.particles is not None:
-            self.particles.stats = self.stats
-        for mesh in self.meshes:
-            mesh.colliders = self.colliders
-        self.frame = frame
-        self.scene.frame_set(frame)
 
     # -- set-up ---------------------------------------------------------------------------------
     def _roles(self, only: set[str] | None) -> extract.Roles:
@@ -621,9 +479,3 @@ def run(context, only: set[str] | None = None, on_frame=None,
     except BaseException:
         job.abort()
         raise
-
-
-def _numbered_within(name: str, last: int) -> bool:
-    """Whether the last number in a frame file's name is at most ``last``."""
-    numbers = re.findall(r"-?\d+", os.path.basename(name))
-    return bool(numbers) and int(numbers[-1]) <= last
