@@ -7,7 +7,7 @@ import bpy
 import numpy as np
 from bpy.props import EnumProperty, FloatProperty
 
-from .props import CONSTRAINT_TYPE_ITEMS, POINT_TYPES
+from .rigid_props import CONSTRAINT_TYPE_ITEMS, POINT_TYPES
 
 # the joints that join two rigid bodies (not those holding an emitter's particles)
 JOINT_TYPE_ITEMS = [item for item in CONSTRAINT_TYPE_ITEMS if item[0] not in POINT_TYPES]

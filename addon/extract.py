@@ -16,7 +16,7 @@ from ..core.particles import (EmitterFrame, EmitterSettings, FrameInputs, Partic
                               ParticleModelBuilder, PointConstraint, SpringLink)
 from . import convert, limits
 from .mesh_read import evaluated_mesh, mesh_polygons
-from .props import CONSTRAINT_TYPE_ITEMS
+from .rigid_props import CONSTRAINT_TYPE_ITEMS, POINT_TYPES
 
 MESH_SOURCES = ("VERTS", "FACES", "VOLUME")
 
@@ -71,9 +71,6 @@ def attachments(scene, ob, what: str = "attachment") -> list:
     return sorted((c for c in scene.objects if c.physanim.constraint.enabled
                    and c.physanim.constraint.object1 == ob and holds(c) == what),
                   key=lambda c: c.name)
-
-
-POINT_TYPES = ('ON_PLANE', 'ON_SPHERE', 'ON_CIRCLE')
 
 
 def type_name(identifier: str) -> str:
