@@ -14,8 +14,9 @@ from __future__ import annotations
 import bpy
 import numpy as np
 
+from ..core.controls.timing import TimeMap
 from ..core.errors import PhysanimError
-from . import convert
+from . import convert, timing
 
 TOLERANCE = 1.0e-4  # m: the miss the solve stops at (a tenth of a millimetre)
 MAX_BAKES = 12
@@ -27,8 +28,9 @@ def aimed(roles) -> list:
             and not ob.physanim.rigid_body.kinematic]
 
 
-def solve(context, roles, frame_start: int, frame_end: int) -> list[str]:
-    """Set each aimed body's Initial Velocity so it hits its target; returns report lines."""
+def solve(context, roles, frame_start: int, frame_end: int, clock: TimeMap) -> list[str]:
+    """Set each aimed body's Initial Velocity so it hits its target; returns report lines.
+    ``clock``: the bake's time map (the flight lasts the simulated time to the target frame)."""
     from .bake import BakeJob
 
     bodies = aimed(roles)
@@ -50,7 +52,8 @@ def solve(context, roles, frame_start: int, frame_end: int) -> list[str]:
                                 frame=frame_start, kind="rigid body")
         scene.frame_set(p.target_frame)
         goals.append(np.array(p.target.matrix_world.translation))
-        spans.append((p.target_frame - frame_start) * dt)
+        spans.append(float(np.diff(timing.frame_seconds(clock, scene,
+                                                        [frame_start, p.target_frame]))[0]))
     scene.frame_set(keep)
     goals, spans = np.array(goals), np.array(spans)
     last = max(ob.physanim.rigid_body.target_frame for ob in bodies)
@@ -115,7 +118,7 @@ def _fly(job, bodies, index, last: int, gravity, dt: float):
     arrived = np.zeros((len(bodies), 3))
     hits: list[list[int]] = [[] for _ in bodies]
     while job.frame < last:
-        job.step(bpy.context)
+        job.step(bpy.context)  # one simulation frame (dt): the frames it shows, with poses
         state = job.rigid.system.state
         now = state.body_P[index] / mass[:, None]
         jump = np.linalg.norm(now - (velocity * keep + gravity * dt), axis=1)
@@ -125,6 +128,6 @@ def _fly(job, bodies, index, last: int, gravity, dt: float):
             target_frame = ob.physanim.rigid_body.target_frame
             if job.frame <= target_frame and jump[k] > slack[k]:
                 hits[k].append(job.frame)
-            if job.frame == target_frame:
-                arrived[k] = state.body_x[index[k]]
+            if target_frame in job.rigid.centres:
+                arrived[k] = job.rigid.centres[target_frame][index[k]]
     return arrived, hits

@@ -20,6 +20,7 @@ import contextlib
 import os
 import pickle
 import time
+from dataclasses import replace
 
 import bpy
 
@@ -29,7 +30,7 @@ from ..core.world import World
 from . import budget, convert, extract, follow, inputs_hash, limits, rigid, rigid_keys
 from . import aim as aim_solver
 from . import resume as checkpoint
-from . import springs
+from . import springs, timing
 from .bake_resume import Resumable
 from .cache_paths import relative_path
 from .particles_bake import STREAM, ParticleBake
@@ -62,13 +63,17 @@ class BakeJob(Resumable):
         self._only = only
         self.roles = self._roles(only)
         limits.check_scene(self.scene, self.frame_start, self.frame_end)
-        budget.check_budget(self.scene, self.roles)
+        # frame -> simulated time (Time Scale); the simulation steps whole frames of its own
+        self.clock = timing.time_map(self.scene, self.frame_start, self.frame_end)
+        budget.check_budget(self.scene, self.roles, float(self.clock.scale.max()))
         for ob in self.roles.followers:  # refused before anything changes
             follow.check(ob, self.frame_start)
         # hit the mark: bodies with a target get the launch that reaches it (scratch bakes)
-        self.aim_notes = (aim_solver.solve(context, self.roles, self.frame_start, self.frame_end)
+        self.aim_notes = (aim_solver.solve(context, self.roles, self.frame_start, self.frame_end,
+                                           self.clock)
                           if aim and self._resume_from is None else [])
-        self.frame = self.frame_start
+        self.frame = self.frame_start  # the last frame written
+        self.tau = self.frame_start  # the simulated time reached, in frame lengths
         self.started = time.perf_counter()
         self.failures: list[tuple[str, str]] = []  # (system, message) of systems that failed
         self._unprepared = 0  # spring meshes not built yet: a failure before them is not the last
@@ -117,7 +122,8 @@ class BakeJob(Resumable):
                             for ob in self.roles.spring_meshes}
         self.rigid_hash = inputs_hash.rigid_hash(self.scene, self.roles.rigid_bodies, all_roles)
         if self.roles.emitters:
-            self.particles = ParticleBake(self.scene, self.roles.emitters, self.hashes, self.stats)
+            self.particles = ParticleBake(self.scene, self.roles.emitters, self.hashes, self.stats,
+                                          self.clock)
         self.extractor = extract.Extractor(self.scene, self.roles)
         self.scene.frame_set(self.frame_start)
         depsgraph = context.evaluated_depsgraph_get()
@@ -169,8 +175,9 @@ class BakeJob(Resumable):
         s = self.frame_start
         if not any(values["active"] for *_, values in self.sample.emitters):
             return None
-        self.scene.frame_set(s - 1)
-        before = self.extractor.sample(self.view_layer.depsgraph, s - 1)
+        frame = self.clock.frame(s - 1)
+        timing.go_to(self.scene, frame)
+        before = self.extractor.sample(self.view_layer.depsgraph, frame, tau=s - 1)
         inputs, self.sample = self._interval(s - 1, before)
         return inputs
 
@@ -243,41 +250,51 @@ class BakeJob(Resumable):
         """Simulate and write the next frame. Returns True when the bake has reached its end."""
         if self.frame >= self.frame_end:
             return True
-        nxt = self.frame + 1
-        inputs, sample = self._interval(self.frame, self.sample)
-        own, mesh_samples = self._own_inputs(inputs, nxt)
-        report = self.world.advance(inputs.world, own)
+        # the frames this simulation frame shows (in slow motion several, each at a fraction
+        # of it; at double speed every other one none), then the frame itself
+        shown = self.clock.frames_in(self.tau, self.frame, self.frame_end)
+        inputs, sample = self._interval(self.tau, self.sample)
+        world = inputs.world
+        samples = tuple(w for _, w in shown if w < 1.0)
+        if samples:
+            world = replace(world, samples=samples)
+        own, mesh_samples = self._own_inputs(inputs, sample.frame)
+        report = self.world.advance(world, own)
         for system, exc in report.failed:
             self._drop(self._channel(system), exc)
-        self._write(report, mesh_samples, nxt)
+        self._write(report, mesh_samples, shown, sample.frame)
         self.sample = sample
-        self.frame = nxt
+        self.tau += 1
+        if shown:
+            self.frame = shown[-1][0]
         if self.frame < self.frame_end and self.checkpoints.due():
             self._save_checkpoint()
         return self.frame >= self.frame_end
 
-    def _interval(self, frame: int, start):
-        """Core inputs for the interval ``frame`` -> ``frame + 1`` from the sample ``start`` at
-        ``frame``; leaves the scene at ``frame + 1``. Returns (inputs, sample at frame + 1)."""
+    def _interval(self, tau: int, start):
+        """Core inputs for the simulation frame ``tau`` -> ``tau + 1`` (simulated time in frame
+        lengths) from the sample ``start`` at its beginning; leaves the scene at the frame
+        showing its end. Returns (inputs, sample there)."""
         between = []
         substeps = self.settings.substeps
         depsgraph = self.view_layer.depsgraph
         self._rigid_between = []
         for k in range(1, substeps):  # sub-frame motion keys: one per sub-step boundary
-            self.scene.frame_set(frame, subframe=k / substeps)
+            timing.go_to(self.scene, self.clock.frame(tau + k / substeps))
             between.append(self.extractor.sample_motion(emitters=False))
             between[-1][0].extend(self._emitter_read(self.extractor.emitter_motion))
             if self.rigid is not None:
                 with self._system(self.rigid):
                     self._rigid_between.append(
                         self.rigid.kinematic_matrices(self.scene.frame_current_final))
-        self.scene.frame_set(frame + 1)
-        end = self.extractor.sample(depsgraph, frame + 1, emitters=False)
-        end.emitters = self._emitter_read(lambda: self.extractor.sample_emitters(depsgraph,
-                                                                                 frame + 1))
+        frame = self.clock.frame(tau + 1)
+        timing.go_to(self.scene, frame)
+        end = self.extractor.sample(depsgraph, frame, emitters=False, tau=tau + 1)
+        end.emitters = self._emitter_read(lambda: self.extractor.sample_emitters(
+            depsgraph, frame, since=start.frame))
         return self.extractor.inputs(start, end, between), end
 
-    def _own_inputs(self, inputs, nxt: int) -> tuple[dict, dict]:
+    def _own_inputs(self, inputs, nxt: float) -> tuple[dict, dict]:
         """Each system's own input for the interval: the emitters' values for the particles,
         a spring mesh's pins and targets at ``nxt`` (read now, the scene being there)."""
         own, samples = {}, {}
@@ -292,17 +309,36 @@ class BakeJob(Resumable):
                 own[mesh.system] = mesh.drive(samples[mesh.ob.name])
         return own, samples
 
-    def _write(self, report, mesh_samples: dict, frame: int) -> None:
+    def _write(self, report, mesh_samples: dict, shown: list, end: float) -> None:
+        """Write the ``shown`` frames (frame, fraction of the simulation frame) of each system;
+        ``end``: the scene frame at the simulation frame's end (messages)."""
         if self.rigid is not None:
+            self.rigid.centres = {}
             with self._system(self.rigid):
-                self.rigid.write_frame(frame)
+                for frame, pose in self._poses(report, self.rigid.system, shown):
+                    self.rigid.write_frame(frame, pose)
         if self.particles is not None:
             with self._system(self.particles):
-                self.particles.record(report.reports[self.particles.system], frame)
-                self.particles.write_frame(frame)
+                self.particles.record(report.reports[self.particles.system], end)
+                for frame, pose in self._poses(report, self.particles.system, shown):
+                    self.particles.write_frame(frame, pose)
         for mesh in list(self.meshes):
             with self._system(mesh):
                 mesh.end_frame(mesh_samples[mesh.ob.name])
+        poses = {mesh: self._poses(report, mesh.system, shown) for mesh in self.meshes}
+        for k, (frame, w) in enumerate(shown):
+            if w < 1.0 and poses:  # the object-space cache needs each mesh's matrix there
+                timing.go_to(self.scene, frame)
+            for mesh in list(self.meshes):
+                with self._system(mesh):
+                    mesh.write(frame, poses[mesh][k][1])
+
+    @staticmethod
+    def _poses(report, system, shown: list) -> list:
+        """(frame, pose) per shown frame: the pose the world sampled for a frame inside the
+        simulation frame, None (the state itself) for the frame at its end."""
+        inner = iter(report.poses.get(system, ()))
+        return [(frame, next(inner) if w < 1.0 else None) for frame, w in shown]
 
     def _channel(self, system):
         if self.particles is not None and system is self.particles.system:
@@ -344,7 +380,7 @@ class BakeJob(Resumable):
         if self.rigid is not None:
             rigid_keys.write_keys(self.scene, self.rigid.objects,
                                   os.path.join(rigid_path, rigid.STREAM), self.frame_start,
-                                  self.frame_end, self.rigid.simulated)
+                                  self.frame_end, self.rigid.simulated, self.clock)
             for ob in self.rigid.objects:
                 ob.physanim.rigid_body.bake_hash = self.rigid_hash
             self.breaks = self.rigid.record_breaks()
@@ -365,7 +401,8 @@ class BakeJob(Resumable):
                            self.frame_start, self.mesh_hashes[ob.name], self.suspended.get(ob.name))
         self.suspended.clear()
         # last: followers trail parents that may have just been baked
-        follow.bake(self.scene, self.roles.followers, self.frame_start, self.frame_end)
+        follow.bake(self.scene, self.roles.followers, self.frame_start, self.frame_end,
+                    self.clock)
         all_roles = extract.gather(self.scene)
         follow_hashes = [inputs_hash.follow_hash(self.scene, ob, all_roles)
                          for ob in self.roles.followers]

@@ -79,7 +79,7 @@ class Resumable:
         """Everything the bake carries to the next frame, pickled in one piece (shared objects
         stay shared)."""
         state = {"world": self.world, "sample": self.sample, "colliders": self.colliders,
-                 "stats": self.stats, "only": self._only,
+                 "stats": self.stats, "only": self._only, "tau": self.tau,
                  "particles": self._fields(self.particles, "particles"),
                  "meshes": {m.ob.name: self._fields(m, "mesh") for m in self.meshes},
                  "rigid": self._fields(self.rigid, "rigid")}
@@ -153,6 +153,7 @@ class Resumable:
         for mesh in self.meshes:
             mesh.colliders = self.colliders
         self.frame = frame
+        self.tau = state.get("tau", frame)  # the simulated time reached (Time Scale)
         self.scene.frame_set(frame)
 
 

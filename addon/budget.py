@@ -16,14 +16,16 @@ BYTES_PER_PARTICLE_STATE = 8 * 16  # float64 state + integrator stages, per part
 MEMORY_BUDGET = 16 * 2**30  # the bake refuses to start when its estimate exceeds this
 
 
-def estimate(scene, roles: Roles) -> tuple[float, float]:
+def estimate(scene, roles: Roles, speed: float = 1.0) -> tuple[float, float]:
     """Peak alive particles and cache bytes of a bake, from rates and lifetimes (upper bounds).
+    ``speed``: the largest Time Scale of the bake (a rate is per simulated frame: at double
+    speed a frame holds two frames' births).
 
     A sub-emitter bursts its rate (+ random) where each of its parent's particles dies: at most
     every parent birth dies within the bake, so its births per frame are its parent's times that.
     """
     s = scene.physanim
-    frames = max(0, s.frame_end - s.frame_start) + 1
+    frames = math.ceil((max(0, s.frame_end - s.frame_start) + 1) * max(1.0, speed))
     baked = {ob.name for ob in roles.emitters}
     peak = cache_bytes = 0.0
     for ob in roles.emitters:
@@ -35,6 +37,7 @@ def estimate(scene, roles: Roles) -> tuple[float, float]:
         life = p.lifetime + p.lifetime_random
         if len(chain) == 1:
             active = max(0, min(p.frame_end, s.frame_end) - max(p.frame_start, s.frame_start) + 1)
+            active = math.ceil(active * max(1.0, speed))
             peak += (p.rate + p.rate_random) * min(life, active) if active else 0.0
             cache_bytes += ((p.rate + p.rate_random) * active * min(life, frames)
                             * BYTES_PER_PARTICLE_FRAME)
@@ -46,9 +49,9 @@ def estimate(scene, roles: Roles) -> tuple[float, float]:
     return peak, cache_bytes
 
 
-def check_budget(scene, roles: Roles) -> None:
+def check_budget(scene, roles: Roles, speed: float = 1.0) -> None:
     """Fail naming the scene when the estimated memory or cache size does not fit."""
-    peak, cache_bytes = estimate(scene, roles)
+    peak, cache_bytes = estimate(scene, roles, speed)
     stages = make_integrator(scene.physanim.integrator, scene.physanim.tolerance).stages
     memory = peak * BYTES_PER_PARTICLE_STATE * (1 + stages)
     if memory > MEMORY_BUDGET:

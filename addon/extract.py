@@ -11,6 +11,7 @@ from ..core.curves import LifeCurve
 from ..core.errors import PhysanimError
 from ..core.contact import ColliderFrame
 from ..core.contact.fit import fit_analytic_shape
+from ..core.controls.timing import window_active
 from ..core.forces import Attractor, Drag, Vortex, Wind
 from ..core.particles import (EmitterFrame, EmitterSettings, FrameInputs, ParticleModel,
                               ParticleModelBuilder, PointConstraint, SpringLink)
@@ -210,12 +211,21 @@ def _framed(name: str, frame: int, kind: str, make, *args):
 
 @dataclass
 class FrameSample:
-    """Per-frame values of every role object (read right after ``frame_set(frame)``)."""
+    """Per-frame values of every role object (read right after ``frame_set(frame)``).
 
-    frame: int
+    ``frame`` is the scene frame (a float between frames in slow motion), ``tau`` the
+    simulated time it shows, in frame lengths (:mod:`..core.controls.timing`; the frame itself
+    at time scale 1)."""
+
+    frame: float
     emitters: list
     colliders: list
     forces: list
+    tau: float | None = None
+
+    def __post_init__(self):
+        if self.tau is None:
+            self.tau = self.frame
 
 
 class Extractor:
@@ -313,15 +323,18 @@ class Extractor:
                 size=_curve(p.size_stops, "size"), stretch=p.stretch, link=link))
         return builder.finalize(frame)
 
-    def sample(self, depsgraph, frame: int, emitters: bool = True) -> FrameSample:
+    def sample(self, depsgraph, frame: float, emitters: bool = True,
+               tau: float | None = None) -> FrameSample:
         """Read every keyframable value at ``frame`` (the scene must already be at that frame);
-        ``emitters`` False leaves the emitters out (see :meth:`sample_emitters`)."""
+        ``emitters`` False leaves the emitters out (see :meth:`sample_emitters`); ``tau``: the
+        simulated time the frame shows (default: the frame)."""
         return FrameSample(frame, self.sample_emitters(depsgraph, frame) if emitters else [],
-                           *self._sample_world(depsgraph, frame))
+                           *self._sample_world(depsgraph, frame), tau=tau)
 
-    def sample_emitters(self, depsgraph, frame: int) -> list:
-        """The emitters' values at ``frame``: what only the particle system reads (a failure
-        here is that system's, not the spring meshes')."""
+    def sample_emitters(self, depsgraph, frame: float, since: float | None = None) -> list:
+        """The emitters' values at ``frame``, the end of the interval from ``since`` (default
+        one frame before): what only the particle system reads (a failure here is that
+        system's, not the spring meshes')."""
         emitters = []
         for ob in self.roles.emitters:
             p = ob.physanim.emitter
@@ -343,7 +356,8 @@ class Extractor:
                         f"{key}_random {values[key + '_random']:g} {unit} is larger than {key} "
                         f"{values[key]:g} {unit}: values would become negative — lower "
                         f"{key}_random or raise {key}", obj=ob.name, frame=frame, kind="emitter")
-            values["active"] = p.frame_start <= frame <= p.frame_end  # births of this frame
+            values["active"] = window_active(p.frame_start, p.frame_end,  # this interval's
+                                             frame - 1 if since is None else since, frame)
             values["constraints"] = point_constraints(self.scene, ob, frame)
             emitters.append((world_matrix(ob, frame, "emitter"), verts, values))
         return emitters
@@ -420,8 +434,8 @@ class Extractor:
                      in enumerate(zip(self.roles.colliders, a.colliders, b.colliders))]
         forces = [_framed(ob.name, a.frame, "force", self._force, ob, m, f)
                   for ob, (m, f) in zip(self.roles.forces, a.forces)]
-        return FrameInputs(frame=a.frame, t0=seconds(a.frame),
-                           frame_dt=seconds(b.frame - a.frame),
+        return FrameInputs(frame=a.frame, t0=seconds(a.tau),
+                           frame_dt=seconds(b.tau - a.tau),
                            gravity=convert.gravity(self.scene), emitters=emitters,
                            colliders=colliders, forces=forces)
 

@@ -12,8 +12,9 @@ import bpy
 import numpy as np
 
 from ..core.controls import FollowSettings, follow_through
+from ..core.controls.timing import TimeMap
 from ..core.errors import PhysanimError
-from . import compat, convert
+from . import compat, timing
 
 DATA_PATH = "delta_location"
 _CREATED = "physanim_follow"  # custom property on an action the bake made (Free removes it)
@@ -36,11 +37,13 @@ def check(ob, frame: int) -> FollowSettings:
         raise PhysanimError(str(exc), obj=ob.name, frame=frame, kind="follow-through") from exc
 
 
-def bake(scene, objects: list, frame_start: int, frame_end: int) -> None:
+def bake(scene, objects: list, frame_start: int, frame_end: int,
+         clock: TimeMap | None = None) -> None:
     """Sample where each parent carries its child, frame by frame, and key the child's
     follow-through as Delta Location (one key per frame). The frame before the first is
     sampled too: the child starts at rest on its place, moving as the parent moved then (a
-    parent that sets off at the first frame leaves it behind)."""
+    parent that sets off at the first frame leaves it behind). ``clock``: the bake's time map
+    (the spring swings in simulated time: slow motion slows the jiggle too)."""
     if not objects:
         return
     settings = [check(ob, frame_start) for ob in objects]
@@ -57,7 +60,9 @@ def bake(scene, objects: list, frame_start: int, frame_end: int) -> None:
         k, i = np.argwhere(~np.isfinite(targets).all(axis=2))[0]
         raise PhysanimError(f"the parent carries it to {targets[k, i].tolist()}",
                             obj=objects[i].name, frame=int(frames[k]), kind="follow-through")
-    times = (frames - frame_start) * convert.seconds_per_frame(scene)
+    clock = clock or TimeMap.constant(frame_start, frame_end)  # springs swing in simulated time
+    times = timing.frame_seconds(clock, scene, frames) - timing.frame_seconds(clock, scene,
+                                                                              frame_start)
     for i, ob in enumerate(objects):
         trail = follow_through(times, targets[:, i], settings[i])
         local = np.linalg.solve(spaces[:, i], (trail - targets[:, i])[:, :, None])[:, :, 0]

@@ -353,6 +353,7 @@ class PHYSANIM_PT_scene(bpy.types.Panel):
         col = layout.column(align=True)
         col.prop(s, "frame_start", text="Frame Start")
         col.prop(s, "frame_end", text="End")
+        layout.prop(s, "time_scale")
         layout.prop(s, "substeps")
         layout.prop(s, "integrator")
         layout.prop(s, "rigid_substeps")

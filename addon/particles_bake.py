@@ -8,9 +8,10 @@ from ..core.cache import CacheWriter
 from ..core.contact import ColliderPaths
 from ..core.errors import PhysanimError, SimulationError
 from ..core.controls import ImpactTracker, SquashSettings, euler_xyz, log_deformation, principal
-from ..core.particles import ParticleSolver, ParticleSystem, emitter_arrays
+from ..core.controls.timing import TimeMap
+from ..core.particles import ParticleSolver, ParticleState, ParticleSystem, emitter_arrays
 from ..core.usd_points import MAX_FLOAT_ID
-from . import convert, limits, native_points
+from . import convert, limits, native_points, timing
 from .cache_paths import emitter_cache_dir
 
 STREAM = "points"
@@ -23,11 +24,12 @@ class ParticleBake:
     Args:
         scene: the scene. emitters: the emitter objects (name order). hashes: per emitter name,
         the inputs hash stored with its cache. stats: counts to add to (births, collisions,
-        peak alive).
+        peak alive). clock: the bake's time map (frame -> simulated time).
     """
 
-    def __init__(self, scene, emitters: list, hashes: dict[str, str], stats: dict):
-        self.scene, self.emitters, self.hashes = scene, emitters, hashes
+    def __init__(self, scene, emitters: list, hashes: dict[str, str], stats: dict,
+                 clock: TimeMap):
+        self.scene, self.emitters, self.hashes, self.clock = scene, emitters, hashes, clock
         self.writers: dict[str, CacheWriter] = {}
         for ob in emitters:
             self.writers[ob.name] = CacheWriter(emitter_cache_dir(scene, ob))
@@ -93,15 +95,17 @@ class ParticleBake:
                     f"(limit {MAX_KEYED_OBJECTS:,}) — use the Points output or a lower rate",
                     obj=ob.name, frame=frame, kind="emitter")
 
-    def write_frame(self, frame: int) -> None:
-        state = self.system.state
+    def write_frame(self, frame: int, pose: ParticleState | None = None) -> None:
+        """Write ``frame``: the particles now, or ``pose`` (a frame shown between sub-steps,
+        in slow motion)."""
+        state = self.system.state if pose is None else pose
         self._check_cache_range(state, frame)
         for i, ob in enumerate(self.emitters):
             arrays = emitter_arrays(self.model, state, i, frame=frame)
             for key in ("age", "life"):  # frames, as Blender shows them
                 arrays[key] = convert.seconds_to_frames(self.scene, arrays[key]).astype(np.float32)
             if ob.name in self.trackers:
-                self._squash(self.trackers[ob.name], arrays)
+                self._squash(self.trackers[ob.name], arrays, frame)
             writer = self.writers[ob.name]
             writer.write_frame(STREAM, frame, arrays)
             if ob.name in self.usd:
@@ -112,11 +116,11 @@ class ParticleBake:
                                   native_points.save_frame, (arrays, frame))
         self.stats["peak"] = max(self.stats["peak"], state.particle_count)
 
-    def _squash(self, tracker: ImpactTracker, arrays: dict) -> None:
+    def _squash(self, tracker: ImpactTracker, arrays: dict, frame: int) -> None:
         """The instances' squash and stretch (their volume kept): instance_scale and
         instance_rotation from the velocity and the last impact of each particle."""
-        impact, age = tracker.update(arrays["id"], arrays["velocity"],
-                                     convert.seconds_per_frame(self.scene))
+        since = np.diff(timing.frame_seconds(self.clock, self.scene, [frame - 1, frame]))[0]
+        impact, age = tracker.update(arrays["id"], arrays["velocity"], float(since))
         axes, factors = principal(log_deformation(arrays["velocity"], impact, age,
                                                   tracker.settings))
         arrays["instance_scale"] = (arrays["size"][:, None] * factors).astype(np.float32)

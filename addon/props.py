@@ -13,6 +13,7 @@ from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProp
                        FloatVectorProperty, IntProperty, PointerProperty, StringProperty)
 
 from ..core.bounds import DEFAULT_POSITION, DEFAULT_SPEED
+from ..core.controls.timing import MAX_SCALE, MIN_SCALE
 from ..core.integrators import INTEGRATORS
 from . import render_modes
 from .compat import BLEND_RELATIVE_PATH_OPTIONS
@@ -360,6 +361,11 @@ class PHYSANIM_PG_scene(bpy.types.PropertyGroup):
                                 soft_max=50, options=STATIC,
                                 description="Contact solver steps per frame for rigid bodies "
                                             "(more: stiffer stacks, fewer: faster)")
+    time_scale: FloatProperty(
+        name="Time Scale", default=1.0, min=MIN_SCALE, max=MAX_SCALE, soft_min=0.05, soft_max=4.0,
+        description="Simulated time per frame, in frames: 0.25 is four times slow motion, 2 "
+                    "double speed; keyframe it for speed ramps. Paths in space stay as at 1 "
+                    "(the simulation keeps its steps; frames between them are interpolated)")
     tolerance: FloatProperty(name="Tolerance", default=1.0e-4, min=1.0e-10, max=1.0,
                              precision=6, description="Error tolerance of the adaptive RK45", options=STATIC)
     seed: IntProperty(name="Seed", min=0, max=2**31 - 1, options=STATIC)

@@ -18,7 +18,7 @@ from ..core.rigid import quaternion as quat
 from ..core.rigid.mass import (box_mass, capsule_mass, polyhedron_mass, sphere_mass,
                                with_override)
 from ..core.rigid.joints import FRAME, JointSettings
-from ..core.rigid.model import RigidBodyBuilder, RigidBodySettings
+from ..core.rigid.model import RigidBodyBuilder, RigidBodySettings, RigidBodyState
 from ..core.rigid.frame_inputs import RigidPaths
 from ..core.rigid.solver import RigidBodySolver, RigidBodySystem
 from ..core.transforms import decompose
@@ -200,6 +200,7 @@ class RigidBake:
         self.writer = CacheWriter(rigid_cache_dir(scene))
         self.system: RigidBodySystem | None = None
         self.holders: dict = {}  # joint -> (holding object, the joint's frame in it)
+        self.centres: dict = {}  # frame -> (n, 3) centres of mass, of the frames written last
 
     @property
     def label(self) -> str:
@@ -271,8 +272,11 @@ class RigidBake:
                 lines.append(f'constraint "{ob.name}" broke at frame {frame + 1}')
         return lines
 
-    def write_frame(self, frame: int) -> None:
-        state = self.system.state
+    def write_frame(self, frame: int, pose: RigidBodyState | None = None) -> None:
+        """Write ``frame``: the bodies now, or ``pose`` (a frame shown between sub-steps, in
+        slow motion)."""
+        state = self.system.state if pose is None else pose
+        self.centres[frame] = state.body_x.copy()  # the frames of the last step (Hit the Mark)
         self.writer.write_frame(STREAM, frame, {
             "position": state.origins(self.model), "rotation": quat.normalized(state.body_q)})
 

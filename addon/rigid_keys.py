@@ -14,8 +14,9 @@ from mathutils import Matrix
 
 from ..core.cache import read_frame
 from ..core.controls import ImpactTracker, SquashSettings, log_deformation
+from ..core.controls.timing import TimeMap
 from ..core.rigid import quaternion as quat
-from . import compat, convert
+from . import compat, convert, timing
 
 
 def _tracks(folder: str, frame_start: int, frame_end: int):
@@ -71,11 +72,13 @@ def _local(ob, space, position, rotation):
 
 
 def write_keys(scene, objects: list, folder: str, frame_start: int, frame_end: int,
-               simulated) -> None:
+               simulated, clock: TimeMap | None = None) -> None:
     """Key the location and rotation_quaternion of every body ``simulated`` (indices: the
     bodies not on their animation for at least one frame) once per frame; the others keep
-    their own animation."""
+    their own animation. ``clock``: the bake's time map (default: time scale 1)."""
     frames, pos, rot = _tracks(folder, frame_start, frame_end)
+    clock = clock or TimeMap.constant(frame_start, frame_end)
+    times = timing.frame_seconds(clock, scene, frames)
     if not len(frames):
         return
     dynamic = [(i, ob) for i, ob in enumerate(objects) if i in simulated]
@@ -92,30 +95,34 @@ def write_keys(scene, objects: list, folder: str, frame_start: int, frame_end: i
                             q[:, axis])
         ob.rotation_mode = 'QUATERNION'
         if ob.physanim.rigid_body.squash > 0.0:
-            factors = squash_factors(scene, ob, pos[:, i], rot[:, i])
+            factors = squash_factors(scene, ob, pos[:, i], rot[:, i], times)
             own = np.array(ob.physanim.rigid_body.previous_pose[14:17])
             for axis in range(3):
                 compat.set_keys(compat.fcurve_ensure(bag, "scale", axis), f32,
                                 own[axis] * factors[:, axis])
 
 
-def squash_factors(scene, ob, position: np.ndarray, rotation: np.ndarray) -> np.ndarray:
+def squash_factors(scene, ob, position: np.ndarray, rotation: np.ndarray,
+                   times: np.ndarray) -> np.ndarray:
     """(f, 3) scale factors along the body's own axes for squash and stretch (their product is
-    1): the world deformation (:mod:`..core.controls.squash`) from the baked motion, seen in the
-    body's axes. Exact when an axis lies along the motion or the contact normal (a ball dropped
-    without spin, a box landing flat); otherwise the nearest deformation along its axes."""
+    1): the world deformation (:mod:`..core.controls.squash`) from the baked motion (at the
+    simulated ``times`` [s] of its frames), seen in the body's axes. Exact when an axis lies
+    along the motion or the contact normal (a ball dropped without spin, a box landing flat);
+    otherwise the nearest deformation along its axes."""
     p = ob.physanim.rigid_body
     settings = SquashSettings(p.squash, p.squash_recovery)
-    dt = convert.seconds_per_frame(scene)
+    steps = np.diff(times)
     velocity = np.zeros_like(position)  # over the frame just ended (the first: the next one)
     if len(position) > 1:
-        velocity[1:] = np.diff(position, axis=0) / dt
+        velocity[1:] = np.diff(position, axis=0) / steps[:, None]
         velocity[0] = velocity[1]
+    steps = np.concatenate([steps[:1] if len(steps) else [convert.seconds_per_frame(scene)],
+                            steps])
     tracker = ImpactTracker(settings, convert.gravity(scene))
     axes = quat.to_matrix(rotation)
     out = np.empty((len(position), 3))
     for k in range(len(position)):
-        impact, age = tracker.update(np.zeros(1, np.int64), velocity[k:k + 1], dt)
+        impact, age = tracker.update(np.zeros(1, np.int64), velocity[k:k + 1], float(steps[k]))
         world = log_deformation(velocity[k:k + 1], impact, age, settings)[0]
         local = axes[k].T @ world @ axes[k]
         diagonal = np.diag(local)

@@ -197,18 +197,24 @@ class SpringMeshBake:
                            {n: (a["targets"][n], nxt["targets"][n]) for n in self.targets})
 
     def end_frame(self, nxt: dict) -> None:
-        """The interval to ``nxt`` was simulated: write its frame."""
+        """The interval to ``nxt`` was simulated (its frames are written by :meth:`write`)."""
         self.sample = nxt
-        self.write()
 
-    def write(self) -> None:
-        """Append this frame's object-space positions to the PC2 file."""
-        local = transform_points(inverse_affine(self.sample["matrix"]), self.state.x)
+    def write(self, frame: int | None = None, pose=None) -> None:
+        """Append a frame's object-space positions to the PC2 file: the state now, or ``pose``
+        (a frame shown between sub-steps, in slow motion). Positions are in the object's space
+        at that frame."""
+        matrix = self.sample["matrix"]
+        if pose is not None:
+            matrix = _object_matrix(self.ob, frame)  # the scene is past it: evaluate there
+        x = self.state.x if pose is None else pose.x
+        local = transform_points(inverse_affine(matrix), x)
         if not np.isfinite(local).all():  # nothing non-finite is ever written to a bake
             bad = int(np.argmax(~np.isfinite(local).all(axis=1)))
             raise PhysanimError(f"vertex {bad} became {local[bad].tolist()} in object space — "
                                 "check the object's scale and animation", obj=self.ob.name,
-                                frame=self.sample["frame"], kind="spring mesh")
+                                frame=self.sample["frame"] if frame is None else frame,
+                                kind="spring mesh")
         self.pc2.append(local)
 
     def close(self) -> None:

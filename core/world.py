@@ -85,6 +85,9 @@ class WorldFrame:
         forces: force objects (drag, wind, attractors, ...) for the interval.
         bodies: the leaders' dynamic bodies at the interval's end, by name (what a follower
             coupled to them needs to move them implicitly).
+        samples: fractions of the interval, strictly between 0 and 1 and ascending, at which
+            each system's pose is wanted as well (frames shown in slow motion, see
+            :mod:`.controls.timing`): :attr:`WorldReport.poses`.
     """
 
     frame: int
@@ -94,6 +97,7 @@ class WorldFrame:
     colliders: Sequence[ColliderFrame] = ()
     forces: Sequence[Any] = ()
     bodies: Mapping[str, BodyInertia] = field(default_factory=dict)
+    samples: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -162,6 +166,13 @@ class WorldSystem(Protocol):
         """A leader takes the followers' impulses on its bodies (those it does not simulate it
         ignores)."""
 
+    def pose(self) -> Any:
+        """A copy of what is drawn of the system now (its points' positions, ...)."""
+
+    def blend(self, a: Any, b: Any, w: float) -> Any:
+        """The pose at the fraction ``w`` in (0, 1] of a sub-step from pose ``a`` to pose
+        ``b`` (``b`` itself at 1)."""
+
 
 class SolverSystem:
     """A :class:`WorldSystem` made of a solver and the state it advances. The solver offers
@@ -208,6 +219,12 @@ class SolverSystem:
         if absorb is not None:
             absorb(self.state, reactions)
 
+    def pose(self) -> Any:
+        return self.state.pose()
+
+    def blend(self, a: Any, b: Any, w: float) -> Any:
+        return type(b).between(a, b, w)
+
 
 @dataclass
 class WorldReport:
@@ -215,6 +232,7 @@ class WorldReport:
 
     reports: dict = field(default_factory=dict)  # system -> its end_frame() report
     failed: list = field(default_factory=list)  # (system, exception), in the order they failed
+    poses: dict = field(default_factory=dict)  # system -> its pose at each of frame.samples
 
 
 class World:
@@ -268,12 +286,24 @@ class World:
             self._guarded(report, system, system.begin_frame, frame, paths, own.get(system))
         for system, k in self.substep_order(systems):
             if system in self.systems:
-                self._guarded(report, system, system.substep, k)
+                self._substep(report, system, k, frame.samples)
         for system in systems:
             if system in self.systems:
                 done = self._guarded(report, system, system.end_frame)
                 if system in self.systems:
                     report.reports[system] = done
+
+    def _substep(self, report: WorldReport, system: WorldSystem, k: int,
+                 samples: Sequence[float]) -> None:
+        """Sub-step ``k`` of ``system``, and its poses at the samples that fall in it."""
+        n = system.substeps
+        inside = [s * n - k for s in samples if k < s * n <= k + 1]
+        before = system.pose() if inside else None
+        self._guarded(report, system, system.substep, k)
+        if inside and system in self.systems:
+            after = system.pose()
+            report.poses.setdefault(system, []).extend(system.blend(before, after, w)
+                                                       for w in inside)
 
     # -- passes ---------------------------------------------------------------------------------
     def kinematic_colliders(self, frame: WorldFrame) -> list[ColliderPath]:

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import zlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -194,3 +194,48 @@ class ParticleState:
     def index_of(self, ids: np.ndarray) -> np.ndarray:
         """Array positions of particle ids (ids are sorted ascending, so a binary search)."""
         return np.searchsorted(self.particle_id, ids)
+
+    def pose(self) -> ParticleState:
+        """A copy of the particles as they are now, for drawing (see :meth:`between`); the
+        random generators and springs are shared, not copied."""
+        return replace(self, **{name: getattr(self, name).copy() for name in self._PER_PARTICLE})
+
+    @classmethod
+    def between(cls, a: ParticleState, b: ParticleState, w: float) -> ParticleState:
+        """The particles at the fraction ``w`` of one sub-step from pose ``a`` to pose ``b``
+        (time a.t + w (b.t - a.t)), for drawing an instant between sub-steps (slow motion).
+
+        Particles in both move on the straight line between (the path a sub-step takes);
+        those born during it appear once their birth time has passed, back along their
+        velocity; those that died during it show until their life span ends.
+        """
+        if w >= 1.0:
+            return b
+        t = a.t + w * (b.t - a.t)
+        where = np.minimum(np.searchsorted(a.particle_id, b.particle_id), max(a.particle_count - 1, 0))
+        both = (a.particle_id[where] == b.particle_id) if a.particle_count else \
+            np.zeros(b.particle_count, bool)
+        ia = where[both]
+        born = b.t - b.particle_age
+        newborn = ~both & (born <= t)
+        gone = ~np.isin(a.particle_id, b.particle_id)
+        gone &= a.particle_age + (t - a.t) < a.particle_life
+        out = {}
+        for name in cls._PER_PARTICLE:
+            va, vb = getattr(a, name), getattr(b, name)
+            mid = vb[both].copy()
+            if name in ("particle_x", "particle_v", "particle_age"):
+                mid = va[ia] + w * (vb[both] - va[ia])
+            young = vb[newborn]
+            if name == "particle_x":
+                young = vb[newborn] - (b.t - t) * b.particle_v[newborn]
+            elif name == "particle_age":
+                young = t - born[newborn]
+            old = va[gone]
+            if name == "particle_x":
+                old = va[gone] + (t - a.t) * a.particle_v[gone]
+            elif name == "particle_age":
+                old = va[gone] + (t - a.t)
+            out[name] = np.concatenate([old, mid, young])
+        order = np.argsort(out["particle_id"], kind="stable")
+        return replace(b, t=t, **{name: out[name][order] for name in cls._PER_PARTICLE})

@@ -18,6 +18,7 @@ import numpy as np
 from ..collision.hull import convex_hull
 from .joints import JointModel, JointSettings, JointState, joint_model
 from ..errors import PhysanimError
+from ..transforms import slerp
 from ..validate import frozen
 from . import quaternion as quat
 from .mass import MassProperties
@@ -192,6 +193,23 @@ class RigidBodyState:
             self.body_slow = np.zeros(n, np.int64)
         if self.body_island is None:
             self.body_island = np.full(n, -1, np.int64)
+
+    def pose(self) -> RigidBodyState:
+        """A copy of the bodies' poses and momenta now, for drawing (see :meth:`between`)."""
+        return RigidBodyState(self.body_x.copy(), self.body_q.copy(), self.body_P.copy(),
+                              self.body_L.copy())
+
+    @staticmethod
+    def between(a: RigidBodyState, b: RigidBodyState, w: float) -> RigidBodyState:
+        """The bodies at the fraction ``w`` of one sub-step from pose ``a`` to pose ``b``:
+        centres and momenta on straight lines, orientations by slerp (a sub-step turns a body
+        at one angular velocity)."""
+        if w >= 1.0:
+            return b
+        return RigidBodyState(a.body_x + w * (b.body_x - a.body_x),
+                              slerp(a.body_q, b.body_q, w),
+                              a.body_P + w * (b.body_P - a.body_P),
+                              a.body_L + w * (b.body_L - a.body_L))
 
     def origins(self, model: RigidBodyModel) -> np.ndarray:
         """(n, 3) world positions of the objects' origins (x - R com)."""

@@ -184,6 +184,18 @@ class SpringMeshState:
     attached: list = field(default_factory=list)
     bound: list = field(default_factory=list)
 
+    def pose(self) -> SpringMeshState:
+        """A copy of the vertices now, for drawing (see :meth:`between`)."""
+        return SpringMeshState(self.x.copy(), self.v.copy())
+
+    @staticmethod
+    def between(a: SpringMeshState, b: SpringMeshState, w: float) -> SpringMeshState:
+        """The vertices at the fraction ``w`` of one sub-step from pose ``a`` to pose ``b``,
+        on straight lines (the path a sub-step takes)."""
+        if w >= 1.0:
+            return b
+        return SpringMeshState(a.x + w * (b.x - a.x), a.v + w * (b.v - a.v))
+
 
 FAMILY_NAMES = ("edge", "shear", "bending (distance-2)")
 
