@@ -380,7 +380,8 @@ class BakeJob(Resumable):
         if self.rigid is not None:
             rigid_keys.write_keys(self.scene, self.rigid.objects,
                                   os.path.join(rigid_path, rigid.STREAM), self.frame_start,
-                                  self.frame_end, self.rigid.simulated, self.clock)
+                                  self.frame_end, self.rigid.simulated, self.clock,
+                                  self.rigid.model.body_com)
             for ob in self.rigid.objects:
                 ob.physanim.rigid_body.bake_hash = self.rigid_hash
             self.breaks = self.rigid.record_breaks()

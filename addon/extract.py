@@ -350,6 +350,10 @@ class Extractor:
                 "rate", "rate_random", "lifetime", "lifetime_random", "speed", "speed_random",
                 "mass", "size", "size_random", "spread", "inherit_velocity")}
             _check_finite(ob, frame, "emitter", values)
+            launch = tuple(float(v) for v in p.launch_velocity)
+            _check_finite(ob, frame, "emitter", {f"launch_velocity[{i}]": v
+                                                 for i, v in enumerate(launch)})
+            values["launch"] = launch
             for key, unit in (("lifetime", "frames"), ("size", "m")):
                 if values[f"{key}_random"] > values[key]:
                     raise PhysanimError(
@@ -424,7 +428,8 @@ class Extractor:
                 speed_random=val["speed_random"], lifetime=seconds(val["lifetime"]),
                 lifetime_random=seconds(val["lifetime_random"]), mass=val["mass"],
                 size=val["size"], size_random=val["size_random"], spread=val["spread"],
-                inherit_velocity=val["inherit_velocity"], active=val["active"],
+                inherit_velocity=val["inherit_velocity"], launch=val["launch"],
+                active=val["active"],
                 matrix0=m0, matrix1=m1, matrices=keys(0, i, m0, m1), verts0=v0, verts1=v1,
                 constraints=held))
         colliders = [_framed(ob.name, a.frame, "collider", ColliderFrame,

@@ -29,6 +29,15 @@ def bake_status(scene) -> tuple[str, str]:
     return scene.physanim.bake_info or "Baked", 'CHECKMARK'
 
 
+def draw_target(layout, p, solved: str) -> None:
+    """Hit the Mark's Target and Target Frame; ``solved``: the velocity the bake solves."""
+    col = layout.column(align=True)
+    col.prop(p, "target")
+    if p.target is not None:
+        col.prop(p, "target_frame")
+        col.label(text=f"{solved} is solved when baking", icon='INFO')
+
+
 def draw_bake_buttons(layout, scene) -> None:
     from . import resume
 
@@ -110,6 +119,8 @@ class PHYSANIM_PT_emitter(_PhysicsPanel, bpy.types.Panel):
         col.prop(p, "speed")
         col.prop(p, "speed_random", text="Random")
         layout.prop(p, "inherit_velocity")
+        layout.prop(p, "launch_velocity")
+        draw_target(layout, p, "Launch Velocity")
         col = layout.column(align=True)
         col.prop(p, "mass")
         col.prop(p, "size")

@@ -44,6 +44,8 @@ class ParticleBake:
                                                 convert.gravity(scene))
                          for ob in emitters if ob.physanim.emitter.squash > 0.0}
         self.births = {ob.name: 0 for ob in emitters}
+        self.watch: set[str] = set()  # emitters whose frames Hit the Mark follows
+        self.watched: dict = {}  # (emitter, frame) -> (ids, positions, velocities, ages [frames])
         self.stats = stats
         self.system: ParticleSystem | None = None
 
@@ -106,6 +108,10 @@ class ParticleBake:
                 arrays[key] = convert.seconds_to_frames(self.scene, arrays[key]).astype(np.float32)
             if ob.name in self.trackers:
                 self._squash(self.trackers[ob.name], arrays, frame)
+            if ob.name in self.watch:
+                self.watched[ob.name, frame] = (arrays["id"], arrays["position"].astype(float),
+                                                arrays["velocity"].astype(float),
+                                                arrays["age"].astype(float))
             writer = self.writers[ob.name]
             writer.write_frame(STREAM, frame, arrays)
             if ob.name in self.usd:

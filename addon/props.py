@@ -140,6 +140,17 @@ class PHYSANIM_PG_emitter(bpy.types.PropertyGroup):
                                     soft_min=0.0, soft_max=1.0, default=0.0,
                                     description="Factor of the emitter's own velocity at the birth "
                                                 "point (1 = thrown by the moving emitter)")
+    launch_velocity: FloatVectorProperty(
+        name="Launch Velocity", size=3, subtype='VELOCITY', unit='VELOCITY', min=-1.0e5,
+        max=1.0e5, description="World velocity added to every particle at birth, m/s (the bake "
+                               "solves it when the emitter has a Target)")
+    target: PointerProperty(
+        name="Target", type=bpy.types.Object,
+        description="Hit the mark: the bake sets Launch Velocity so the centre of the "
+                    "emitter's burst reaches this object's origin at Target Frame (solved on the "
+                    "simulation itself)")
+    target_frame: IntProperty(name="Target Frame", default=48, options=STATIC,
+                              description="The frame the burst's centre arrives at its target")
     mass: FloatProperty(name="Mass", min=1.0e-6, max=1.0e6, default=0.1, unit='MASS')
     size: FloatProperty(name="Size", min=0.0, max=1.0e3, soft_max=1.0, default=0.05,
                         unit='LENGTH', description="Radius of a particle's instance")

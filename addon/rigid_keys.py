@@ -14,6 +14,7 @@ from mathutils import Matrix
 
 from ..core.cache import read_frame
 from ..core.controls import ImpactTracker, SquashSettings, log_deformation
+from ..core.controls.hang import FlightSettings, shape_flights
 from ..core.controls.timing import TimeMap
 from ..core.rigid import quaternion as quat
 from . import compat, convert, timing
@@ -72,10 +73,12 @@ def _local(ob, space, position, rotation):
 
 
 def write_keys(scene, objects: list, folder: str, frame_start: int, frame_end: int,
-               simulated, clock: TimeMap | None = None) -> None:
+               simulated, clock: TimeMap | None = None, com: np.ndarray | None = None) -> None:
     """Key the location and rotation_quaternion of every body ``simulated`` (indices: the
     bodies not on their animation for at least one frame) once per frame; the others keep
-    their own animation. ``clock``: the bake's time map (default: time scale 1)."""
+    their own animation. ``clock``: the bake's time map (default: time scale 1); ``com``:
+    (n, 3) the bodies' centres of mass in their own axes (what Hang Time and Exaggeration
+    shape; default: their origins)."""
     frames, pos, rot = _tracks(folder, frame_start, frame_end)
     clock = clock or TimeMap.constant(frame_start, frame_end)
     times = timing.frame_seconds(clock, scene, frames)
@@ -85,7 +88,9 @@ def write_keys(scene, objects: list, folder: str, frame_start: int, frame_end: i
     spaces = _parent_spaces(scene, [ob for _, ob in dynamic], frames)
     f32 = frames.astype(np.float32)
     for i, ob in dynamic:
-        loc, q = _local(ob, spaces.get(ob.name), pos[:, i], rot[:, i])
+        shown_pos, shown_rot = _flights(scene, clock, ob, times, pos[:, i], rot[:, i],
+                                        None if com is None else com[i])
+        loc, q = _local(ob, spaces.get(ob.name), shown_pos, shown_rot)
         bag = compat.channelbag_for(ob, _baked_action(ob))
         q = _continuous(q)
         for axis in range(3):
@@ -95,11 +100,30 @@ def write_keys(scene, objects: list, folder: str, frame_start: int, frame_end: i
                             q[:, axis])
         ob.rotation_mode = 'QUATERNION'
         if ob.physanim.rigid_body.squash > 0.0:
-            factors = squash_factors(scene, ob, pos[:, i], rot[:, i], times)
+            factors = squash_factors(scene, ob, shown_pos, shown_rot, times)
             own = np.array(ob.physanim.rigid_body.previous_pose[14:17])
             for axis in range(3):
                 compat.set_keys(compat.fcurve_ensure(bag, "scale", axis), f32,
                                 own[axis] * factors[:, axis])
+
+
+def _flights(scene, clock: TimeMap, ob, times, origins: np.ndarray, rotations: np.ndarray,
+             com):
+    """The body's origins and rotations with its Hang Time and Exaggeration applied to its
+    flights (:mod:`..core.controls.hang`), which shape the path of its centre of mass."""
+    p = ob.physanim.rigid_body
+    settings = FlightSettings(p.hang_time, p.exaggeration)
+    if settings.off:
+        return origins, rotations
+    offset = np.zeros(3) if com is None else np.asarray(com, np.float64)
+    centres = origins + quat.rotate(rotations, np.broadcast_to(offset, origins.shape))
+    # a flight to the body's mark stays as simulated: it arrives there on its frame
+    keep = tuple(np.nonzero(np.isclose(times, timing.frame_seconds(clock, scene,
+                                                                   p.target_frame)))[0]) \
+        if p.target is not None else ()
+    centres, rotations = shape_flights(times, centres, rotations, convert.gravity(scene),
+                                       settings, keep)
+    return centres - quat.rotate(rotations, np.broadcast_to(offset, centres.shape)), rotations
 
 
 def squash_factors(scene, ob, position: np.ndarray, rotation: np.ndarray,

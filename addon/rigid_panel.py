@@ -6,7 +6,7 @@ import bpy
 import numpy as np
 
 from ..core.errors import PhysanimError
-from .panels import AUTO_SHAPE_PREVIEW_LIMIT, _PhysicsPanel
+from .panels import AUTO_SHAPE_PREVIEW_LIMIT, _PhysicsPanel, draw_target
 
 SHAPE_NAMES = {"BOX": "Box", "SPHERE": "Sphere", "CAPSULE": "Capsule", "HULL": "Convex Hull",
                "MESH": "Mesh (concave)"}
@@ -74,15 +74,14 @@ class PHYSANIM_PT_rigid_body(_PhysicsPanel, bpy.types.Panel):
         col.active = not p.kinematic
         col.prop(p, "initial_velocity")
         col.prop(p, "initial_angular_velocity")
-        col = layout.column(align=True)
-        col.prop(p, "target")
-        if p.target is not None:
-            col.prop(p, "target_frame")
-            col.label(text="Initial Velocity is solved when baking", icon='INFO')
+        draw_target(layout, p, "Initial Velocity")
         col = layout.column(align=True)
         col.prop(p, "squash")
         if p.squash > 0.0:
             col.prop(p, "squash_recovery")
+        col = layout.column(align=True)
+        col.prop(p, "hang_time")
+        col.prop(p, "exaggeration")
         self._mass_overrides(layout, p, shape, props)
         layout.operator("physanim.connect", icon='CONSTRAINT')
 

@@ -76,6 +76,18 @@ class PHYSANIM_PG_rigid_body(bpy.types.PropertyGroup):
                             "squashes on impact, its volume kept (0: off); the simulation itself "
                             "stays rigid")
     squash_recovery: recovery_property()
+    hang_time: FloatProperty(
+        name="Hang Time (Slow In, Slow Out)", min=0.0, max=0.95, soft_max=0.8, default=0.0,
+        options=STATIC,
+        description="Eases the body's clock around the apex of each jump: it lingers there at "
+                    "(1 - Hang Time) of its speed and leaves and lands faster, on the frames "
+                    "and along the path simulated (0: off); drawn on the keys, the simulation "
+                    "stays as it was")
+    exaggeration: FloatProperty(
+        name="Bounce Exaggeration", min=0.05, max=10.0, soft_max=3.0, default=1.0,
+        options=STATIC,
+        description="Each flight's height above the line from take-off to landing, times this "
+                    "(1: as simulated); take-off and landing keep their frames and places")
     previous_action: PointerProperty(type=bpy.types.Action, options={'HIDDEN'},
                                      description="The animation the bake set aside")
     previous_slot: StringProperty(options={'HIDDEN'})

@@ -56,7 +56,7 @@ def _randomised(rng, count, value, spread):
 def _finish(rng, settings, frame, u, x, v_dir, v_emitter) -> Births:
     count = len(u)
     speed = _randomised(rng, count, frame.speed, frame.speed_random)
-    v = v_dir * speed[:, None] + frame.inherit_velocity * v_emitter
+    v = v_dir * speed[:, None] + frame.inherit_velocity * v_emitter + np.asarray(frame.launch)
     life = _randomised(rng, count, frame.lifetime, frame.lifetime_random)
     size = _randomised(rng, count, frame.size, frame.size_random)
     return Births(u, x, v, life, np.full(count, frame.mass), size)

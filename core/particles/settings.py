@@ -151,6 +151,7 @@ class EmitterFrame:
         mass: [kg]. size: base size [m] +- ``size_random`` [m], which must not exceed ``size``.
         spread: cone half-angle around the direction [rad].
         inherit_velocity: factor of the emitter's velocity at the birth point (robot-arm throw).
+        launch: (3,) world velocity added to every birth [m/s] (Hit the Mark solves it).
         active: whether this emitter gives births in this frame interval.
         matrix0, matrix1: (4, 4) world matrices at the start and end of the interval.
         matrices: optional (k + 1, 4, 4) sub-frame samples at s = 0, 1/k, ..., 1 (curved motion).
@@ -169,6 +170,7 @@ class EmitterFrame:
     size_random: float = 0.0
     spread: float = 0.0
     inherit_velocity: float = 0.0
+    launch: tuple[float, float, float] = (0.0, 0.0, 0.0)
     active: bool = True
     matrix0: np.ndarray = field(default_factory=lambda: np.eye(4))
     matrix1: np.ndarray = field(default_factory=lambda: np.eye(4))
@@ -184,6 +186,9 @@ class EmitterFrame:
                       lifetime_random=self.lifetime_random, size=self.size,
                       size_random=self.size_random, spread=self.spread)
         finite(owner, inherit_velocity=self.inherit_velocity)
+        if len(self.launch) != 3 or not all(math.isfinite(v) for v in self.launch):
+            raise ValueError(f"{owner}: launch velocity must be 3 finite numbers (got "
+                             f"{tuple(self.launch)})")
         # +- random must not cross zero: a negative life span or size has no meaning, and
         # clamping it would silently change the distribution the user asked for.
         if self.lifetime_random > self.lifetime:

@@ -202,3 +202,59 @@ def test_time_scale_alone_bakes_and_changing_it_outdates(physanim_ext, tmp_path)
     assert panels.bake_status(scene)[1] == 'CHECKMARK'
     scene.physanim.time_scale = 0.6
     assert "outdated" in panels.bake_status(scene)[0]
+
+
+def _drop(tmp_path: Path, name: str, **props):
+    _scene(tmp_path, 70, 1.0, name)
+    _ground()
+    ball = _ball((0.0, 0.0, 3.0), (1.0, 0.0, 0.0))
+    ball.physanim.rigid_body.restitution = 0.8  # a rubber ball (the default does not bounce)
+    for key, value in props.items():
+        setattr(ball.physanim.rigid_body, key, value)
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    return _track(ball, range(1, 71))
+
+
+def test_hang_time_alone_lingers_at_the_apex_and_lands_on_the_simulated_frames(physanim_ext,
+                                                                               tmp_path):
+    """A bouncing ball (the rigid-body defaults but its restitution), Hang Time 0.6 and
+    nothing else: its keys touch down on the frames the simulation did, in the same places; around
+    each apex it moves at under half its simulated speed, on the simulated path."""
+    plain = _drop(tmp_path, "plain.blend")
+    hung = _drop(tmp_path, "hang.blend", hang_time=0.6)
+    low = np.nonzero((plain[1:-1, 2] < plain[:-2, 2]) & (plain[1:-1, 2] <= plain[2:, 2]))[0] + 1
+    assert len(low) >= 2  # it bounced at least twice
+    assert np.abs(hung[low] - plain[low]).max() < 1e-4
+    top = np.nonzero((plain[1:-1, 2] > plain[:-2, 2]) & (plain[1:-1, 2] >= plain[2:, 2]))[0] + 1
+    top = top[plain[top, 2] > 0.3 + 0.2]  # the jumps (the last hops are a frame or two long)
+    assert len(top) >= 1
+    for k in top:
+        assert np.linalg.norm(hung[k + 1] - hung[k - 1]) < 0.5 * np.linalg.norm(
+            plain[k + 1] - plain[k - 1])
+    # on the path: x runs at the simulated (damped, nearly constant) speed, so the height at
+    # each shown x is the simulated height there
+    for k in top:
+        seg = slice(k - 4, k + 5)
+        assert np.interp(hung[seg, 0], plain[:, 0], plain[:, 2]) == pytest.approx(
+            hung[seg, 2], abs=2e-3)
+
+
+def test_bounce_exaggeration_alone_raises_each_bounce(physanim_ext, tmp_path):
+    """Bounce Exaggeration 2 and nothing else: each bounce's apex rises twice as far above the
+    line between its contacts; the contacts keep their frames and places."""
+    plain = _drop(tmp_path, "plain.blend")
+    high = _drop(tmp_path, "high.blend", exaggeration=2.0)
+    low = np.nonzero((plain[1:-1, 2] < plain[:-2, 2]) & (plain[1:-1, 2] <= plain[2:, 2]))[0] + 1
+    assert np.abs(high[low] - plain[low]).max() < 1e-4
+    jumps = 0
+    for a, b in zip(low[:-1], low[1:]):
+        k = a + int(np.argmax(plain[a:b + 1, 2]))
+        if plain[k, 2] < 0.3 + 0.2:
+            continue  # a hop of a frame or two: no flight to shape
+        jumps += 1
+        # the line from take-off to landing: a low frame is the first after a bounce (the
+        # contact falls between frames), so the flight is frames a .. b - 1
+        line = np.interp(k, [a, b - 1], plain[[a, b - 1], 2])
+        assert high[k, 2] - line == pytest.approx(2.0 * (plain[k, 2] - line), rel=0.01)
+    assert jumps >= 1
+    assert np.abs(high[:, :2] - plain[:, :2]).max() < 1e-6
