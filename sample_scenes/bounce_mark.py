@@ -43,7 +43,7 @@ README_FRAME = 30
 def build(scene) -> None:
     import bmesh
 
-    _common.stage(scene, (-10.5, -13.5, 4.2), (-0.5, 1.0, 1.9), frame_end=FRAMES)
+    _common.stage(scene, (-9.0, -11.5, 3.6), (-1.3, 1.0, 2.0), frame_end=FRAMES)
     floor = _common.ground(scene, size=60.0, color=(0.3, 0.32, 0.35))
     floor.physanim.collider.restitution, floor.physanim.collider.friction = 0.8, 0.0
     red = _common.material("BallRed", (0.8, 0.1, 0.08))

@@ -140,6 +140,9 @@ def build_scene(seed: int):
         if rng.random() < 0.5:
             c.object2 = objects[int(rng.integers(len(objects)))]
         objects.append(held)
+    if rng.random() < 0.3:  # slow motion, a speed-up, or the limits (drawn last: the scenes of
+        # earlier seeds stay as they were)
+        s.time_scale = float(rng.choice([0.01, 0.3, 2.5, 100.0]))
     return rng, objects
 
 

@@ -102,6 +102,26 @@ def test_a_cancelled_bake_resumes_bit_identical(physanim_ext, tmp_path):
     assert panels.bake_status(scene)[1] == 'CHECKMARK'
 
 
+@pytest.mark.parametrize("scale", [0.4, 1.7])
+def test_a_retimed_bake_resumes_bit_identical(physanim_ext, tmp_path, scale):
+    """Under a Time Scale a step is a simulation frame showing several frames (or none): a bake
+    cut off between them resumes where the simulation was, to the same files."""
+    path = _shot(tmp_path / "shot")
+    scene = bpy.context.scene
+    scene.physanim.time_scale = scale
+    bpy.ops.wm.save_mainfile()
+    bake = _module(physanim_ext, "bake")
+    cache = path.parent / "physanim_cache"
+    reference = _reference(bake, cache)
+    job = bake.BakeJob(bpy.context, checkpoint_every=0)
+    while job.frame < 11:
+        job.step(bpy.context)
+    job.suspend()
+    info, failed = bake.run(bpy.context, resume=True)
+    assert failed is None and "frames 1-24" in info
+    assert _tree(cache) == reference
+
+
 def test_a_killed_bake_resumes_bit_identical(physanim_ext, tmp_path):
     """The process baking is killed outright (SIGKILL: no clean-up at all) mid-bake."""
     path = _shot(tmp_path / "shot", frame_end=60, cloth=24)
