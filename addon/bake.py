@@ -299,7 +299,7 @@ class BakeJob(Resumable):
         a spring mesh's pins and targets at ``nxt`` (read now, the scene being there)."""
         own, samples = {}, {}
         if self.particles is not None:
-            own[self.particles.system] = inputs.emitters
+            own[self.particles.system] = inputs.drive
         if self.rigid is not None:
             with self._system(self.rigid):
                 own[self.rigid.system] = self.rigid.begin(nxt, self._rigid_between)

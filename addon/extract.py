@@ -13,10 +13,12 @@ from ..core.contact import ColliderFrame
 from ..core.contact.fit import fit_analytic_shape
 from ..core.controls.timing import window_active
 from ..core.forces import Attractor, Drag, Vortex, Wind
+from ..core.forces.interactions import Coulomb, LennardJones, MutualGravity
 from ..core.particles import (EmitterFrame, EmitterSettings, FrameInputs, ParticleModel,
                               ParticleModelBuilder, PointConstraint, SpringLink)
 from . import convert, limits
 from .mesh_read import evaluated_mesh, mesh_polygons
+from .props import INTERACTION_TYPES
 from .rigid_props import CONSTRAINT_TYPE_ITEMS, POINT_TYPES
 
 MESH_SOURCES = ("VERTS", "FACES", "VOLUME")
@@ -348,7 +350,7 @@ class Extractor:
                                         obj=ob.name, frame=frame, kind="emitter")
             values = {k: float(getattr(p, k)) for k in (
                 "rate", "rate_random", "lifetime", "lifetime_random", "speed", "speed_random",
-                "mass", "size", "size_random", "spread", "inherit_velocity")}
+                "mass", "size", "size_random", "spread", "inherit_velocity", "charge")}
             _check_finite(ob, frame, "emitter", values)
             launch = tuple(float(v) for v in p.launch_velocity)
             _check_finite(ob, frame, "emitter", {f"launch_velocity[{i}]": v
@@ -381,8 +383,11 @@ class Extractor:
         for ob in self.roles.forces:
             values = {k: getattr(ob.physanim.force, k) for k in (
                 "type", "strength", "noise", "noise_scale", "noise_speed", "linear",
-                "quadratic", "falloff", "min_distance", "max_distance", "seed")}
+                "quadratic", "falloff", "min_distance", "max_distance", "seed",
+                "gravity_constant", "theta", "softening", "sigma", "epsilon", "cutoff",
+                "core_softness", "coulomb_constant")}
             _check_finite(ob, frame, "force", values)
+            values["emitters"] = self._affected(ob)
             forces.append((world_matrix(ob, frame, "force"), values))
         return colliders, forces
 
@@ -437,12 +442,27 @@ class Extractor:
                              v0, v1, self._collider_tris.get(ob.name))
                      for i, (ob, (m0, shape, rest, fric, thick, v0), (m1, *_, v1))
                      in enumerate(zip(self.roles.colliders, a.colliders, b.colliders))]
+        fields = [(ob, m, f) for ob, (m, f) in zip(self.roles.forces, a.forces)
+                  if f["type"] not in INTERACTION_TYPES]
         forces = [_framed(ob.name, a.frame, "force", self._force, ob, m, f)
-                  for ob, (m, f) in zip(self.roles.forces, a.forces)]
+                  for ob, m, f in fields]
+        charges = tuple(values["charge"] for *_, values in b.emitters)
+        interactions = [_framed(ob.name, a.frame, "force", _interaction, ob, f, charges)
+                        for ob, (_, f) in zip(self.roles.forces, a.forces)
+                        if f["type"] in INTERACTION_TYPES and b.emitters]
         return FrameInputs(frame=a.frame, t0=seconds(a.tau),
                            frame_dt=seconds(b.tau - a.tau),
                            gravity=convert.gravity(self.scene), emitters=emitters,
-                           colliders=colliders, forces=forces)
+                           colliders=colliders, forces=forces, interactions=interactions)
+
+    def _affected(self, ob) -> tuple[int, ...]:
+        """The emitter indices an interaction force object's Emitters collection holds (all
+        emitters: empty)."""
+        group = ob.physanim.force.affects
+        if group is None:
+            return ()
+        names = {o.name for o in group.all_objects}
+        return tuple(i for name, i in self.index.items() if name in names) or (-1,)
 
     @staticmethod
     def _force(ob, m: np.ndarray, f: dict):
@@ -458,3 +478,16 @@ class Extractor:
             return Attractor(ob.name, origin, f["strength"], f["falloff"], f["min_distance"],
                              f["max_distance"])
         return Vortex(ob.name, origin, z_axis, f["strength"])
+
+
+def _interaction(ob, f: dict, charges: tuple[float, ...]):
+    """A force object's interaction among particles (its type in INTERACTION_TYPES)."""
+    kind, members = f["type"], f["emitters"]
+    if kind == 'GRAVITY':
+        return MutualGravity(ob.name, G=f["gravity_constant"], softening=f["softening"],
+                             theta=f["theta"], emitters=members)
+    if kind == 'LENNARD_JONES':
+        return LennardJones(ob.name, sigma=f["sigma"], epsilon=f["epsilon"], cutoff=f["cutoff"],
+                            softness=f["core_softness"], emitters=members)
+    return Coulomb(ob.name, k=f["coulomb_constant"], cutoff=f["cutoff"],
+                   softening=f["softening"], charges=charges, emitters=members)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import bpy
 
 from . import extract, native_points, props
+from .props import INTERACTION_TYPES
 
 # larger meshes show their Automatic collider shape only when baking (the panel redraws often)
 AUTO_SHAPE_PREVIEW_LIMIT = 100_000
@@ -120,6 +121,7 @@ class PHYSANIM_PT_emitter(_PhysicsPanel, bpy.types.Panel):
         col.prop(p, "speed_random", text="Random")
         layout.prop(p, "inherit_velocity")
         layout.prop(p, "launch_velocity")
+        layout.prop(p, "charge")
         draw_target(layout, p, "Launch Velocity")
         col = layout.column(align=True)
         col.prop(p, "mass")
@@ -248,6 +250,13 @@ class PHYSANIM_PT_follow(_PhysicsPanel, bpy.types.Panel):
         layout.prop(p, "damping")
 
 
+_INTERACTION_PROPS = {  # what each interaction's panel shows, in order
+    'GRAVITY': ("gravity_constant", "softening", "theta"),
+    'LENNARD_JONES': ("sigma", "epsilon", "cutoff", "core_softness"),
+    'COULOMB': ("coulomb_constant", "cutoff", "softening"),
+}
+
+
 class PHYSANIM_PT_force(_PhysicsPanel, bpy.types.Panel):
     bl_label = "Force"
     bl_parent_id = "PHYSANIM_PT_object"
@@ -261,6 +270,9 @@ class PHYSANIM_PT_force(_PhysicsPanel, bpy.types.Panel):
         layout = self.layout
         layout.use_property_split = True
         layout.prop(p, "type")
+        if p.type in INTERACTION_TYPES:
+            self._interaction(layout, p)
+            return
         layout.label(text="Acts on particles and on spring meshes " + (
             "(pressure on their faces)" if p.type == 'WIND' else "(a whole mesh as one particle)"),
             icon='INFO')
@@ -280,6 +292,17 @@ class PHYSANIM_PT_force(_PhysicsPanel, bpy.types.Panel):
             layout.prop(p, "falloff")
             layout.prop(p, "min_distance")
             layout.prop(p, "max_distance")
+
+    @staticmethod
+    def _interaction(layout, p) -> None:
+        layout.prop(p, "affects")
+        layout.label(text="Among the particles of " + (
+            f'the emitters in "{p.affects.name}"' if p.affects is not None else
+            "every emitter") + ", all with all", icon='INFO')
+        for key in _INTERACTION_PROPS[p.type]:
+            layout.prop(p, key)
+        if p.type == 'COULOMB':
+            layout.label(text="Each emitter's Charge sets its particles'", icon='INFO')
 
 
 class PHYSANIM_PT_spring_mesh(_PhysicsPanel, bpy.types.Panel):

@@ -70,7 +70,12 @@ FORCE_ITEMS = [
     ('DRAG', "Drag", "Air resistance opposing each particle's velocity"),
     ('ATTRACTOR', "Attractor", "Pull towards (or push away from) the object's origin"),
     ('VORTEX', "Vortex", "Swirl around the object's local Z axis"),
+    ('GRAVITY', "Mutual Gravity", "The particles attract each other (N-body gravity, Barnes-Hut)"),
+    ('LENNARD_JONES', "Lennard-Jones", "The particles repel up close and attract a little "
+                                       "farther: they clump into drops"),
+    ('COULOMB', "Coulomb", "Charged particles push (like charges) or pull (unlike) each other"),
 ]
+INTERACTION_TYPES = ('GRAVITY', 'LENNARD_JONES', 'COULOMB')  # forces among the particles
 
 
 class PHYSANIM_PG_stop(bpy.types.PropertyGroup):
@@ -152,6 +157,8 @@ class PHYSANIM_PG_emitter(bpy.types.PropertyGroup):
     target_frame: IntProperty(name="Target Frame", default=48, options=STATIC,
                               description="The frame the burst's centre arrives at its target")
     mass: FloatProperty(name="Mass", min=1.0e-6, max=1.0e6, default=0.1, unit='MASS')
+    charge: FloatProperty(name="Charge", min=-1.0e6, max=1.0e6, soft_min=-10.0, soft_max=10.0,
+                          description="Electric charge of each particle, C (Coulomb forces)")
     size: FloatProperty(name="Size", min=0.0, max=1.0e3, soft_max=1.0, default=0.05,
                         unit='LENGTH', description="Radius of a particle's instance")
     size_random: FloatProperty(name="Size Random", min=0.0, max=1.0e3, soft_max=1.0,
@@ -246,6 +253,37 @@ class PHYSANIM_PG_force(bpy.types.PropertyGroup):
     max_distance: FloatProperty(name="Max Distance", min=0.0, max=1.0e6, default=0.0,
                                 unit='LENGTH', description="0 = unlimited")
     seed: IntProperty(name="Seed", min=0, max=2**31 - 1)
+    # interactions among particles (types in INTERACTION_TYPES)
+    affects: PointerProperty(name="Emitters", type=bpy.types.Collection,
+                             description="The emitters whose particles interact, all with all "
+                                         "(empty: every emitter's)")
+    gravity_constant: FloatProperty(name="G", min=0.0, max=1.0e9, soft_max=100.0, default=1.0,
+                                    description="Gravitational constant, m³/(kg s²), at the "
+                                                "scene's scale (6.674e-11 is the real one)")
+    theta: FloatProperty(name="Opening Angle", min=0.0, max=2.0, default=0.5,
+                         description="Barnes-Hut accuracy: a far group of particles acts as one "
+                                     "when its size is under this times its distance (0: exact, "
+                                     "slow; 0.5: about 0.1 % error; 1: fast, a few %)")
+    softening: FloatProperty(name="Softening", min=0.0, max=1.0e3, soft_max=1.0, default=0.05,
+                             unit='LENGTH', description="Distance that keeps close passes "
+                                                        "finite (Plummer)")
+    sigma: FloatProperty(name="Sigma", min=1.0e-5, max=1.0e3, soft_max=1.0, default=0.1,
+                         unit='LENGTH', description="Distance where the Lennard-Jones force "
+                                                    "turns from push to pull is 1.12 times this")
+    epsilon: FloatProperty(name="Epsilon", min=0.0, max=1.0e6, soft_max=1.0, default=0.002,
+                           description="Depth of the Lennard-Jones well, J: how strongly "
+                                       "particles cling (stronger needs more sub-steps: the "
+                                       "bake says how many)")
+    core_softness: FloatProperty(name="Core Softness", min=0.0, max=1.9, default=0.5,
+                                 description="0: Lennard-Jones' hard core (particles never "
+                                             "overlap; needs short steps); higher: a finite "
+                                             "push up close, so fast or overlapping particles "
+                                             "bounce off at ordinary sub-steps")
+    cutoff: FloatProperty(name="Cutoff", min=1.0e-5, max=1.0e3, soft_max=10.0, default=0.25,
+                          unit='LENGTH', description="No force beyond this distance")
+    coulomb_constant: FloatProperty(name="k", min=0.0, max=1.0e12, soft_max=100.0, default=1.0,
+                                    description="Coulomb constant, N m²/C², at the scene's "
+                                                "scale (8.988e9 is the real one)")
 
 
 BEND_ITEMS = [

@@ -3,10 +3,10 @@
 from .model import ParticleModel, ParticleModelBuilder, ParticleState
 from .output import emitter_arrays
 from .settings import POINT_CONSTRAINTS, EmitterFrame, EmitterSettings, PointConstraint, SpringLink
-from .solver import FrameInputs, FrameReport, ParticleSolver, ParticleSystem
+from .solver import FrameInputs, FrameReport, ParticleDrive, ParticleSolver, ParticleSystem
 
 __all__ = [
-    "POINT_CONSTRAINTS", "PointConstraint", "EmitterFrame", "EmitterSettings", "FrameInputs", "FrameReport",
+    "POINT_CONSTRAINTS", "PointConstraint", "EmitterFrame", "EmitterSettings", "FrameInputs", "FrameReport", "ParticleDrive",
     "ParticleModel", "ParticleModelBuilder", "ParticleSolver", "ParticleSystem", "ParticleState", "SpringLink",
     "emitter_arrays",
 ]

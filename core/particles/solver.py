@@ -17,6 +17,8 @@ Per sub-step, in order (each a named pass below):
 """
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass, field
 from collections.abc import Sequence
 
@@ -49,6 +51,8 @@ class FrameInputs:
         colliders: colliders (analytic shapes or triangle meshes) with their motion over the
             interval.
         forces: force objects (drag, wind, attractors, ...) for this interval.
+        interactions: forces among the particles (:mod:`..forces.interactions`: mutual
+            gravity, Lennard-Jones, Coulomb), bound to the particles each sub-step.
     """
 
     frame: int
@@ -58,18 +62,35 @@ class FrameInputs:
     emitters: Sequence[EmitterFrame] = ()
     colliders: Sequence[ColliderFrame] = ()
     forces: Sequence[Force] = ()
+    interactions: Sequence = ()
 
     @classmethod
-    def of(cls, frame: WorldFrame, emitters: Sequence[EmitterFrame]) -> FrameInputs:
-        """The particles' inputs: the world's interval and the emitters' values."""
-        return cls(frame.frame, frame.t0, frame.frame_dt, frame.gravity, emitters,
-                   frame.colliders, frame.forces)
+    def of(cls, frame: WorldFrame, drive: ParticleDrive) -> FrameInputs:
+        """The particles' inputs: the world's interval, the emitters' values and the
+        interactions."""
+        return cls(frame.frame, frame.t0, frame.frame_dt, frame.gravity, drive.emitters,
+                   frame.colliders, frame.forces, drive.interactions)
+
+    @property
+    def drive(self) -> ParticleDrive:
+        """What only the particles read of this interval."""
+        return ParticleDrive(self.emitters, self.interactions)
 
     @property
     def world(self) -> WorldFrame:
         """What every system shares of this interval."""
         return WorldFrame(self.frame, self.t0, self.frame_dt, self.gravity, self.colliders,
                           self.forces)
+
+
+@dataclass(frozen=True)
+class ParticleDrive:
+    """The particle system's own input for one interval (besides the world's): one
+    :class:`EmitterFrame` per model emitter, same order, and the interactions among the
+    particles."""
+
+    emitters: Sequence[EmitterFrame] = ()
+    interactions: Sequence = ()
 
 
 @dataclass
@@ -109,13 +130,13 @@ class _FrameStep:
 
 class ParticleSystem(SolverSystem):
     """A particle state and its solver as one system of a :class:`~physanim.core.world.World`;
-    its own per-frame input is the list of :class:`EmitterFrame` (one per emitter)."""
+    its own per-frame input is a :class:`ParticleDrive`."""
 
     def __init__(self, solver: ParticleSolver, state: ParticleState, name: str = "particles"):
         super().__init__(solver, state, name)
 
-    def inputs(self, frame: WorldFrame, emitters: Sequence[EmitterFrame]) -> FrameInputs:
-        return FrameInputs.of(frame, emitters)
+    def inputs(self, frame: WorldFrame, drive: ParticleDrive) -> FrameInputs:
+        return FrameInputs.of(frame, drive)
 
     def report(self, step: _FrameStep) -> FrameReport:
         step.report.alive = self.state.particle_count
@@ -201,7 +222,7 @@ class ParticleSolver:
         a world of this one system."""
         system = ParticleSystem(self, state)
         world = World([system], self.colliders)
-        return world.advance(inputs.world, {system: inputs.emitters}).reports[system]
+        return world.advance(inputs.world, {system: inputs.drive}).reports[system]
 
     def begin_frame(self, state: ParticleState, inputs: FrameInputs, paths: list) -> _FrameStep:
         """Check the interval's emitter inputs and sample its births (one draw per frame)."""
@@ -216,10 +237,33 @@ class ParticleSolver:
                 detail = str(exc).removeprefix(f'emitter "{e.name}": ')
                 raise PhysanimError(detail, obj=e.name, frame=inputs.frame, kind="emitter") from exc
         h = inputs.frame_dt / self.substeps
+        self._check_stiffness(state, inputs, h)
         g = np.asarray(inputs.gravity, dtype=np.float64)
         return _FrameStep(state, inputs, paths, h, g, 2.0 * float(np.linalg.norm(g)) * h + 1e-4,
                           [self._sample(state, inputs, i) for i in range(model.emitter_count)],
                           FrameReport(per_emitter_births=[0] * model.emitter_count))
+
+    @staticmethod
+    def _check_stiffness(state: ParticleState, inputs: FrameInputs, h: float) -> None:
+        """An interaction too stiff for the sub-step (its particles' lightest) stops the bake
+        up front, saying how many sub-steps it needs, instead of blowing up frames later."""
+        for spec in inputs.interactions:
+            members = spec.emitters or range(len(inputs.emitters))
+            masses = [ef.mass for e, ef in enumerate(inputs.emitters)
+                      if e in members and ef.active]
+            held = state.particle_mass[np.isin(state.particle_emitter, list(members))]
+            if len(held):
+                masses.append(float(held.min()))
+            if not masses:
+                continue
+            longest = spec.max_step(min(masses))
+            if h > longest:
+                need = math.ceil(inputs.frame_dt / longest)
+                raise PhysanimError(
+                    f"too stiff for sub-steps of {1000 * h:.3g} ms on {min(masses):g} kg "
+                    f"particles: it needs {1000 * longest:.3g} ms or less — raise the scene's "
+                    f"Substeps to {need}, or lower its Epsilon", obj=spec.name,
+                    frame=inputs.frame, kind="force")
 
     def substep(self, step: _FrameStep, k: int) -> None:
         """Sub-step ``k`` of the interval: the passes of the module docstring."""
@@ -265,6 +309,7 @@ class ParticleSolver:
     def _forces(self, state, inputs, g) -> list:
         forces: list = [Gravity(tuple(g))] if np.any(g) else []
         forces.extend(inputs.forces)
+        forces.extend(spec.bind(state.particle_emitter) for spec in inputs.interactions)
         if len(state.link_a):
             for e, settings in enumerate(self.model.emitters):
                 sel = state.link_emitter == e

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from physanim.core.collision.hull import convex_hull
-from physanim.core.particles import EmitterFrame, EmitterSettings, ParticleSolver, ParticleSystem
+from physanim.core.particles import (EmitterFrame, EmitterSettings, ParticleDrive, ParticleSolver,
+                                     ParticleSystem)
 from physanim.core.rigid.mass import polyhedron_mass
 from physanim.core.rigid.model import RigidBodySettings
 from physanim.core.rigid.solver import RigidBodySystem
@@ -31,7 +32,7 @@ def _run(rigid_body, frames=48):
     w = World(systems)
     idle = EmitterFrame(active=False)
     for f in range(frames):
-        w.advance(WorldFrame(f, f * DT, DT, G, [ground()]), {systems[0]: [idle]})
+        w.advance(WorldFrame(f, f * DT, DT, G, [ground()]), {systems[0]: ParticleDrive([idle])})
     return model, state, pstate
 
 

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from physanim.core.controls.timing import TimeMap, window_active
-from physanim.core.particles import EmitterFrame, EmitterSettings, ParticleSolver, ParticleSystem
+from physanim.core.particles import (EmitterFrame, EmitterSettings, ParticleDrive, ParticleSolver,
+                                     ParticleSystem)
 from physanim.core.particles.model import ParticleState
 from physanim.core.rigid.model import RigidBodyState
 from physanim.core.springs.model import SpringMeshState
@@ -133,7 +134,7 @@ def test_world_samples_poses_inside_the_frame_and_leaves_the_path_alone():
         system = ParticleSystem(ParticleSolver(model, substeps=4), state)
         world = World([system])
         off = EmitterFrame(rate=0.0, active=False)
-        report = world.advance(WorldFrame(0, 0.0, DT, samples=samples), {system: [off]})
+        report = world.advance(WorldFrame(0, 0.0, DT, samples=samples), {system: ParticleDrive([off])})
         return system.state, report.poses.get(system, [])
 
     plain, none = run(())

@@ -1,0 +1,134 @@
+"""Fixed-radius neighbours of points: a uniform cell grid (cell list) with cells as wide as the
+radius, so every pair closer than it lies in the same or adjacent cells.
+
+Points are sorted by cell; each occupied cell meets itself and 13 of its 26 neighbours (one of
+each opposite pair: the half shell), so a pair of cells is visited once and a pair of points
+comes out once, with i < j in the sorted order. Every (cell, neighbour cell) block of point
+pairs is expanded vectorised (repeat / arange over the block sizes), a few offsets at a time so
+the candidate arrays stay bounded, and kept when the points are within the radius.
+
+Cell keys are linear cell indices when the grid's cell count fits in int64, else a 64-bit hash
+of the cell coordinates (two cells sharing a hash only add candidates, which the distance test
+removes; the neighbour cell's key is hashed the same way, so nothing is missed).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .broadphase_grid import _HASH
+
+#: the half shell: (0, 0, 0) and one offset of each opposite pair of the 26 neighbours
+HALF_SHELL = np.array([(0, 0, 0)] + [(dx, dy, dz) for dx in (-1, 0, 1) for dy in (-1, 0, 1)
+                                     for dz in (-1, 0, 1) if (dx, dy, dz) > (0, 0, 0)],
+                      dtype=np.int64)
+#: candidate pairs held at once (about 24 bytes each, a few arrays of them)
+BATCH = 4_000_000
+
+
+class PointGrid:
+    """The cells of points ``x`` (n, 3) [m] for neighbour queries within ``radius`` [m] (> 0).
+
+    Attributes:
+        order: (n,) the points sorted by cell. cell_start, cell_count: (c,) each occupied
+            cell's run in ``order``. cell: (c, 3) its coordinates. key: (c,) its sorted keys.
+    """
+
+    def __init__(self, x: np.ndarray, radius: float):
+        x = np.asarray(x, dtype=np.float64).reshape(-1, 3)
+        if not (np.isfinite(radius) and radius > 0.0):
+            raise ValueError(f"neighbour radius must be finite and > 0 (got {radius})")
+        if not np.isfinite(x).all():
+            raise ValueError("neighbour search: a point is not finite")
+        self.x, self.radius = x, float(radius)
+        if not len(x):
+            self.order = np.zeros(0, np.int64)
+            self.cell = np.zeros((0, 3), np.int64)
+            self.key = self.cell_start = self.cell_count = np.zeros(0, np.int64)
+            return
+        lo = x.min(axis=0)
+        coords = np.floor((x - lo) / self.radius).astype(np.int64)
+        self._dims = coords.max(axis=0) + 3  # room for the -1 / +1 neighbours
+        coords += 1
+        keys = self._key(coords)
+        self.order = np.argsort(keys, kind="stable")
+        sorted_keys = keys[self.order]
+        starts = np.concatenate([[0], np.flatnonzero(np.diff(sorted_keys)) + 1])
+        self.key = sorted_keys[starts]
+        self.cell_start = starts
+        self.cell_count = np.diff(np.concatenate([starts, [len(x)]]))
+        self.cell = coords[self.order[starts]]
+
+    def _key(self, cell: np.ndarray) -> np.ndarray:
+        dx, dy, dz = (int(d) for d in self._dims)
+        if dx * dy * dz < 1 << 62:
+            return (cell[:, 0] * dy + cell[:, 1]) * dz + cell[:, 2]
+        u = cell.astype(np.uint64)
+        return ((u[:, 0] * _HASH[0]) ^ (u[:, 1] * _HASH[1]) ^ (u[:, 2] * _HASH[2])).view(np.int64)
+
+    def pairs(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every pair of points within the radius (Euclidean, inclusive), once: (i, j), (k,)
+        each, original indices."""
+        out_i, out_j = [], []
+        for a, b in self._cell_pairs():
+            i, j = self._expand(a, b)
+            d = self.x[i] - self.x[j]
+            near = np.einsum("ij,ij->i", d, d) <= self.radius * self.radius
+            out_i.append(i[near])
+            out_j.append(j[near])
+        if not out_i:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        return np.concatenate(out_i), np.concatenate(out_j)
+
+    def _cell_pairs(self):
+        """(cell a, cell b) index arrays per batch: a with itself and its half-shell
+        neighbours that are occupied."""
+        batch_a, batch_b, size = [], [], 0
+        for offset in HALF_SHELL:
+            if not offset.any():
+                a = np.arange(len(self.key))
+                b = a
+            else:
+                wanted = self._key(self.cell + offset)
+                b = np.searchsorted(self.key, wanted)
+                b = np.minimum(b, len(self.key) - 1)
+                hit = self.key[b] == wanted
+                a, b = np.flatnonzero(hit), b[hit]
+                if self._hashed:  # a hash may name the cell itself: that block came already
+                    keep = a != b
+                    a, b = a[keep], b[keep]
+            work = int((self.cell_count[a] * self.cell_count[b]).sum())
+            if size and size + work > BATCH:
+                yield np.concatenate(batch_a), np.concatenate(batch_b)
+                batch_a, batch_b, size = [], [], 0
+            batch_a.append(a)
+            batch_b.append(b)
+            size += work
+        if batch_a:
+            yield np.concatenate(batch_a), np.concatenate(batch_b)
+
+    @property
+    def _hashed(self) -> bool:
+        dx, dy, dz = (int(d) for d in self._dims)
+        return dx * dy * dz >= 1 << 62
+
+    def _expand(self, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The point pairs of the cell pairs (a, b); within one cell (a == b) each pair once."""
+        ca, cb = self.cell_count[a], self.cell_count[b]
+        block = ca * cb
+        total = int(block.sum())
+        if total == 0:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        k = np.repeat(np.arange(len(a)), block)
+        local = np.arange(total) - np.repeat(np.cumsum(block) - block, block)
+        p = local // cb[k]
+        q = local % cb[k]
+        same = a[k] == b[k]
+        keep = ~same | (p < q)
+        i = self.order[self.cell_start[a[k]] + p][keep]
+        j = self.order[self.cell_start[b[k]] + q][keep]
+        return i, j
+
+
+def neighbour_pairs(x: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """Every pair of points of ``x`` (n, 3) within ``radius``, once: (i, j) index arrays."""
+    return PointGrid(x, radius).pairs()

@@ -1,0 +1,225 @@
+"""Gravitational attraction among point masses: the exact pairwise sum, and Barnes and Hut's tree
+code that approximates far groups of masses by their total mass at their centre of mass.
+
+Both use Plummer softening: the acceleration of i is
+
+    a_i = G sum_j m_j (x_j - x_i) / (|x_j - x_i|^2 + eps^2)^(3/2),
+
+finite at any distance (two stars passing through each other do not fling apart).
+
+The tree is a linear octree: points sorted along the Morton (Z-order) curve of their cells, a
+node at level L being a run of points sharing the code's first 3 L bits; a node of at most
+:data:`LEAF_SIZE` points is a leaf (a *bucket*). Traversal is vectorised over buckets: a
+frontier of (bucket, node) pairs, level by level; a node is far from a bucket when its cell's
+side s and the distance d from its centre of mass to the bucket's bounding box satisfy
+s < theta d, and then every point of the bucket takes the node's monopole; a leaf that is not far
+is summed point by point; other nodes open into their children. theta = 0 is the exact sum.
+Error against theta is measured in the tests and printed by the benchmark.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..collision.broadphase_octree import _morton
+
+LEAF_SIZE = 16
+MAX_LEVEL = 21  # 21 bits per axis in a 63-bit Morton code
+EXACT_BELOW = 1024  # fewer points: the exact sum is cheaper than a tree
+BATCH = 2_000_000  # point-pair interactions evaluated at once
+
+
+def exact_accelerations(x: np.ndarray, m: np.ndarray, G: float, eps: float) -> np.ndarray:
+    """a (n, 3) [m/s^2] by the exact pairwise sum, each pair once, equal and opposite (total
+    momentum and angular momentum change by rounding only)."""
+    n = len(x)
+    a = np.zeros((n, 3))
+    if n < 2:
+        return a
+    i, j = np.triu_indices(n, 1)
+    for s in range(0, len(i), BATCH):
+        ii, jj = i[s:s + BATCH], j[s:s + BATCH]
+        d = x[jj] - x[ii]
+        r2 = np.einsum("ij,ij->i", d, d) + eps * eps
+        with np.errstate(divide="ignore"):  # two points at one place pull along no axis
+            inv = np.where(r2 > 0.0, 1.0 / (r2 * np.sqrt(r2)), 0.0)
+        f = G * d * inv[:, None]  # per unit mass of both
+        for k in range(3):
+            a[:, k] += np.bincount(ii, f[:, k] * m[jj], minlength=n)
+            a[:, k] -= np.bincount(jj, f[:, k] * m[ii], minlength=n)
+    return a
+
+
+class Octree:
+    """The linear octree of points ``x`` (n, 3) with masses ``m`` (n,) (see the module
+    docstring). Node arrays, all levels together: ``node_start``/``node_count`` (their run of the
+    sorted points), ``node_level``, ``node_mass``, ``node_com`` (n_nodes, 3), ``node_size``
+    (cell side [m]), ``node_child``/``node_children`` (first child index, count; 0 for leaves).
+    """
+
+    def __init__(self, x: np.ndarray, m: np.ndarray, leaf_size: int = LEAF_SIZE):
+        lo, hi = x.min(axis=0), x.max(axis=0)
+        side = float((hi - lo).max()) * (1.0 + 1e-9) or 1.0
+        cell = np.floor((x - lo) / side * (1 << MAX_LEVEL)).astype(np.int64)
+        cell = np.clip(cell, 0, (1 << MAX_LEVEL) - 1)
+        code = _morton(cell.T)
+        self.order = np.argsort(code, kind="stable")
+        code = code[self.order]
+        xs, ms = x[self.order], m[self.order]
+        self.x, self.m = xs, ms
+        cum_m = np.concatenate([[0.0], np.cumsum(ms)])
+        cum_mx = np.concatenate([np.zeros((1, 3)), np.cumsum(ms[:, None] * xs, axis=0)])
+        starts, counts, levels, parents = [np.zeros(1, np.int64)], [np.array([len(x)])], \
+            [np.zeros(1, np.int64)], [np.full(1, -1)]
+        open_ = np.array([len(x) > leaf_size])
+        first = 0  # index of the current level's first node
+        level = 0
+        while open_.any() and level < MAX_LEVEL:
+            level += 1
+            s0, c0 = starts[-1][open_], counts[-1][open_]
+            parent_index = first + np.flatnonzero(open_)
+            # the children: runs of equal level-L keys inside each open node
+            idx = np.repeat(s0, c0) + (np.arange(int(c0.sum()))
+                                       - np.repeat(np.cumsum(c0) - c0, c0))
+            key = code[idx] >> (3 * (MAX_LEVEL - level))
+            owner = np.repeat(np.arange(len(s0)), c0)
+            change = np.concatenate([[True], (np.diff(key) != 0) | (np.diff(owner) != 0)])
+            run_first = np.flatnonzero(change)
+            run_start = idx[run_first]
+            run_count = np.diff(np.concatenate([run_first, [len(idx)]]))
+            first += len(starts[-1])
+            starts.append(run_start)
+            counts.append(run_count)
+            levels.append(np.full(len(run_start), level))
+            parents.append(parent_index[owner[run_first]])
+            open_ = run_count > leaf_size
+        self.node_start = np.concatenate(starts)
+        self.node_count = np.concatenate(counts)
+        self.node_level = np.concatenate(levels)
+        parent = np.concatenate(parents)
+        total = len(self.node_start)
+        self.node_children = np.bincount(parent[1:], minlength=total)
+        # children of a node are consecutive (the levels are built in the parents' order)
+        self.node_child = np.zeros(total, np.int64)
+        has = self.node_children > 0
+        first_child = np.full(total, total, np.int64)
+        np.minimum.at(first_child, parent[1:], np.arange(1, total))
+        self.node_child[has] = first_child[has]
+        end = self.node_start + self.node_count
+        self.node_mass = cum_m[end] - cum_m[self.node_start]
+        self.node_com = (cum_mx[end] - cum_mx[self.node_start]) / np.where(
+            self.node_mass > 0.0, self.node_mass, 1.0)[:, None]
+        self.node_size = side / (1 << self.node_level).astype(np.float64)
+        self.leaves = np.flatnonzero(~has)
+        # the targets: the leaves (buckets of at most leaf_size points), with their boxes
+        self.groups = self.leaves[np.argsort(self.node_start[self.leaves])]
+        gs = self.node_start[self.groups]
+        self.group_lo = np.minimum.reduceat(xs, gs)
+        self.group_hi = np.maximum.reduceat(xs, gs)
+
+    def accelerations(self, G: float, eps: float, theta: float) -> np.ndarray:
+        """a (n, 3) of every point, in the caller's order."""
+        (far_g, far_n), (near_g, near_l) = self.interactions(theta)
+        # each group's sources, as rows of one table of nodes then points: its far nodes'
+        # monopoles and its near leaves' points, sorted by group (a radix sort of small keys)
+        n_nodes = len(self.node_mass)
+        table_x = np.concatenate([self.node_com, self.x])
+        table_m = np.concatenate([self.node_mass, self.m])
+        group_of = np.concatenate([far_g, np.repeat(near_g, self.node_count[near_l])])
+        source = np.concatenate([far_n, n_nodes + _ranges(self.node_start[near_l],
+                                                          self.node_count[near_l])])
+        key = group_of.astype(np.uint16 if len(self.groups) <= 1 << 16 else np.int64)
+        source = source[np.argsort(key, kind="stable")]
+        groups = self.groups
+        per_group = np.bincount(key, minlength=len(groups))
+        src_start = np.cumsum(per_group) - per_group
+        count = self.node_count[groups]
+        rows = count * per_group  # interactions of each group: its points times its sources
+        a = np.zeros((len(self.x), 3))
+        for lo, hi in _batches(rows, BATCH):
+            g = np.arange(lo, hi)
+            g = g[rows[lo:hi] > 0]
+            if not len(g):
+                continue
+            # point-major: each target point's sources are one contiguous run
+            point = _ranges(self.node_start[groups[g]], count[g])
+            width = np.repeat(per_group[g], count[g])
+            src = source[_ranges(np.repeat(src_start[g], count[g]), width)]
+            a[point] = _pull_runs(self.x, np.repeat(point, width), table_x[src], table_m[src],
+                                  G, eps, np.cumsum(width) - width)
+        out = np.empty_like(a)
+        out[self.order] = a
+        return out
+
+    def interactions(self, theta: float) -> tuple[tuple[np.ndarray, np.ndarray],
+                                                  tuple[np.ndarray, np.ndarray]]:
+        """The traversal: (group, far node) pairs and (group, near leaf) pairs; groups are
+        indices into :attr:`groups`. A node is far from a group when its side is under theta
+        times the distance from its centre of mass to the group's box (so from each of its
+        points)."""
+        far_b, far_n, near_b, near_l = [], [], [], []
+        group = np.arange(len(self.groups))
+        node = np.zeros(len(group), np.int64)
+        while len(group):
+            com = self.node_com[node]
+            gap = np.maximum(np.maximum(self.group_lo[group] - com, com - self.group_hi[group]),
+                             0.0)
+            far = self.node_size[node] < theta * np.sqrt(np.einsum("ij,ij->i", gap, gap))
+            leaf = ~far & (self.node_children[node] == 0)
+            far_b.append(group[far])
+            far_n.append(node[far])
+            near_b.append(group[leaf])
+            near_l.append(node[leaf])
+            opened = ~far & ~leaf
+            b, nd = group[opened], node[opened]
+            k = self.node_children[nd]
+            group = np.repeat(b, k)
+            node = _ranges(self.node_child[nd], k)
+        return ((np.concatenate(far_b), np.concatenate(far_n)),
+                (np.concatenate(near_b), np.concatenate(near_l)))
+
+
+def _ranges(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """The concatenation of arange(s, s + c) for each (s, c)."""
+    total = int(counts.sum())
+    return np.repeat(starts - (np.cumsum(counts) - counts), counts) + np.arange(total)
+
+
+def _pull_runs(x: np.ndarray, target: np.ndarray, src_x: np.ndarray, src_m: np.ndarray,
+               G: float, eps: float, run_start: np.ndarray) -> np.ndarray:
+    """Sum over each run of sources of G m d / (|d|^2 + eps^2)^(3/2), d = source - target
+    (a source at the target itself adds nothing)."""
+    xt = x[target]
+    r2 = np.full(len(target), eps * eps)
+    d = []
+    for k in range(3):
+        dk = src_x[:, k] - xt[:, k]
+        r2 += dk * dk
+        d.append(dk)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        w = np.where(r2 > 0.0, G * src_m / (r2 * np.sqrt(r2)), 0.0)
+    return np.stack([np.add.reduceat(dk * w, run_start) for dk in d], axis=1)
+
+
+def _batches(block: np.ndarray, limit: int):
+    """Ranges of pairs whose blocks sum to about ``limit`` interactions each."""
+    if not len(block):
+        return
+    ends = np.cumsum(block)
+    lo = 0
+    while lo < len(block):
+        base = ends[lo - 1] if lo else 0
+        hi = int(np.searchsorted(ends, base + limit, side="right"))
+        hi = max(hi, lo + 1)
+        yield lo, hi
+        lo = hi
+
+
+def accelerations(x: np.ndarray, m: np.ndarray, G: float, eps: float,
+                  theta: float) -> np.ndarray:
+    """a (n, 3) [m/s^2] of every point: the exact sum for theta 0 or few points, else the
+    tree code."""
+    x = np.asarray(x, np.float64)
+    m = np.asarray(m, np.float64)
+    if theta == 0.0 or len(x) < EXACT_BELOW:
+        return exact_accelerations(x, m, G, eps)
+    return Octree(x, m).accelerations(G, eps, theta)

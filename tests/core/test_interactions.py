@@ -1,0 +1,263 @@
+"""Interactions among particles (core/forces/interactions.py, barnes_hut.py, and the neighbour
+grid of core/collision/neighbours.py) against closed forms: a circular two-body orbit's period,
+momentum and angular momentum of a cloud, the tree code's error against the exact sum,
+Lennard-Jones oscillation about 2^(1/6) sigma and a condensing droplet, Coulomb repulsion's
+energy, and which emitters take part."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from physanim.core.collision.neighbours import neighbour_pairs
+from physanim.core.forces import Drag
+from physanim.core.forces import barnes_hut as bh
+from physanim.core.forces.interactions import Coulomb, LennardJones, MutualGravity
+from physanim.core.particles import EmitterFrame, EmitterSettings, FrameInputs, ParticleSolver
+from physanim.tests.core.helpers import particle_model, place
+
+ZERO_G = (0.0, 0.0, 0.0)
+
+
+def _run(model, state, interactions, frames, dt, substeps=1, integrator="SYMPLECTIC_EULER",
+         forces=(), each=None):
+    solver = ParticleSolver(model, integrator, substeps)
+    idle = [EmitterFrame(active=False)] * model.emitter_count
+    for f in range(frames):
+        solver.advance(state, FrameInputs(frame=f, t0=f * dt, frame_dt=dt, gravity=ZERO_G,
+                                          emitters=idle, forces=forces,
+                                          interactions=interactions))
+        if each is not None:
+            each(f, state)
+
+
+# -- neighbours ---------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("scale", [1.0, 1e6])
+def test_neighbour_grid_finds_exactly_the_pairs_within_the_radius(scale):
+    rng = np.random.default_rng(3)
+    x = rng.random((1500, 3)) * scale
+    x[:40] = x[40:80]  # coincident points count too
+    r = 0.08 * scale
+    i, j = neighbour_pairs(x, r)
+    found = set(map(tuple, np.sort(np.stack([i, j], 1), axis=1)))
+    d = np.linalg.norm(x[:, None] - x[None], axis=2)
+    a, b = np.nonzero(np.triu(d <= r, 1))
+    assert found == set(zip(a.tolist(), b.tolist()))
+    assert len(found) == len(i)  # each pair once
+
+
+# -- gravity ------------------------------------------------------------------------------------
+
+def test_two_body_circular_orbit_period():
+    """Two equal masses D apart, each at v = sqrt(G m / (2 D)) across the line between them:
+    a circular orbit of period 2 pi sqrt(D^3 / (2 G m)); measured within 0.5 %."""
+    G, m, D = 1.0, 2.0, 1.0
+    v = math.sqrt(G * m / (2 * D))
+    period = 2 * math.pi * math.sqrt(D ** 3 / (2 * G * m))
+    model = particle_model(EmitterSettings("Stars"))
+    state = model.state()
+    place(state, [[-D / 2, 0, 0], [D / 2, 0, 0]], [[0, -v, 0], [0, v, 0]], mass=m)
+    gravity = MutualGravity("Pull", G, softening=0.0, theta=0.0)
+    dt = period / 200
+    angles = []
+    _run(model, state, [gravity], 260, dt, substeps=10,
+         each=lambda f, s: angles.append(math.atan2(*(s.particle_x[1] - s.particle_x[0])[1::-1])))
+    unwrapped = np.unwrap(angles)
+    t = (np.arange(len(angles)) + 1) * dt
+    k = int(np.argmax(unwrapped >= unwrapped[0] + 2 * math.pi))
+    crossed = np.interp(unwrapped[0] + 2 * math.pi, unwrapped[k - 1:k + 1], t[k - 1:k + 1])
+    assert crossed - t[0] == pytest.approx(period, rel=5e-3)
+    sep = np.linalg.norm(state.particle_x[1] - state.particle_x[0])
+    assert sep == pytest.approx(D, rel=1e-2)  # still circular
+
+
+def _cloud(n: int = 1000):
+    rng = np.random.default_rng(7)
+    model = particle_model(EmitterSettings("Cloud"))
+    state = model.state()
+    place(state, rng.normal(size=(n, 3)), 0.3 * rng.normal(size=(n, 3)))
+    state.particle_mass[:] = rng.uniform(0.5, 1.5, n)
+    return model, state
+
+
+def _energy(s, G: float, eps: float) -> float:
+    m, x = s.particle_mass, s.particle_x
+    i, j = np.triu_indices(len(m), 1)
+    r = np.sqrt(((x[i] - x[j]) ** 2).sum(1) + eps * eps)
+    return 0.5 * (m * (s.particle_v ** 2).sum(1)).sum() - G * (m[i] * m[j] / r).sum()
+
+
+def test_a_cloud_keeps_its_momentum_and_angular_momentum():
+    """1,000 bodies under the exact sum (equal and opposite pairs) and symplectic Euler:
+    momentum and angular momentum change by rounding only (1e-9 relative); the energy error
+    over a second is first order in the step (halving the step halves it) and small."""
+    G, eps = 1e-3, 0.1
+    gravity = MutualGravity("Pull", G, softening=eps, theta=0.0)
+
+    def totals(s):
+        p = (s.particle_mass[:, None] * s.particle_v).sum(axis=0)
+        ang = np.cross(s.particle_x, s.particle_mass[:, None] * s.particle_v).sum(axis=0)
+        return p, ang
+
+    model, state = _cloud()
+    p0, l0 = totals(state)
+    e0 = _energy(state, G, eps)
+    scale_p = (state.particle_mass[:, None] * np.abs(state.particle_v)).sum()
+    scale_l = (np.linalg.norm(state.particle_x, axis=1) * state.particle_mass
+               * np.linalg.norm(state.particle_v, axis=1)).sum()
+    _run(model, state, [gravity], 20, 0.05)
+    p1, l1 = totals(state)
+    assert np.abs(p1 - p0).max() < 1e-9 * scale_p
+    assert np.abs(l1 - l0).max() < 1e-9 * scale_l
+    drift = abs(_energy(state, G, eps) - e0)
+    assert drift < 2e-3 * abs(e0)
+    model, state = _cloud()
+    _run(model, state, [gravity], 40, 0.025)
+    assert abs(_energy(state, G, eps) - e0) == pytest.approx(drift / 2, rel=0.1)
+
+
+@pytest.mark.parametrize("shape", ["ball", "disk"])
+def test_barnes_hut_error_below_one_percent_at_theta_half(shape):
+    """The tree code's force field against the exact sum: RMS relative error under 1 % at
+    theta 0.5, smaller at 0.3 (it converges to the sum)."""
+    rng = np.random.default_rng(11)
+    n = 6000
+    x = rng.normal(size=(n, 3))
+    if shape == "disk":
+        x[:, 2] *= 0.05
+    m = rng.uniform(0.5, 1.5, n)
+    exact = bh.exact_accelerations(x, m, 1.0, 0.01)
+    errors = {}
+    for theta in (0.3, 0.5):
+        a = bh.Octree(x, m).accelerations(1.0, 0.01, theta)
+        errors[theta] = math.sqrt(((a - exact) ** 2).sum() / (exact ** 2).sum())
+    assert errors[0.5] < 0.01
+    assert errors[0.3] < errors[0.5]
+    assert bh.accelerations(x[:500], m[:500], 1.0, 0.01, 0.5) == pytest.approx(
+        bh.exact_accelerations(x[:500], m[:500], 1.0, 0.01))  # few points: the exact sum
+
+
+# -- Lennard-Jones ------------------------------------------------------------------------------
+
+def test_lennard_jones_pair_oscillates_about_its_minimum():
+    """Two particles released near r* = 2^(1/6) sigma oscillate about it, at the harmonic
+    period 2 pi sqrt(mu / U''(r*)) for a small amplitude (within 2 %), energy kept."""
+    sigma, eps, m = 0.1, 0.05, 0.1
+    lj = LennardJones("Drops", sigma, eps, 2.5 * sigma, softness=0.0)  # the hard 12-6 core
+    r_star = 2 ** (1 / 6) * sigma
+    assert lj.minimum == pytest.approx(r_star)
+    k = 36 * 2 ** (2 / 3) * eps / sigma ** 2  # U''(r*)
+    mu = m / 2
+    period = 2 * math.pi * math.sqrt(mu / k)
+    model = particle_model(EmitterSettings("Drops"))
+    state = model.state()
+    r0 = 1.01 * r_star
+    place(state, [[0, 0, 0], [r0, 0, 0]], [[0, 0, 0], [0, 0, 0]], mass=m)
+    dt = period / 40
+    seps = []
+    _run(model, state, [lj], 200, dt, substeps=10,
+         each=lambda f, s: seps.append(s.particle_x[1, 0] - s.particle_x[0, 0]))
+    seps = np.array(seps)
+    assert seps.min() < r_star < seps.max()
+    assert seps.max() == pytest.approx(r0, rel=1e-3)  # energy: it comes back to where it began
+    peaks = np.flatnonzero((seps[1:-1] > seps[:-2]) & (seps[1:-1] >= seps[2:])) + 1
+    measured = np.diff(peaks).mean() * dt
+    assert measured == pytest.approx(period, rel=0.02)
+    v = lj.energy(np.array([r_star, 2.5 * sigma, 3 * sigma]))
+    assert v[0] < 0 and v[1] == v[2] == 0.0
+
+
+def test_lennard_jones_cloud_condenses_into_a_droplet():
+    """A loose cube of particles with drag (it sheds heat) and the hard 12-6 core pulls into
+    one round drop: nearly all in one cluster (a few evaporate as it heats up collapsing),
+    neighbours at 2^(1/6) sigma, no pair closer than sigma, the cloud rounder."""
+    rng = np.random.default_rng(5)
+    sigma = 0.1
+    side = (np.arange(7) - 3.0) * 1.3 * sigma  # a loose lattice, jittered: nothing overlaps
+    grid = np.stack(np.meshgrid(side, side, side), axis=-1).reshape(-1, 3)
+    n = len(grid)
+    model = particle_model(EmitterSettings("Mist"))
+    state = model.state()
+    place(state, grid + rng.uniform(-0.01, 0.01, grid.shape), np.zeros((n, 3)), mass=0.1)
+    lj = LennardJones("Cling", sigma, 0.05, 2.5 * sigma, softness=0.0)
+    steps = math.ceil((1 / 24) / lj.max_step(0.1))
+    _run(model, state, [lj], 150, 1 / 24, substeps=steps, forces=[Drag("Air", 0.05)])
+    x = state.particle_x
+    d = np.linalg.norm(x[:, None] - x[None], axis=2)
+    reach = d < 1.5 * sigma  # bonded; the cluster of particle 0 by repeated reach
+    seen = reach[np.argmin(np.linalg.norm(x - np.median(x, axis=0), axis=1))].copy()
+    for _ in range(n):
+        grown = reach[seen].any(axis=0)
+        if (grown == seen).all():
+            break
+        seen = grown
+    assert seen.sum() >= 0.9 * n
+    drop = x[seen]
+    nearest = (d[np.ix_(seen, seen)] + np.eye(int(seen.sum())) * 1e9).min(axis=1)
+    assert np.median(nearest) == pytest.approx(lj.minimum, rel=0.06)
+    assert nearest.min() > 0.85 * sigma
+    r = np.linalg.norm(drop - drop.mean(0), axis=1)
+    r0 = np.linalg.norm(grid - grid.mean(0), axis=1)
+    assert r.max() / r.mean() < r0.max() / r0.mean()  # the cube's corners pulled in
+
+
+# -- Coulomb ------------------------------------------------------------------------------------
+
+def test_like_charges_fly_apart_with_the_coulomb_energy():
+    """Two like charges released at r0: at separation r their relative speed satisfies
+    mu v^2 / 2 = k q^2 (1 / r0 - 1 / r) (within 0.5 %); unlike charges close in."""
+    k, q, m, r0 = 1.0, 0.2, 0.1, 0.1
+    mu = m / 2
+    coulomb = Coulomb("Charge", k, cutoff=10.0, softening=0.0, charges=(q,))
+    model = particle_model(EmitterSettings("Ions"))
+    state = model.state()
+    place(state, [[0, 0, 0], [r0, 0, 0]], [[0, 0, 0], [0, 0, 0]], mass=m)
+    _run(model, state, [coulomb], 40, 1 / 24, substeps=50, integrator="RK4")
+    r = state.particle_x[1, 0] - state.particle_x[0, 0]
+    v = state.particle_v[1, 0] - state.particle_v[0, 0]
+    assert r > 2 * r0
+    assert 0.5 * mu * v * v == pytest.approx(k * q * q * (1 / r0 - 1 / r), rel=5e-3)
+    unlike = Coulomb("Charge", k, cutoff=10.0, softening=0.01, charges=(q, -q))
+    model = particle_model(EmitterSettings("Plus"), EmitterSettings("Minus"))
+    state = model.state()
+    place(state, [[0, 0, 0]], [[0, 0, 0]], emitter=0, mass=m)
+    place(state, [[r0, 0, 0]], [[0, 0, 0]], emitter=1, mass=m)
+    _run(model, state, [unlike], 1, 1 / 240, substeps=10)
+    assert state.particle_x[1, 0] - state.particle_x[0, 0] < r0
+
+
+def test_only_the_named_emitters_take_part():
+    """Gravity among emitter 0's particles leaves emitter 1's alone (and they feel none)."""
+    model = particle_model(EmitterSettings("A"), EmitterSettings("B"))
+    state = model.state()
+    place(state, [[0, 0, 0], [1, 0, 0]], np.zeros((2, 3)), emitter=0)
+    place(state, [[0, 1, 0], [1, 1, 0]], np.zeros((2, 3)), emitter=1)
+    gravity = MutualGravity("Pull", 1.0, 0.01, 0.0, emitters=(0,))
+    _run(model, state, [gravity], 1, 0.1)
+    assert np.abs(state.particle_v[:2, 0]).min() > 0.0
+    assert np.array_equal(state.particle_v[2:], np.zeros((2, 3)))
+
+
+@pytest.mark.parametrize("make", [lambda: MutualGravity("G", softening=-1.0),
+                                  lambda: LennardJones("L", sigma=0.2, cutoff=0.1),
+                                  lambda: Coulomb("C", cutoff=0.0),
+                                  lambda: MutualGravity("G", theta=float("nan"))])
+def test_bad_settings_name_the_force(make):
+    with pytest.raises(ValueError, match='force "'):
+        make()
+
+
+def test_a_too_stiff_lennard_jones_stops_up_front_naming_the_substeps_it_needs():
+    from physanim.core.errors import PhysanimError
+
+    model = particle_model(EmitterSettings("Mist"))
+    state = model.state()
+    place(state, [[0, 0, 0], [0.11, 0, 0]], np.zeros((2, 3)), mass=0.1)
+    lj = LennardJones("Cling", 0.1, 0.05, 0.25)
+    with pytest.raises(PhysanimError, match=r'force "Cling" at frame 0: too stiff .* raise the '
+                                            r"scene's Substeps to 9"):
+        _run(model, state, [lj], 1, 1 / 24, substeps=2)
+    _run(model, state, [LennardJones("Cling")], 24, 1 / 24, substeps=2)  # the defaults run
+    assert np.isfinite(state.particle_x).all()
