@@ -14,6 +14,7 @@ from ..core.contact.fit import fit_analytic_shape
 from ..core.controls.timing import window_active
 from ..core.forces import Attractor, Drag, Vortex, Wind
 from ..core.forces.interactions import Coulomb, LennardJones, MutualGravity
+from ..core.particles.pair_collisions import ParticleCollisions
 from ..core.particles import (EmitterFrame, EmitterSettings, FrameInputs, ParticleModel,
                               ParticleModelBuilder, PointConstraint, SpringLink)
 from . import convert, limits
@@ -385,7 +386,7 @@ class Extractor:
                 "type", "strength", "noise", "noise_scale", "noise_speed", "linear",
                 "quadratic", "falloff", "min_distance", "max_distance", "seed",
                 "gravity_constant", "theta", "softening", "sigma", "epsilon", "cutoff",
-                "core_softness", "coulomb_constant")}
+                "core_softness", "coulomb_constant", "restitution", "friction")}
             _check_finite(ob, frame, "force", values)
             values["emitters"] = self._affected(ob)
             forces.append((world_matrix(ob, frame, "force"), values))
@@ -447,13 +448,16 @@ class Extractor:
         forces = [_framed(ob.name, a.frame, "force", self._force, ob, m, f)
                   for ob, m, f in fields]
         charges = tuple(values["charge"] for *_, values in b.emitters)
-        interactions = [_framed(ob.name, a.frame, "force", _interaction, ob, f, charges)
-                        for ob, (_, f) in zip(self.roles.forces, a.forces)
-                        if f["type"] in INTERACTION_TYPES and b.emitters]
+        among = [_framed(ob.name, a.frame, "force", _interaction, ob, f, charges)
+                 for ob, (_, f) in zip(self.roles.forces, a.forces)
+                 if f["type"] in INTERACTION_TYPES and b.emitters]
+        collisions = [c for c in among if isinstance(c, ParticleCollisions)]
+        interactions = [c for c in among if not isinstance(c, ParticleCollisions)]
         return FrameInputs(frame=a.frame, t0=seconds(a.tau),
                            frame_dt=seconds(b.tau - a.tau),
                            gravity=convert.gravity(self.scene), emitters=emitters,
-                           colliders=colliders, forces=forces, interactions=interactions)
+                           colliders=colliders, forces=forces, interactions=interactions,
+                           collisions=collisions)
 
     def _affected(self, ob) -> tuple[int, ...]:
         """The emitter indices an interaction force object's Emitters collection holds (all
@@ -486,6 +490,9 @@ def _interaction(ob, f: dict, charges: tuple[float, ...]):
     if kind == 'GRAVITY':
         return MutualGravity(ob.name, G=f["gravity_constant"], softening=f["softening"],
                              theta=f["theta"], emitters=members)
+    if kind == 'COLLISIONS':
+        return ParticleCollisions(ob.name, restitution=f["restitution"], friction=f["friction"],
+                                  emitters=members)
     if kind == 'LENNARD_JONES':
         return LennardJones(ob.name, sigma=f["sigma"], epsilon=f["epsilon"], cutoff=f["cutoff"],
                             softness=f["core_softness"], emitters=members)

@@ -254,6 +254,7 @@ _INTERACTION_PROPS = {  # what each interaction's panel shows, in order
     'GRAVITY': ("gravity_constant", "softening", "theta"),
     'LENNARD_JONES': ("sigma", "epsilon", "cutoff", "core_softness"),
     'COULOMB': ("coulomb_constant", "cutoff", "softening"),
+    'COLLISIONS': ("restitution", "friction"),
 }
 
 
@@ -303,6 +304,8 @@ class PHYSANIM_PT_force(_PhysicsPanel, bpy.types.Panel):
             layout.prop(p, key)
         if p.type == 'COULOMB':
             layout.label(text="Each emitter's Charge sets its particles'", icon='INFO')
+        if p.type == 'COLLISIONS':
+            layout.label(text="Each particle is a sphere of its Size", icon='INFO')
 
 
 class PHYSANIM_PT_spring_mesh(_PhysicsPanel, bpy.types.Panel):

@@ -74,8 +74,10 @@ FORCE_ITEMS = [
     ('LENNARD_JONES', "Lennard-Jones", "The particles repel up close and attract a little "
                                        "farther: they clump into drops"),
     ('COULOMB', "Coulomb", "Charged particles push (like charges) or pull (unlike) each other"),
+    ('COLLISIONS', "Particle Collisions", "The particles collide with each other as spheres "
+                                          "of their size: they bounce, slide and heap up"),
 ]
-INTERACTION_TYPES = ('GRAVITY', 'LENNARD_JONES', 'COULOMB')  # forces among the particles
+INTERACTION_TYPES = ('GRAVITY', 'LENNARD_JONES', 'COULOMB', 'COLLISIONS')  # among particles
 
 
 class PHYSANIM_PG_stop(bpy.types.PropertyGroup):
@@ -281,6 +283,12 @@ class PHYSANIM_PG_force(bpy.types.PropertyGroup):
                                              "bounce off at ordinary sub-steps")
     cutoff: FloatProperty(name="Cutoff", min=1.0e-5, max=1.0e3, soft_max=10.0, default=0.25,
                           unit='LENGTH', description="No force beyond this distance")
+    restitution: FloatProperty(name="Restitution", min=0.0, max=1.0, default=0.3,
+                               description="Particle collisions: the share of the approach "
+                                           "speed two particles part with")
+    friction: FloatProperty(name="Friction", min=0.0, max=10.0, soft_max=2.0, default=0.5,
+                            description="Particle collisions: Coulomb friction between "
+                                        "particles (more: steeper heaps)")
     coulomb_constant: FloatProperty(name="k", min=0.0, max=1.0e12, soft_max=100.0, default=1.0,
                                     description="Coulomb constant, N m²/C², at the scene's "
                                                 "scale (8.988e9 is the real one)")

@@ -201,3 +201,12 @@ def key_values(ob, path: str, index: int, frames_values) -> None:
     for frame, value in frames_values:
         getattr(ob, path)[index] = value
         ob.keyframe_insert(path, index=index, frame=frame)
+
+
+def fcurves(ob) -> list:
+    """The F-curves of an object's action (the layered actions of 4.4 and later, or 4.2's)."""
+    action = ob.animation_data.action
+    if getattr(action, "layers", None):
+        return [fc for layer in action.layers for strip in layer.strips
+                for bag in strip.channelbags for fc in bag.fcurves]
+    return list(action.fcurves)

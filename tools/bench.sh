@@ -5,6 +5,7 @@
 #        tools/bench.sh cloth [--frames F] [--grid N]      tools/bench.sh broadphase [--quick]
 #        tools/bench.sh rigid [--cubes N] [--frames F] [--stack N]
 #        tools/bench.sh chain [--links N] [--frames F]
+#        tools/bench.sh interactions [--quick] [--sizes N,N] [--theta T]
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 venv="$("$here/tools/venv.sh" "${PHYSANIM_BLENDER:-4.5}")"
@@ -15,6 +16,7 @@ case "${1:-}" in
   collision) shift; exec "$venv/bin/python" bench/collision.py "$@" ;;
   rigid) shift; exec "$venv/bin/python" bench/rigid.py "$@" ;;
   chain) shift; exec "$venv/bin/python" bench/chain.py "$@" ;;
+  interactions) shift; exec "$venv/bin/python" bench/interactions.py "$@" ;;
   particles) shift; exec "$venv/bin/python" bench/particles.py "$@" ;;
   *) exec "$venv/bin/python" bench/particles.py "$@" ;;
 esac

@@ -124,6 +124,7 @@ class ParticleState:
         link_emitter: (k,) emitter whose spring settings apply.
         next_id: the id the next birth gets. last_born: per emitter, id of its latest birth.
         rngs: per emitter random generators (their state is part of the simulation state).
+        pair_warm: particle-collision impulses kept from sub-step to sub-step.
     """
 
     t: float
@@ -142,6 +143,9 @@ class ParticleState:
     next_id: int
     last_born: list[int]
     rngs: list[np.random.Generator] = field(repr=False)
+    #: per particle-collision setting (its name): the pairs in contact after the last sub-step
+    #: (keys from the pair's ids) and their normal impulses, which warm-start the next one
+    pair_warm: dict = field(default_factory=dict, repr=False)
 
     @classmethod
     def empty(cls, t: float, rngs: list[np.random.Generator]) -> ParticleState:

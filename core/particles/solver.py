@@ -32,6 +32,7 @@ from ..forces import (DampedSprings, Force, Gravity, HardConstraints, OnPlanes, 
 from ..integrators import make_integrator
 from ..world import SolverSettings, SolverSystem, World, WorldFrame
 from .emit import Births, sample_births, sample_bursts
+from .pair_collisions import ParticleCollisions
 from .model import ParticleModel, ParticleState
 from .settings import EmitterFrame, PointConstraint
 
@@ -53,6 +54,7 @@ class FrameInputs:
         forces: force objects (drag, wind, attractors, ...) for this interval.
         interactions: forces among the particles (:mod:`..forces.interactions`: mutual
             gravity, Lennard-Jones, Coulomb), bound to the particles each sub-step.
+        collisions: collisions among the particles (:mod:`.pair_collisions`).
     """
 
     frame: int
@@ -63,18 +65,19 @@ class FrameInputs:
     colliders: Sequence[ColliderFrame] = ()
     forces: Sequence[Force] = ()
     interactions: Sequence = ()
+    collisions: Sequence[ParticleCollisions] = ()
 
     @classmethod
     def of(cls, frame: WorldFrame, drive: ParticleDrive) -> FrameInputs:
         """The particles' inputs: the world's interval, the emitters' values and the
         interactions."""
         return cls(frame.frame, frame.t0, frame.frame_dt, frame.gravity, drive.emitters,
-                   frame.colliders, frame.forces, drive.interactions)
+                   frame.colliders, frame.forces, drive.interactions, drive.collisions)
 
     @property
     def drive(self) -> ParticleDrive:
         """What only the particles read of this interval."""
-        return ParticleDrive(self.emitters, self.interactions)
+        return ParticleDrive(self.emitters, self.interactions, self.collisions)
 
     @property
     def world(self) -> WorldFrame:
@@ -91,6 +94,7 @@ class ParticleDrive:
 
     emitters: Sequence[EmitterFrame] = ()
     interactions: Sequence = ()
+    collisions: Sequence[ParticleCollisions] = ()
 
 
 @dataclass
@@ -247,7 +251,7 @@ class ParticleSolver:
     def _check_stiffness(state: ParticleState, inputs: FrameInputs, h: float) -> None:
         """An interaction too stiff for the sub-step (its particles' lightest) stops the bake
         up front, saying how many sub-steps it needs, instead of blowing up frames later."""
-        for spec in inputs.interactions:
+        for spec in (*inputs.interactions, *inputs.collisions):
             members = spec.emitters or range(len(inputs.emitters))
             masses = [ef.mass for e, ef in enumerate(inputs.emitters)
                       if e in members and ef.active]
@@ -280,6 +284,8 @@ class ParticleSolver:
                        step.rest_speed)
         state.particle_x, state.particle_v = done.x, done.v
         step.report.collisions += done.count
+        if inputs.collisions:
+            self._collide_pairs(step, x0, v0, s1, contact.contacts)
         if held is not None:
             self._constrain(state, held, x0, t + h, h)
         self._check(state, inputs, t + h)
@@ -294,6 +300,25 @@ class ParticleSolver:
         state.t = t + h
 
     # -- passes ---------------------------------------------------------------------------------
+    def _collide_pairs(self, step: _FrameStep, x0, v0, s1: float, resting) -> None:
+        """Particles against each other (:mod:`.pair_collisions`), then against the colliders
+        again: a push from a neighbour must not carry a particle into the ground."""
+        state, h = step.state, step.h
+        for spec in step.inputs.collisions:
+            before = state.particle_x
+            x, v, count, warm = spec.resolve(
+                state.particle_x, state.particle_v, x0, v0, state.particle_size,
+                state.particle_mass, state.particle_emitter, h, step.rest_speed,
+                (resting.index, resting.normal), state.particle_id,
+                state.pair_warm.get(spec.name))
+            state.pair_warm[spec.name] = warm
+            if not count:
+                continue
+            step.report.collisions += count
+            done = respond(step.paths, before, x, state.particle_v, v, s1, s1, h,
+                           step.rest_speed)
+            state.particle_x, state.particle_v = done.x, done.v
+
     def _sample(self, state, inputs, i) -> Births:
         """This frame's births of mesh/origin emitter ``i`` (sub-emitters burst in ``_emit``)."""
         e = self.model.emitters[i]

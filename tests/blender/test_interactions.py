@@ -117,3 +117,32 @@ def test_a_too_stiff_lennard_jones_names_the_substeps_it_needs(physanim_ext, tmp
     with pytest.raises(RuntimeError, match=r"force \"Lennard_Jones\" at frame \d+: too stiff.*"
                                            r"Substeps to \d+"):
         bpy.ops.physanim.bake()
+
+
+def test_particle_collisions_at_their_defaults_keep_particles_apart(physanim_ext, tmp_path):
+    """Particle Collisions and nothing else beside a default emitter and a default ground:
+    the particles come to rest on the ground side by side — no two resting particles overlap
+    by more than 1 % of their size, where without it they sit inside each other."""
+    _scene(tmp_path, 90)
+    bpy.ops.mesh.primitive_plane_add(size=20.0)
+    bpy.context.object.physanim.collider.enabled = True
+    spout = _emitter("Spout", (0.0, 0.0, 1.0))
+    size = spout.physanim.emitter.size
+    cache = sys.modules[f"{physanim_ext.__name__}.core.cache"]
+
+    def worst_overlap(frame: int, resting: bool) -> float:
+        folder = bpy.path.abspath(spout.physanim.emitter.result.physanim.result.cache)
+        arrays = cache.read_frame(folder, frame)
+        keep = arrays["age"] >= 1.0  # the last frame's newborn leave the nozzle together
+        if resting:
+            keep &= np.linalg.norm(arrays["velocity"], axis=1) < 0.05
+        x = arrays["position"][keep].astype(float)
+        assert len(x) > 20
+        d = np.linalg.norm(x[:, None] - x[None], axis=2) + np.eye(len(x)) * 1e9
+        return (2 * size - d.min()) / size
+
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    assert worst_overlap(90, resting=False) > 0.5
+    _force('COLLISIONS')
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    assert worst_overlap(90, resting=True) < 0.01

@@ -1,0 +1,145 @@
+"""Particles colliding with each other (core/particles/pair_collisions.py): head-on collisions
+against the closed forms, momentum kept exactly, no pair passing through another however fast,
+and a heap that comes to rest without overlaps, steeper with more friction."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from physanim.core.collision.neighbours import neighbour_pairs
+from physanim.core.contact import ColliderFrame
+from physanim.core.particles import EmitterFrame, EmitterSettings, FrameInputs, ParticleSolver
+from physanim.core.particles.pair_collisions import ParticleCollisions
+from physanim.tests.core.helpers import particle_model, place
+
+
+def _run(model, state, collisions, frames, dt=1 / 24, substeps=1, gravity=(0.0, 0.0, 0.0),
+         colliders=()):
+    solver = ParticleSolver(model, "SYMPLECTIC_EULER", substeps)
+    idle = [EmitterFrame(active=False)] * model.emitter_count
+    for f in range(frames):
+        solver.advance(state, FrameInputs(frame=f, t0=f * dt, frame_dt=dt, gravity=gravity,
+                                          emitters=idle, colliders=list(colliders),
+                                          collisions=collisions))
+
+
+def _pair(m1, m2, v1, v2, radius=0.1):
+    model = particle_model(EmitterSettings("Balls"))
+    state = model.state()
+    place(state, [[0.0, 0.0, 0.0]], [[v1, 0.0, 0.0]], mass=m1)
+    place(state, [[1.0, 0.0, 0.0]], [[v2, 0.0, 0.0]], mass=m2)
+    state.particle_size[:] = radius
+    return model, state
+
+
+@pytest.mark.parametrize("m1, m2", [(1.0, 1.0), (1.0, 3.0), (5.0, 0.5)])
+def test_elastic_head_on_collision_matches_the_closed_form(m1, m2):
+    """Restitution 1, no friction: v1' = ((m1 - m2) v1 + 2 m2 v2) / (m1 + m2) and the same for
+    v2' (equal masses exchange velocities)."""
+    v1, v2 = 2.0, -1.0
+    model, state = _pair(m1, m2, v1, v2)
+    _run(model, state, [ParticleCollisions("Hit", restitution=1.0, friction=0.0)], 24)
+    expect1 = ((m1 - m2) * v1 + 2 * m2 * v2) / (m1 + m2)
+    expect2 = ((m2 - m1) * v2 + 2 * m1 * v1) / (m1 + m2)
+    assert state.particle_v[:, 0] == pytest.approx([expect1, expect2], abs=1e-12)
+    assert (state.particle_v[:, 1:] == 0.0).all()
+
+
+def test_restitution_scales_the_parting_speed():
+    model, state = _pair(1.0, 1.0, 2.0, -2.0)
+    _run(model, state, [ParticleCollisions("Hit", restitution=0.4, friction=0.0)], 24)
+    assert state.particle_v[1, 0] - state.particle_v[0, 0] == pytest.approx(0.4 * 4.0, abs=1e-12)
+
+
+def test_a_gas_keeps_its_momentum_exactly():
+    """500 particles of random masses bouncing about in a box of their own (no walls, no
+    gravity), many collisions: the total momentum changes by rounding only."""
+    rng = np.random.default_rng(3)
+    n = 500
+    model = particle_model(EmitterSettings("Gas"))
+    state = model.state()
+    side = (np.arange(8) - 3.5) * 0.25
+    grid = np.stack(np.meshgrid(side, side, side), axis=-1).reshape(-1, 3)[:n]
+    place(state, grid, rng.normal(0.0, 2.0, (len(grid), 3)))
+    state.particle_mass[:] = rng.uniform(0.2, 2.0, len(grid))
+    state.particle_size[:] = 0.1
+    p0 = (state.particle_mass[:, None] * state.particle_v).sum(axis=0)
+    scale = (state.particle_mass[:, None] * np.abs(state.particle_v)).sum()
+    e0 = (state.particle_mass * (state.particle_v ** 2).sum(1)).sum()
+    solver_collisions = [ParticleCollisions("Gas", restitution=0.8, friction=0.3)]
+    _run(model, state, solver_collisions, 24, substeps=2)
+    p1 = (state.particle_mass[:, None] * state.particle_v).sum(axis=0)
+    assert np.abs(p1 - p0).max() < 1e-12 * scale
+    energy = (state.particle_mass * (state.particle_v ** 2).sum(1)).sum()
+    assert energy < 0.9 * e0  # they met, and lost energy (restitution 0.8)
+
+
+@pytest.mark.parametrize("speed", [10.0, 300.0])
+def test_no_pair_passes_through_another(speed):
+    """Two rows of particles fly through each other's lines at up to 300 m/s (60 radii per
+    sub-step): every pair bounces back, none ends up on the far side."""
+    model = particle_model(EmitterSettings("Shot"))
+    state = model.state()
+    y = np.arange(20) * 0.3
+    place(state, np.stack([np.zeros(20), y, np.zeros(20)], 1),
+          np.tile([speed, 0.0, 0.0], (20, 1)))
+    place(state, np.stack([np.full(20, 1.0), y, np.zeros(20)], 1),
+          np.tile([-speed, 0.0, 0.0], (20, 1)))
+    state.particle_size[:] = 0.05
+    _run(model, state, [ParticleCollisions("Shot", restitution=0.5)], 3)
+    left, right = state.particle_x[:20, 0], state.particle_x[20:, 0]
+    assert (left < right).all()
+    assert (state.particle_v[:20, 0] < 0.0).all() and (state.particle_v[20:, 0] > 0.0).all()
+
+
+def _heap(friction: float, n: int = 600, frames: int = 150):
+    """A loose column of n particles (radius 5 cm) collapsing onto the ground into a heap."""
+    rng = np.random.default_rng(0)
+    model = particle_model(EmitterSettings("Sand"))
+    state = model.state()
+    side = (np.arange(10) - 4.5) * 0.11
+    layers = n // 100
+    grid = np.stack(np.meshgrid(side, side, 0.06 + np.arange(layers) * 0.11), -1).reshape(-1, 3)
+    place(state, grid + rng.uniform(-0.003, 0.003, grid.shape), np.zeros(grid.shape),
+          mass=0.01)
+    state.particle_size[:] = 0.05
+    ground = ColliderFrame("Ground", "HALF_SPACE", np.eye(4), np.eye(4), restitution=0.0,
+                           friction=friction, thickness=0.05)
+    _run(model, state, [ParticleCollisions("Sand", restitution=0.0, friction=friction,
+                                           iterations=12)],
+         frames, substeps=4, gravity=(0.0, 0.0, -9.81), colliders=[ground])
+    return state
+
+
+def test_a_heap_comes_to_rest_without_overlap_and_is_steeper_with_friction():
+    """At rest (a median speed under 3 cm/s) no two particles overlap by more than 1 % of a
+    radius, none sinks into the ground, and more friction makes a taller, narrower heap."""
+    heaps = {}
+    for mu in (0.1, 0.6):
+        state = _heap(mu)
+        x = state.particle_x
+        i, j = neighbour_pairs(x, 0.1)
+        overlap = (0.1 - np.linalg.norm(x[i] - x[j], axis=1)) / 0.05
+        assert overlap.max() < 0.01, (mu, overlap.max())
+        assert x[:, 2].min() >= 0.05 - 1e-9
+        assert np.median(np.linalg.norm(state.particle_v, axis=1)) < 0.03
+        radius = np.percentile(np.linalg.norm(x[:, :2] - x[:, :2].mean(0), axis=1), 90)
+        heaps[mu] = (np.percentile(x[:, 2], 99), radius)
+    assert heaps[0.6][0] > heaps[0.1][0] and heaps[0.6][1] < heaps[0.1][1]
+
+
+def test_only_the_named_emitters_collide():
+    model = particle_model(EmitterSettings("A"), EmitterSettings("B"))
+    state = model.state()
+    place(state, [[0.0, 0.0, 0.0]], [[1.0, 0.0, 0.0]], emitter=0)
+    place(state, [[0.5, 0.0, 0.0]], [[-1.0, 0.0, 0.0]], emitter=1)
+    state.particle_size[:] = 0.1
+    _run(model, state, [ParticleCollisions("A only", emitters=(0,))], 12)
+    assert state.particle_v[:, 0] == pytest.approx([1.0, -1.0])  # passed through each other
+
+
+@pytest.mark.parametrize("kwargs", [dict(restitution=1.5), dict(friction=-1.0),
+                                    dict(iterations=0)])
+def test_bad_settings_name_the_force(kwargs):
+    with pytest.raises(ValueError, match='force "Sand"'):
+        ParticleCollisions("Sand", **kwargs)
