@@ -38,7 +38,7 @@ SUITE_ARGS = {"stars": 4000}
 
 # Frames that show the point: the approach (20), through each other (60), the tails (120)
 SHOWCASE = (20, 60, 120)
-README_FRAME = 120
+README_FRAME = 60
 
 
 def build(scene, stars: int = STARS) -> None:
