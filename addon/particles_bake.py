@@ -107,7 +107,7 @@ class ParticleBake:
             for key in ("age", "life"):  # frames, as Blender shows them
                 arrays[key] = convert.seconds_to_frames(self.scene, arrays[key]).astype(np.float32)
             if ob.name in self.trackers:
-                self._squash(self.trackers[ob.name], arrays, frame)
+                self._squash(ob, self.trackers[ob.name], arrays, frame)
             if ob.name in self.watch:
                 self.watched[ob.name, frame] = (arrays["id"], arrays["position"].astype(float),
                                                 arrays["velocity"].astype(float),
@@ -122,14 +122,23 @@ class ParticleBake:
                                   native_points.save_frame, (arrays, frame))
         self.stats["peak"] = max(self.stats["peak"], state.particle_count)
 
-    def _squash(self, tracker: ImpactTracker, arrays: dict, frame: int) -> None:
+    def _squash(self, ob, tracker: ImpactTracker, arrays: dict, frame: int) -> None:
         """The instances' squash and stretch (their volume kept): instance_scale and
         instance_rotation from the velocity and the last impact of each particle."""
         since = np.diff(timing.frame_seconds(self.clock, self.scene, [frame - 1, frame]))[0]
         impact, age = tracker.update(arrays["id"], arrays["velocity"], float(since))
         axes, factors = principal(log_deformation(arrays["velocity"], impact, age,
                                                   tracker.settings))
-        arrays["instance_scale"] = (arrays["size"][:, None] * factors).astype(np.float32)
+        scale = arrays["size"][:, None] * factors
+        bad = ~(np.abs(scale) <= FLOAT32_MAX).all(axis=1)  # inf, NaN or beyond the cache
+        if bad.any():
+            k = int(np.argmax(bad))
+            speed = float(np.linalg.norm(arrays["velocity"][k]))
+            raise PhysanimError(
+                f"Squash & Stretch of particle {int(arrays['id'][k])} (moving at {speed:.4g} "
+                f"m/s) came to a scale of {factors[k].tolist()} — lower Squash & Stretch",
+                obj=ob.name, frame=frame, kind="emitter")
+        arrays["instance_scale"] = scale.astype(np.float32)
         arrays["instance_rotation"] = euler_xyz(axes).astype(np.float32)
 
     @staticmethod

@@ -16,6 +16,7 @@ from ..core.cache import read_frame
 from ..core.controls import ImpactTracker, SquashSettings, log_deformation
 from ..core.controls.hang import FlightSettings, shape_flights
 from ..core.controls.timing import TimeMap
+from ..core.errors import PhysanimError
 from ..core.rigid import quaternion as quat
 from . import compat, convert, timing
 
@@ -151,6 +152,12 @@ def squash_factors(scene, ob, position: np.ndarray, rotation: np.ndarray,
         local = axes[k].T @ world @ axes[k]
         diagonal = np.diag(local)
         out[k] = np.exp(diagonal - diagonal.sum() / 3.0)
+    bad = ~(np.abs(out) <= np.finfo(np.float32).max).all(axis=1)  # keys are float32
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise PhysanimError(f"Squash & Stretch came to a scale of {out[k].tolist()} (moving at "
+                            f"{np.linalg.norm(velocity[k]):.4g} m/s) — lower Squash & Stretch",
+                            obj=ob.name, frame=scene.physanim.frame_start + k, kind="rigid body")
     return out
 
 

@@ -23,6 +23,9 @@ HALF_SHELL = np.array([(0, 0, 0)] + [(dx, dy, dz) for dx in (-1, 0, 1) for dy in
                       dtype=np.int64)
 #: candidate pairs held at once (about 24 bytes each, a few arrays of them)
 BATCH = 4_000_000
+#: candidate pairs one search may test (a minute or so of numpy): beyond, points are crowded
+#: within the radius and the search would be all pairs of them
+MAX_CANDIDATES = 500_000_000
 
 
 class PointGrid:
@@ -65,12 +68,30 @@ class PointGrid:
         u = cell.astype(np.uint64)
         return ((u[:, 0] * _HASH[0]) ^ (u[:, 1] * _HASH[1]) ^ (u[:, 2] * _HASH[2])).view(np.int64)
 
-    def pairs(self) -> tuple[np.ndarray, np.ndarray]:
+    def candidate_count(self) -> int:
+        """Point pairs the search will test: the pairs within each cell and with its half
+        shell (what :meth:`pairs` costs)."""
+        total = 0
+        for a, b in self._cell_pairs():
+            block = self.cell_count[a] * self.cell_count[b]
+            total += int(np.where(a == b, (block - self.cell_count[a]) // 2, block).sum())
+        return total
+
+    def pairs(self, limit: int = MAX_CANDIDATES) -> tuple[np.ndarray, np.ndarray]:
         """Every pair of points within the radius (Euclidean, inclusive), once: (i, j), (k,)
-        each, original indices."""
+        each, original indices.
+
+        Raises:
+            ValueError: more than ``limit`` candidate pairs (points crowded within the radius:
+                the search would be all pairs of them), with their number.
+        """
+        count = self.candidate_count()
+        if count > limit:
+            raise ValueError(f"{count:,} point pairs lie within {self.radius:g} m of each other "
+                             f"(at most {limit:,} are searched)")
         out_i, out_j = [], []
         for a, b in self._cell_pairs():
-            i, j = self._expand(a, b)
+            i, j = self._expand_batched(a, b)
             d = self.x[i] - self.x[j]
             near = np.einsum("ij,ij->i", d, d) <= self.radius * self.radius
             out_i.append(i[near])
@@ -111,6 +132,29 @@ class PointGrid:
         dx, dy, dz = (int(d) for d in self._dims)
         return dx * dy * dz >= 1 << 62
 
+    def _expand_batched(self, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_expand`, a cell pair bigger than BATCH alone taken a few of its rows at a
+        time (a crowded cell)."""
+        big = self.cell_count[a] * self.cell_count[b] > BATCH
+        if not big.any():
+            return self._expand(a, b)
+        parts = [self._expand(a[~big], b[~big])]
+        for ca, cb in zip(a[big], b[big]):
+            rows = max(1, BATCH // int(self.cell_count[cb]))
+            for r0 in range(0, int(self.cell_count[ca]), rows):
+                parts.append(self._expand_rows(ca, cb, r0, min(r0 + rows,
+                                                               int(self.cell_count[ca]))))
+        return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+    def _expand_rows(self, a: int, b: int, r0: int, r1: int) -> tuple[np.ndarray, np.ndarray]:
+        """The point pairs of rows r0..r1 of cell a against cell b (a == b: each pair once)."""
+        p = np.repeat(np.arange(r0, r1), self.cell_count[b])
+        q = np.tile(np.arange(self.cell_count[b]), r1 - r0)
+        if a == b:
+            keep = p < q
+            p, q = p[keep], q[keep]
+        return (self.order[self.cell_start[a] + p], self.order[self.cell_start[b] + q])
+
     def _expand(self, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The point pairs of the cell pairs (a, b); within one cell (a == b) each pair once."""
         ca, cb = self.cell_count[a], self.cell_count[b]
@@ -129,6 +173,8 @@ class PointGrid:
         return i, j
 
 
-def neighbour_pairs(x: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
-    """Every pair of points of ``x`` (n, 3) within ``radius``, once: (i, j) index arrays."""
-    return PointGrid(x, radius).pairs()
+def neighbour_pairs(x: np.ndarray, radius: float,
+                    limit: int = MAX_CANDIDATES) -> tuple[np.ndarray, np.ndarray]:
+    """Every pair of points of ``x`` (n, 3) within ``radius``, once: (i, j) index arrays
+    (ValueError beyond ``limit`` candidate pairs, see :meth:`PointGrid.pairs`)."""
+    return PointGrid(x, radius).pairs(limit)

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..collision.neighbours import neighbour_pairs
+from ..errors import PhysanimError
 from . import barnes_hut
 from .fields import ParticleView
 
@@ -26,6 +27,16 @@ def _check(owner: str, **values) -> None:
     for key, value in values.items():
         if not (math.isfinite(value) and value >= 0.0):
             raise ValueError(f'{owner}: {key} must be finite and >= 0 (got {value})')
+
+
+def _neighbours(name: str, x: np.ndarray, cutoff: float) -> tuple[np.ndarray, np.ndarray]:
+    """The member pairs within ``cutoff``; too many (particles crowded within it) is an error
+    naming the force (the solver adds the frame)."""
+    try:
+        return neighbour_pairs(x, cutoff)
+    except ValueError as exc:
+        raise PhysanimError(f"{exc} — lower its Cutoff, or spread the particles",
+                            obj=name, kind="force") from exc
 
 
 def _members(emitters: tuple[int, ...], particle_emitter: np.ndarray) -> np.ndarray:
@@ -164,7 +175,7 @@ class _BoundLennardJones:
             return
         s = self.spec
         x = p.x[self.members]
-        i, j = neighbour_pairs(x, s.cutoff)
+        i, j = _neighbours(s.name, x, s.cutoff)
         d = x[i] - x[j]
         r2 = np.einsum("ij,ij->i", d, d)
         if s.softness == 0.0:  # a pair at one place has no direction: pushed along no axis
@@ -228,7 +239,7 @@ class _BoundCoulomb:
             return
         s = self.spec
         x = p.x[self.members]
-        i, j = neighbour_pairs(x, s.cutoff)
+        i, j = _neighbours(s.name, x, s.cutoff)
         d = x[i] - x[j]
         r2 = np.einsum("ij,ij->i", d, d) + s.softening * s.softening
         with np.errstate(divide="ignore"):  # two charges at one place push along no axis

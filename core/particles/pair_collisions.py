@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..collision.neighbours import neighbour_pairs
+from ..errors import PhysanimError
 
 POSITION_PASSES = 3  # position passes per velocity pass (they stop once the overlap is left)
 TOLERANCE = 0.002  # of the sum of radii: overlap the position passes leave (0.4 % of a radius)
@@ -98,7 +99,13 @@ class ParticleCollisions:
         held, floor = _supported(members, support, len(x))
         r, w = radius[members], 1.0 / mass[members]
         moved = np.linalg.norm(xm - x0m, axis=1)
-        i, j = neighbour_pairs(x0m, max(2.0 * float(r.max()) + 2.0 * float(moved.max()), 1e-9))
+        try:
+            i, j = neighbour_pairs(x0m, max(2.0 * float(r.max()) + 2.0 * float(moved.max()),
+                                            1e-9))
+        except ValueError as exc:  # crowded: every particle within reach of every other
+            raise PhysanimError(f"{exc} — the particles are crowded or fly too far in a "
+                                "sub-step: raise Substeps, or lower the rate", obj=self.name,
+                                kind="force") from exc
         d0 = x0m[i] - x0m[j]
         dist = np.linalg.norm(d0, axis=1)
         reach = r[i] + r[j]

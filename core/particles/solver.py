@@ -17,6 +17,7 @@ Per sub-step, in order (each a named pass below):
 """
 from __future__ import annotations
 
+import contextlib
 import math
 
 from dataclasses import dataclass, field
@@ -197,6 +198,17 @@ def point_rows(c: PointConstraint, held: np.ndarray, s0: float, t: float, h: flo
     return on_circles(held, origin, axis, c.radius, velocity, t)
 
 
+@contextlib.contextmanager
+def _at_frame(frame):
+    """A PhysanimError raised inside without a frame gains ``frame``."""
+    try:
+        yield
+    except PhysanimError as exc:
+        if exc.frame is not None:
+            raise
+        raise PhysanimError(exc.detail, obj=exc.obj, frame=frame, kind=exc.kind) from exc
+
+
 class ParticleSolver:
     """Advances a :class:`ParticleState` of a :class:`ParticleModel` frame by frame.
 
@@ -278,14 +290,16 @@ class ParticleSolver:
                                                 s0, step.rest_speed), h)
         x0, v0 = state.particle_x, state.particle_v
         held = self._constraints(state, inputs, s0, t, h)
-        step.report.integrator_steps += self._integrate(
-            state, self._forces(state, inputs, step.g), contact, held, t, h, inputs)
+        with _at_frame(inputs.frame):  # an interaction's failure knows no frame
+            step.report.integrator_steps += self._integrate(
+                state, self._forces(state, inputs, step.g), contact, held, t, h, inputs)
         done = respond(step.paths, x0, state.particle_x, v0, state.particle_v, s0, s1, h,
                        step.rest_speed)
         state.particle_x, state.particle_v = done.x, done.v
         step.report.collisions += done.count
         if inputs.collisions:
-            self._collide_pairs(step, x0, v0, s1, contact.contacts)
+            with _at_frame(inputs.frame):
+                self._collide_pairs(step, x0, v0, s1, contact.contacts)
         if held is not None:
             self._constrain(state, held, x0, t + h, h)
         self._check(state, inputs, t + h)

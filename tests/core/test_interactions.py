@@ -48,6 +48,18 @@ def test_neighbour_grid_finds_exactly_the_pairs_within_the_radius(scale):
     assert len(found) == len(i)  # each pair once
 
 
+def test_a_crowded_cell_is_searched_in_parts_and_too_many_pairs_are_refused():
+    """3,000 points in one cell (4.5 million pairs, more than one batch): every pair comes out
+    once; past the limit the search refuses with the number of pairs."""
+    rng = np.random.default_rng(4)
+    x = rng.random((3000, 3)) * 0.5
+    i, j = neighbour_pairs(x, 1.0)
+    assert len(i) == 3000 * 2999 // 2
+    assert len(set((np.minimum(i, j) * 3000 + np.maximum(i, j)).tolist())) == len(i)
+    with pytest.raises(ValueError, match="4,498,500 point pairs lie within 1 m"):
+        neighbour_pairs(x, 1.0, limit=1_000_000)
+
+
 # -- gravity ------------------------------------------------------------------------------------
 
 def test_two_body_circular_orbit_period():
