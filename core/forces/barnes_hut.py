@@ -26,6 +26,7 @@ LEAF_SIZE = 16
 MAX_LEVEL = 21  # 21 bits per axis in a 63-bit Morton code
 EXACT_BELOW = 1024  # fewer points: the exact sum is cheaper than a tree
 BATCH = 2_000_000  # point-pair interactions evaluated at once
+GROUP_CHUNK = 8192  # groups traversed together (their interaction lists held at once)
 
 
 def exact_accelerations(x: np.ndarray, m: np.ndarray, G: float, eps: float) -> np.ndarray:
@@ -117,24 +118,36 @@ class Octree:
         self.group_hi = np.maximum.reduceat(xs, gs)
 
     def accelerations(self, G: float, eps: float, theta: float) -> np.ndarray:
-        """a (n, 3) of every point, in the caller's order."""
-        (far_g, far_n), (near_g, near_l) = self.interactions(theta)
+        """a (n, 3) of every point, in the caller's order. The groups are taken
+        :data:`GROUP_CHUNK` at a time (memory stays bounded for a million bodies)."""
+        a = np.zeros((len(self.x), 3))
+        table_x = np.concatenate([self.node_com, self.x])
+        table_m = np.concatenate([self.node_mass, self.m])
+        for g0 in range(0, len(self.groups), GROUP_CHUNK):
+            chunk = np.arange(g0, min(g0 + GROUP_CHUNK, len(self.groups)))
+            self._accelerate(a, chunk, table_x, table_m, G, eps, theta)
+        out = np.empty_like(a)
+        out[self.order] = a
+        return out
+
+    def _accelerate(self, a: np.ndarray, chunk: np.ndarray, table_x: np.ndarray,
+                    table_m: np.ndarray, G: float, eps: float, theta: float) -> None:
+        """The accelerations of the points of the groups ``chunk`` (consecutive indices)."""
+        (far_g, far_n), (near_g, near_l) = self.interactions(theta, chunk)
         # each group's sources, as rows of one table of nodes then points: its far nodes'
         # monopoles and its near leaves' points, sorted by group (a radix sort of small keys)
         n_nodes = len(self.node_mass)
-        table_x = np.concatenate([self.node_com, self.x])
-        table_m = np.concatenate([self.node_mass, self.m])
-        group_of = np.concatenate([far_g, np.repeat(near_g, self.node_count[near_l])])
+        group_of = np.concatenate([far_g, np.repeat(near_g, self.node_count[near_l])]) \
+            - chunk[0]
         source = np.concatenate([far_n, n_nodes + _ranges(self.node_start[near_l],
                                                           self.node_count[near_l])])
-        key = group_of.astype(np.uint16 if len(self.groups) <= 1 << 16 else np.int64)
+        key = group_of.astype(np.uint16 if len(chunk) <= 1 << 16 else np.int64)
         source = source[np.argsort(key, kind="stable")]
-        groups = self.groups
+        groups = self.groups[chunk]
         per_group = np.bincount(key, minlength=len(groups))
         src_start = np.cumsum(per_group) - per_group
         count = self.node_count[groups]
         rows = count * per_group  # interactions of each group: its points times its sources
-        a = np.zeros((len(self.x), 3))
         for lo, hi in _batches(rows, BATCH):
             g = np.arange(lo, hi)
             g = g[rows[lo:hi] > 0]
@@ -146,18 +159,15 @@ class Octree:
             src = source[_ranges(np.repeat(src_start[g], count[g]), width)]
             a[point] = _pull_runs(self.x, np.repeat(point, width), table_x[src], table_m[src],
                                   G, eps, np.cumsum(width) - width)
-        out = np.empty_like(a)
-        out[self.order] = a
-        return out
 
-    def interactions(self, theta: float) -> tuple[tuple[np.ndarray, np.ndarray],
-                                                  tuple[np.ndarray, np.ndarray]]:
+    def interactions(self, theta: float, groups: np.ndarray | None = None
+                     ) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
         """The traversal: (group, far node) pairs and (group, near leaf) pairs; groups are
         indices into :attr:`groups`. A node is far from a group when its side is under theta
         times the distance from its centre of mass to the group's box (so from each of its
         points)."""
         far_b, far_n, near_b, near_l = [], [], [], []
-        group = np.arange(len(self.groups))
+        group = np.arange(len(self.groups)) if groups is None else np.asarray(groups)
         node = np.zeros(len(group), np.int64)
         while len(group):
             com = self.node_com[node]
