@@ -98,6 +98,10 @@ class _Aim:
                          for ob in self.objects])
 
     def set_launch(self, launch: np.ndarray) -> None:
+        if not np.isfinite(launch).all():  # never written into the scene
+            k = int(np.argmax(~np.isfinite(launch).all(axis=1)))
+            raise PhysanimError(f"the launch solve came to {launch[k].tolist()} m/s",
+                                obj=self.objects[k].name, kind=self.kind)
         for ob, velocity in zip(self.objects, launch):
             setattr(self.props(ob), self.launch_key, tuple(float(v) for v in velocity))
 
@@ -177,6 +181,11 @@ class _Bursts(_Aim):
             raise PhysanimError("a sub-emitter's births follow its parent's deaths: aim the "
                                 "parent emitter instead", obj=ob.name, frame=frame_start,
                                 kind="emitter")
+        if p.frame_start < frame_start:
+            raise PhysanimError(f"its births start at frame {p.frame_start}, before the bake's "
+                                f"first frame {frame_start}: Hit the Mark aims births it bakes "
+                                "from their start", obj=ob.name, frame=frame_start,
+                                kind="emitter")
         if p.frame_start >= p.target_frame:
             raise PhysanimError(f"its births start at frame {p.frame_start}, not before Target "
                                 f"Frame {p.target_frame}", obj=ob.name, frame=frame_start,
@@ -229,6 +238,11 @@ class _Bursts(_Aim):
                     born_by = np.ceil(self.clock.tau(self.objects[k].physanim.emitter.frame_start)
                                       - 1e-9)
                     first = age >= self.clock.tau(frame) - born_by - 1e-4
+                    if not first.any():
+                        raise PhysanimError(
+                            f"the particles of its first births have died by Target Frame "
+                            f"{frame} — raise Lifetime or bring Target Frame closer",
+                            obj=name, frame=frame, kind="emitter")
                     arrived[k] = x[first].mean(axis=0)
                 t = float(timing.frame_seconds(self.clock, self.scene, frame))
                 accel = (ids[:0], np.zeros((0, 3)))

@@ -74,6 +74,7 @@ class BakeJob(Resumable):
                           if aim and self._resume_from is None else [])
         self.frame = self.frame_start  # the last frame written
         self.tau = self.frame_start  # the simulated time reached, in frame lengths
+        self._before_end = (None, self.frame_start)  # (state, frame) before the last step
         self.started = time.perf_counter()
         self.failures: list[tuple[str, str]] = []  # (system, message) of systems that failed
         self._unprepared = 0  # spring meshes not built yet: a failure before them is not the last
@@ -253,6 +254,13 @@ class BakeJob(Resumable):
         # the frames this simulation frame shows (in slow motion several, each at a fraction
         # of it; at double speed every other one none), then the frame itself
         shown = self.clock.frames_in(self.tau, self.frame, self.frame_end)
+        if shown and shown[-1][0] == self.frame_end and self._no_checkpoint is None \
+                and self.clock.tau(self.frame_end) < self.tau + 1.0 - 1e-9:
+            # the last step runs past the frame end: a later extension starts from before it
+            try:
+                self._before_end = (self.checkpoint_state(), self.frame)
+            except (pickle.PicklingError, TypeError, AttributeError) as exc:
+                self._checkpoint_failed(exc)
         inputs, sample = self._interval(self.tau, self.sample)
         world = inputs.world
         samples = tuple(w for _, w in shown if w < 1.0)
@@ -390,8 +398,17 @@ class BakeJob(Resumable):
         folders.update({f"spring_mesh {name}": str(path) for name, path in mesh_paths.items()})
         if rigid_path is not None:
             folders["rigid_bodies"] = str(rigid_path)
-        if final_state is not None and set(folders) == set(final_record):
-            self._save_checkpoint(finished=True, folders=folders, state=final_state)
+        # a finished bake is extended from its last state — or, when its last simulation frame
+        # ran past the frame end (a Time Scale), from the state before it, so the frames that
+        # one shows past the end are simulated when the bake is extended
+        state_at = (final_state, self.frame)
+        if abs(self.tau - self.clock.tau(self.frame_end)) > 1e-9:
+            state_at = self._before_end
+        if state_at[0] is not None and set(folders) == set(final_record):
+            self._save_checkpoint(finished=True, folders=folders, state=state_at[0],
+                                  frame=state_at[1])
+        else:  # the scene's checkpoint (this bake's partial folders, or an earlier bake's)
+            checkpoint.discard(self.scene)  # no longer describes what is baked
         for ob in emitters:
             results.attach(context, self.scene, ob,
                            relative_path(os.path.join(paths[ob.name], STREAM)),

@@ -91,13 +91,14 @@ class Resumable:
             return None
         return {name: getattr(wrapper, name) for name in _RESUMED[kind]}
 
-    def _save_checkpoint(self, finished: bool = False, folders=None, state=None) -> None:
+    def _save_checkpoint(self, finished: bool = False, folders=None, state=None,
+                         frame: int | None = None) -> None:
         if self._no_checkpoint is not None:
             return
         if not self._owns_checkpoint and self._resume_from is None:
             checkpoint.discard(self.scene)  # an earlier cut-off bake's partial folders go
         try:
-            self.checkpoints.save(self, finished, folders, state)
+            self.checkpoints.save(self, finished, folders, state, frame)
         except (pickle.PicklingError, TypeError, AttributeError) as exc:
             self._checkpoint_failed(exc)
             return

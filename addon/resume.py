@@ -115,10 +115,12 @@ class Checkpoints:
         return time.perf_counter() - self.last >= self.every
 
     def save(self, job, finished: bool, folders: dict[str, str] | None = None,
-             state: bytes | None = None) -> None:
+             state: bytes | None = None, frame: int | None = None) -> None:
         """Write the checkpoint of ``job`` at its frame (``state``: its pickled state, taken
-        earlier; ``folders``: where its frames are, default its partial folders)."""
-        data = {"format": FORMAT, "package": PACKAGE, "frame": job.frame, "frame_start": job.frame_start,
+        earlier at ``frame``, default the job's; ``folders``: where its frames are, default its
+        partial folders)."""
+        frame = job.frame if frame is None else frame
+        data = {"format": FORMAT, "package": PACKAGE, "frame": frame, "frame_start": job.frame_start,
                 "frame_end": job.frame_end, "finished": finished, "hashes": job.hash_record(),
                 "only": sorted(job._only) if job._only is not None else None,
                 "folders": folders or job.partial_folders(),

@@ -122,8 +122,9 @@ def _flights(scene, clock: TimeMap, ob, times, origins: np.ndarray, rotations: n
     keep = tuple(np.nonzero(np.isclose(times, timing.frame_seconds(clock, scene,
                                                                    p.target_frame)))[0]) \
         if p.target is not None else ()
+    substep = convert.seconds_per_frame(scene) / scene.physanim.rigid_substeps
     centres, rotations = shape_flights(times, centres, rotations, convert.gravity(scene),
-                                       settings, keep)
+                                       settings, keep, substep if not clock.identity else 0.0)
     return centres - quat.rotate(rotations, np.broadcast_to(offset, centres.shape)), rotations
 
 

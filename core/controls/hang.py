@@ -55,12 +55,16 @@ class FlightSettings:
         return self.hang_time == 0.0 and self.exaggeration == 1.0
 
 
-def flights(times: np.ndarray, positions: np.ndarray, gravity) -> list[tuple[int, int]]:
+def flights(times: np.ndarray, positions: np.ndarray, gravity,
+            step: float = 0.0) -> list[tuple[int, int]]:
     """The flights of one body: (first, last) sample indices of each run in free fall that
     rises then falls.
 
     Args:
         times: (F,) increasing sample times [s]. positions: (F, 3) [m]. gravity: (3,) [m/s^2].
+        step: the simulation's sub-step [s] when samples fall between sub-steps (slow motion):
+            their motion is straight within a sub-step, so velocities jump by g step at its
+            ends, which is free fall too.
     """
     g = np.asarray(gravity, np.float64)
     if len(times) < MIN_FLIGHT_SAMPLES or not np.any(g):
@@ -71,7 +75,8 @@ def flights(times: np.ndarray, positions: np.ndarray, gravity) -> list[tuple[int
     mid = 0.5 * (times[1:] + times[:-1])
     # free fall between intervals k and k + 1: v changes by g times the time between them
     change = np.diff(v, axis=0) - g * np.diff(mid)[:, None]
-    slack = SLACK + SLACK_FRACTION * np.linalg.norm(v[1:], axis=1)
+    slack = SLACK + SLACK_FRACTION * np.linalg.norm(v[1:], axis=1) \
+        + float(np.linalg.norm(g)) * step
     free = np.linalg.norm(change, axis=1) <= slack
     out = []
     k = 0
@@ -127,19 +132,19 @@ def eased(u: np.ndarray, apex: float, hang_time: float) -> np.ndarray:
 
 
 def shape_flights(times: np.ndarray, positions: np.ndarray, rotations: np.ndarray, gravity,
-                  settings: FlightSettings, keep: tuple[int, ...] = ()
+                  settings: FlightSettings, keep: tuple[int, ...] = (), step: float = 0.0
                   ) -> tuple[np.ndarray, np.ndarray]:
     """One body's shown positions (F, 3) and unit quaternions (F, 4) with hang time and
     exaggeration applied to each of its flights (:func:`flights`); elsewhere unchanged, and in
     a flight holding a sample index of ``keep`` (a frame it must be on as simulated: its
-    mark) too."""
+    mark) too. ``step``: the simulation's sub-step, see :func:`flights`."""
     pos = np.array(positions, np.float64)
     rot = np.array(rotations, np.float64)
     if settings.off:
         return pos, rot
     g = np.asarray(gravity, np.float64)
     up = -g / np.linalg.norm(g) if np.any(g) else np.zeros(3)
-    for first, last in flights(times, pos, g):
+    for first, last in flights(times, pos, g, step):
         if any(first < k < last for k in keep):
             continue
         t = np.asarray(times[first:last + 1], np.float64)

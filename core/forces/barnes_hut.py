@@ -36,9 +36,7 @@ def exact_accelerations(x: np.ndarray, m: np.ndarray, G: float, eps: float) -> n
     a = np.zeros((n, 3))
     if n < 2:
         return a
-    i, j = np.triu_indices(n, 1)
-    for s in range(0, len(i), BATCH):
-        ii, jj = i[s:s + BATCH], j[s:s + BATCH]
+    for ii, jj in _pair_blocks(n):
         d = x[jj] - x[ii]
         r2 = np.einsum("ij,ij->i", d, d) + eps * eps
         with np.errstate(divide="ignore"):  # two points at one place pull along no axis
@@ -48,6 +46,24 @@ def exact_accelerations(x: np.ndarray, m: np.ndarray, G: float, eps: float) -> n
             a[:, k] += np.bincount(ii, f[:, k] * m[jj], minlength=n)
             a[:, k] -= np.bincount(jj, f[:, k] * m[ii], minlength=n)
     return a
+
+
+def _pair_blocks(n: int):
+    """Every pair i < j of n points, a block of rows at a time (about BATCH pairs each)."""
+    row = 0
+    while row < n - 1:
+        # rows row..stop-1 hold (n - 1 - r) pairs each
+        stop = row + 1
+        total = n - 1 - row
+        while stop < n - 1 and total + (n - 1 - stop) <= BATCH:
+            total += n - 1 - stop
+            stop += 1
+        rows = np.arange(row, stop)
+        width = n - 1 - rows
+        ii = np.repeat(rows, width)
+        jj = _ranges(rows + 1, width)
+        yield ii, jj
+        row = stop
 
 
 class Octree:

@@ -23,6 +23,9 @@ from . import barnes_hut
 from .fields import ParticleView
 
 
+MAX_EXACT_PAIRS = 200_000_000  # the exact gravity sum beyond this is minutes a step
+
+
 def _check(owner: str, **values) -> None:
     for key, value in values.items():
         if not (math.isfinite(value) and value >= 0.0):
@@ -96,6 +99,11 @@ class _BoundGravity:
         if len(self.members) < 2 or self.spec.G == 0.0:
             return
         s = self.spec
+        n = len(self.members)
+        if (s.theta == 0.0 or n < barnes_hut.EXACT_BELOW) and n * (n - 1) // 2 > MAX_EXACT_PAIRS:
+            raise PhysanimError(f"the exact sum (Opening Angle 0) over {n:,} particles is "
+                                f"{n * (n - 1) // 2:,} pairs a step — raise the Opening Angle "
+                                "(0.5: about 0.15 % error)", obj=s.name, kind="force")
         m = p.mass[self.members]
         a = barnes_hut.accelerations(p.x[self.members], m, s.G, s.softening, s.theta)
         f_out[self.members] += m[:, None] * a

@@ -136,19 +136,22 @@ class ParticleCollisions:
         taken = _warm(keys, warm)  # accumulated normal impulse (as a relative velocity)
         _move(vm, i, j, normal * taken[:, None], share)
         _hold(vm, held, floor, vm)
+        rubbed = np.zeros((len(i), 3))  # the friction impulse so far (a relative velocity)
         for _ in range(self.iterations):
             rel = np.einsum("ij,ij->i", vm[i] - vm[j], normal)
             step = np.maximum(taken + (lower - rel) * scale, 0.0) - taken
             taken += step
             _move(vm, i, j, normal * step[:, None], share)
-            # friction: the sliding velocity, up to mu times the normal impulse so far
+            # friction: the sliding velocity taken back, the pair's friction impulse over all
+            # passes at most mu times its normal impulse (Coulomb's cone)
             slide = vm[i] - vm[j]
             slide -= np.einsum("ij,ij->i", slide, normal)[:, None] * normal
-            speed = np.linalg.norm(slide, axis=1)
+            total = rubbed - slide * scale[:, None]
+            length = np.linalg.norm(total, axis=1)
             limit = self.friction * taken
-            stop = np.where(speed > limit, limit / np.where(speed > 0.0, speed, 1.0), 1.0)
-            active = taken > 0.0
-            _move(vm, i, j, -slide * (stop * scale * active)[:, None], share)
+            total *= np.minimum(1.0, limit / np.where(length > 0.0, length, 1.0))[:, None]
+            _move(vm, i, j, total - rubbed, share)
+            rubbed = total
             _hold(vm, held, floor, vm)
         new = xm + h * (vm - start_v)
         new = _apart(new, w, *candidates, held, floor, xm, POSITION_PASSES * self.iterations)

@@ -179,6 +179,26 @@ def test_a_finished_bake_extends_to_a_later_frame_end(physanim_ext, tmp_path):
         bake.run(bpy.context, resume=True)
 
 
+def test_a_retimed_finished_bake_extends_to_the_same_files(physanim_ext, tmp_path):
+    """At Time Scale 0.4 the last simulation frame of a 1-16 bake runs past frame 16: the
+    extension to 26 starts from the state before it, and gives exactly the files of one bake
+    1-26 (no frame missing or shifted)."""
+    path = _shot(tmp_path / "shot", frame_end=16)
+    scene = bpy.context.scene
+    scene.physanim.time_scale = 0.4
+    bpy.ops.wm.save_mainfile()
+    bake = _module(physanim_ext, "bake")
+    cache = path.parent / "physanim_cache"
+    assert bake.run(bpy.context)[1] is None
+    scene.physanim.frame_end = 26
+    assert bake.run(bpy.context, resume=True)[1] is None
+    extended = _tree(cache)
+    shutil.rmtree(cache)
+    assert bake.run(bpy.context)[1] is None
+    assert _tree(cache) == extended
+    assert sum(".npz" in name for name in extended) >= 26  # every frame of the emitter
+
+
 def test_resuming_a_changed_scene_is_refused_and_a_fresh_bake_cleans_up(physanim_ext, tmp_path,
                                                                          capsys):
     path = _shot(tmp_path / "shot")
