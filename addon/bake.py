@@ -16,13 +16,11 @@ failure stop the bake.
 """
 from __future__ import annotations
 
-import contextlib
 import os
 import pickle
 import time
 from dataclasses import replace
 
-import bpy
 
 from ..core.contact import ColliderPaths
 from ..core.errors import PhysanimError
@@ -31,11 +29,12 @@ from . import budget, convert, extract, follow, inputs_hash, limits, rigid, rigi
 from . import aim as aim_solver
 from . import resume as checkpoint
 from . import springs, timing
+from .bake_failures import Failures
 from .bake_resume import Resumable
 from .cache_paths import relative_path
 from .particles_bake import STREAM, ParticleBake
 
-class BakeJob(Resumable):
+class BakeJob(Resumable, Failures):
     """Bake every (or the chosen) emitter and spring mesh of a scene, one frame per :meth:`step`.
 
     Args:
@@ -182,56 +181,6 @@ class BakeJob(Resumable):
         inputs, self.sample = self._interval(s - 1, before)
         return inputs
 
-    # -- failures -------------------------------------------------------------------------------
-    @contextlib.contextmanager
-    def _system(self, channel):
-        """Run one system's add-on work (reading its inputs, writing its frames)."""
-        try:
-            yield
-        except (PhysanimError, ValueError) as exc:
-            self._drop(channel, exc)
-
-    def _drop(self, channel, exc: Exception) -> None:
-        """A system failed: delete its partial cache, keep its previous bake, and go on with
-        the others; re-raise when none is left."""
-        if channel is not self.particles and channel is not self.rigid \
-                and channel not in self.meshes:
-            return  # dropped already (a failure inside its own guarded work)
-        channel.abort()
-        self.world.drop(channel.system)
-        if channel is self.particles:
-            self.particles = None
-            self._failed(channel.label, None, exc)
-        elif channel is self.rigid:
-            self.rigid = None
-            self._restore_rigid()
-            self._failed(channel.label, None, exc)
-        else:
-            self.meshes.remove(channel)
-            self._failed(channel.label, channel.ob.name, exc)
-
-    def _failed(self, label: str, mesh: str | None, exc: Exception) -> None:
-        if mesh is not None:
-            springs.restore_modifier(bpy.data.objects[mesh], self.suspended.pop(mesh, None))
-        self.failures.append((label, str(exc)))
-        if self.particles is None and self.rigid is None and not self.meshes \
-                and not self._unprepared:
-            raise exc
-
-    def _restore_rigid(self) -> None:
-        """Earlier rigid-body keys back on their objects (the new bake did not finish)."""
-        for name, baked in self.rigid_suspended.items():
-            rigid_keys.restore(bpy.data.objects[name], baked)
-        self.rigid_suspended.clear()
-
-    def _emitter_read(self, read) -> list:
-        """``read()`` of emitter values: a failure there is the particle system's; [] once the
-        particle system has failed (or when there is none)."""
-        if self.particles is not None:
-            with self._system(self.particles):
-                return read()
-        return []
-
     # -- progress -------------------------------------------------------------------------------
     @property
     def alive(self) -> int:
@@ -348,13 +297,6 @@ class BakeJob(Resumable):
         inner = iter(report.poses.get(system, ()))
         return [(frame, next(inner) if w < 1.0 else None) for frame, w in shown]
 
-    def _channel(self, system):
-        if self.particles is not None and system is self.particles.system:
-            return self.particles
-        if self.rigid is not None and system is self.rigid.system:
-            return self.rigid
-        return next(mesh for mesh in self.meshes if mesh.system is system)
-
     # -- end ------------------------------------------------------------------------------------
     def finish(self, context) -> str:
         """Swap the new caches in and point every result at them. Returns a summary."""
@@ -456,16 +398,6 @@ class BakeJob(Resumable):
             info += "; " + "; ".join(self.aim_notes)
         self.settings.bake_info = info
         return info
-
-    def failure_report(self, info: str) -> str | None:
-        """One message naming every system that failed (each keeps its previous bake) and what
-        did bake; None when nothing failed."""
-        if not self.failures:
-            return None
-        failed = "; ".join(message for _, message in self.failures)
-        names = ", ".join(what for what, _ in self.failures)
-        return (f"{failed} — not baked (previous bake kept): {names}; the rest baked "
-                f"({info.removeprefix('baked ')})")
 
     def suspend(self) -> None:
         """Cancelled (Esc, Ctrl+C): keep the frames baked so far and a checkpoint, so Resume

@@ -3,7 +3,8 @@
 from .model import ParticleModel, ParticleModelBuilder, ParticleState
 from .output import emitter_arrays
 from .settings import POINT_CONSTRAINTS, EmitterFrame, EmitterSettings, PointConstraint, SpringLink
-from .solver import FrameInputs, FrameReport, ParticleDrive, ParticleSolver, ParticleSystem
+from .frame_inputs import FrameInputs, FrameReport, ParticleDrive
+from .solver import ParticleSolver, ParticleSystem
 
 __all__ = [
     "POINT_CONSTRAINTS", "PointConstraint", "EmitterFrame", "EmitterSettings", "FrameInputs", "FrameReport", "ParticleDrive",
