@@ -154,6 +154,32 @@ class TriangleMesh:
         return face, per_edge, per_vertex
 
 
+    @cached_property
+    def creases(self) -> tuple[np.ndarray, np.ndarray]:
+        """The edges and corners that stand out of the surface: every edge (after welding)
+        whose faces are not coplanar, or that borders fewer or more than two faces, and the
+        vertices at their ends. Inside a flat region nothing stands out (a fanned cap's centre
+        and spokes, a quad's diagonal), so what touches such a region only touches its faces.
+
+        Returns:
+            (edges (e, 2) vertex ids, vertices (k,) ids), welded ids, sorted.
+        """
+        ids = self.welded[self.triangles]
+        n = np.int64(self.vertex_count)
+        a, b = ids, np.roll(ids, -1, axis=1)
+        key = (np.minimum(a, b) * n + np.maximum(a, b)).reshape(-1)
+        keys, first, inverse, counts = np.unique(key, return_index=True, return_inverse=True,
+                                                 return_counts=True)
+        face = np.repeat(self.pseudo_normals[0], 3, axis=0)
+        # coplanar faces: every face of the edge has the normal of its first
+        bent = np.zeros(len(keys), bool)
+        np.logical_or.at(bent, inverse, np.einsum("ij,ij->i", face, face[first[inverse]])
+                         < 1.0 - 1e-9)
+        sharp = bent | (counts != 2)
+        edges = np.stack([keys[sharp] // n, keys[sharp] % n], axis=1)
+        return _frozen(edges), _frozen(np.unique(edges))
+
+
 def _sum_by(index: np.ndarray, values: np.ndarray, count: int) -> np.ndarray:
     """(count, 3) sums of (m, 3) ``values`` grouped by ``index`` (m,)."""
     return np.stack([np.bincount(index, weights=values[:, k], minlength=count)

@@ -7,7 +7,7 @@ import numpy as np
 
 from ..transforms import inverse_affine
 from .frame import ColliderFrame
-from .path import CONTACT_DISTANCE, ColliderPath, Hits, SurfacePoints
+from .path import CONTACT_DISTANCE, ColliderPath, Features, Hits, SurfacePoints
 
 SHAPES = ("HALF_SPACE", "PLANE", "SPHERE", "BOX")
 
@@ -30,6 +30,7 @@ class AnalyticPath(ColliderPath):
             extent = np.array([1.0 + margin[0], 1.0 + margin[1],
                                margin[2] if frame.shape == "PLANE" else 1.0 + margin[2]])
         self.extent = extent
+        self._features = _features(frame.shape, extent)
 
     def first_hits(self, start, end, s_start, s_end) -> Hits:
         shape = self.frame.shape
@@ -83,6 +84,9 @@ class AnalyticPath(ColliderPath):
         return SurfacePoints(cand[near], p_w[near], n_w[near],
                              self.surface_velocity(p[near], s), d[near])
 
+    def features(self, s0: float, s1: float) -> Features:
+        return self._features
+
     def _local_z(self, x: np.ndarray, s) -> np.ndarray:
         """Local z of points (the only coordinate planes need): one row of the inverse matrix."""
         inv = inverse_affine(self._at(s))
@@ -102,6 +106,23 @@ class AnalyticPath(ColliderPath):
             return np.nonzero(z1 < level)[0]
         z0 = self._local_z(start, s_start)
         return np.nonzero((z0 > level) & (z1 <= level) | (z0 < -level) & (z1 >= -level))[0]
+
+
+def _features(shape: str, e: np.ndarray) -> Features:
+    """A sphere's centre (its radius the extent), a box's or a bounded plane's corners and
+    edges (a plane of no thickness: its four), nothing of the ground."""
+    if shape == "SPHERE":
+        return Features.still(np.zeros((1, 3)), e[:1].copy(), np.zeros((0, 2, 3)))
+    if shape == "HALF_SPACE":
+        return Features.none()
+    flat = shape == "PLANE" and e[2] == 0.0
+    signs = np.array([(x, y, z) for z in ((0.0,) if flat else (-1.0, 1.0))
+                      for y in (-1.0, 1.0) for x in (-1.0, 1.0)])
+    corners = signs * e
+    # corners differing in one sign share an edge
+    differ = np.abs(signs[:, None, :] - signs[None, :, :]).astype(bool).sum(axis=2)
+    i, j = np.nonzero(np.triu(differ == 1))
+    return Features.still(corners, np.zeros(len(corners)), np.stack([corners[i], corners[j]], 1))
 
 
 # --- shape geometry in local space -------------------------------------------------------------

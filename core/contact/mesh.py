@@ -33,12 +33,13 @@ import numpy as np
 
 from ..collision.build import build_bvh
 from ..collision.bvh import BVH
+from ..collision.crossing import barycentric
 from ..collision.distance import CORNER, EDGE, closest_on_triangles, closest_points
 from ..collision.mesh import TriangleMesh
 from ..collision.raycast import segment_hits
 from ..transforms import inverse_affine, norm_rows, transform_vectors
 from .frame import ColliderFrame
-from .path import CONTACT_DISTANCE, ColliderPath, Hits, SurfacePoints
+from .path import CONTACT_DISTANCE, ColliderPath, Features, Hits, SurfacePoints
 
 BVH_KIND = "aabb"  # refits cheaply and exactly for deforming meshes
 BVH_CACHE = 8  # hierarchies kept per interval (refits for the sub-step times in use)
@@ -87,6 +88,18 @@ class MeshPath(ColliderPath):
             bvh, _ = self._bvh0.refit(self.vertices0 + s * self.vertex_step)
             self._bvhs[s] = bvh
         return bvh
+
+    def features(self, s0: float, s1: float) -> Features:
+        """The mesh's creases (:attr:`~..collision.mesh.TriangleMesh.creases`) and their ends."""
+        edges, corners = self._bvh0.mesh.creases
+        if not len(edges):
+            return Features.none()
+
+        def at(s: float) -> np.ndarray:
+            return self.vertices0 + s * self.vertex_step if self.deforming else self.vertices0
+
+        v0, v1 = at(s0), at(s1)
+        return Features(v0[corners], v1[corners], np.zeros(len(corners)), v0[edges], v1[edges])
 
     def _corners(self, tri: np.ndarray, s: np.ndarray) -> np.ndarray:
         """(k, 3, 3) corners of triangles ``tri`` (k,) at per-triangle parameters s (k,)."""
@@ -268,7 +281,7 @@ class MeshPath(ColliderPath):
         local_v = None
         if self.deforming and element is not None and len(l):
             el = np.maximum(element, 0)
-            w = _barycentric(l, self._corners(el, s))
+            w = barycentric(l, self._corners(el, s))
             local_v = np.einsum("nk,nkj->nj", w, self.vertex_step[self.triangles[el]])
             local_v /= self.frame_dt
         if local_v is None and self.path.static:
@@ -355,22 +368,3 @@ def _boundary_features(mesh: TriangleMesh) -> np.ndarray:
     out[:, EDGE:EDGE + 3] = edge_open
     out[:, CORNER:CORNER + 3] = vertex_open[ids]
     return out
-
-
-def _barycentric(p: np.ndarray, corners: np.ndarray) -> np.ndarray:
-    """(k, 3) barycentric weights of points p (k, 3) in triangles (k, 3, 3), clamped to the
-    triangle; zero-area triangles weigh their corners equally."""
-    a = corners[:, 0]
-    e0, e1, e2 = corners[:, 1] - a, corners[:, 2] - a, p - a
-    d00 = np.einsum("ij,ij->i", e0, e0)
-    d01 = np.einsum("ij,ij->i", e0, e1)
-    d11 = np.einsum("ij,ij->i", e1, e1)
-    d20 = np.einsum("ij,ij->i", e2, e0)
-    d21 = np.einsum("ij,ij->i", e2, e1)
-    denom = d00 * d11 - d01 * d01
-    ok = denom > 0.0
-    safe = np.where(ok, denom, 1.0)
-    v = np.where(ok, (d11 * d20 - d01 * d21) / safe, 1.0 / 3.0)
-    w = np.where(ok, (d00 * d21 - d01 * d20) / safe, 1.0 / 3.0)
-    weights = np.clip(np.stack([1.0 - v - w, v, w], axis=1), 0.0, 1.0)
-    return weights / weights.sum(axis=1, keepdims=True)

@@ -12,6 +12,9 @@ questions of the collision passes (:mod:`.response`):
 * :meth:`ColliderPath.first_hits`: where segments start -> end first enter the collider;
 * :meth:`ColliderPath.push_out`: which points ended inside it, and the surface to put them on;
 * :meth:`ColliderPath.near_surface`: which points are near its surface (resting contact).
+
+and one for systems with faces and edges (:mod:`.features`): :meth:`ColliderPath.features`,
+the corners, creased edges and round parts that could reach between a mesh's vertices.
 """
 from __future__ import annotations
 
@@ -49,6 +52,36 @@ class Hits:
     @classmethod
     def none(cls) -> Hits:
         return cls(np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)))
+
+
+@dataclass(frozen=True)
+class Features:
+    """What of a collider stands out of its surface, in its local frame at a sub-step's start
+    (``0``) and end (``1``): corners and round parts as points with a radius (a sphere is its
+    centre), creased edges as segments.
+
+    Attributes:
+        points0, points1: (k, 3) [local units]. radius: (k,) [local units].
+        segments0, segments1: (e, 2, 3) [local units].
+    """
+
+    points0: np.ndarray
+    points1: np.ndarray
+    radius: np.ndarray
+    segments0: np.ndarray
+    segments1: np.ndarray
+
+    @classmethod
+    def none(cls) -> Features:
+        return cls.still(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 2, 3)))
+
+    @classmethod
+    def still(cls, points: np.ndarray, radius: np.ndarray, segments: np.ndarray) -> Features:
+        """Features that do not move in the local frame."""
+        return cls(points, points, radius, segments, segments)
+
+    def __len__(self) -> int:
+        return len(self.points0) + len(self.segments0)
 
 
 @dataclass(frozen=True)
@@ -151,3 +184,9 @@ class ColliderPath:
     def near_surface(self, x: np.ndarray, s: float) -> SurfacePoints:
         """Points x (n, 3) whose ``gap`` to the surface at s is below CONTACT_DISTANCE."""
         raise NotImplementedError
+
+    def features(self, s0: float, s1: float) -> Features:
+        """The collider's corners, creased edges and round parts at s0 and s1 (none: a
+        surface without any, like the infinite ground, which no face can meet before one of
+        its vertices does)."""
+        return Features.none()

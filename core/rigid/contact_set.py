@@ -8,6 +8,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..colouring import colour
+
 
 def tangents(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Two unit tangents (k, 3) completing each unit normal (k, 3) to an orthonormal basis."""
@@ -15,41 +17,6 @@ def tangents(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     t1 = np.cross(n, helper)
     t1 /= np.linalg.norm(t1, axis=1)[:, None]
     return t1, np.cross(n, t1)
-
-
-def colour(a: np.ndarray, b: np.ndarray, dynamic: np.ndarray) -> list[np.ndarray]:
-    """Contact indices grouped so that no dynamic body appears twice in a group. Each group is
-    a maximal set (greedy): it keeps taking contacts whose dynamic bodies are still free in it,
-    so there are at most 2 D - 1 groups for D contacts on the busiest body."""
-    left = np.arange(len(a))
-    groups = []
-    while len(left):
-        used = np.zeros(len(dynamic), bool)
-        group, candidates = [], left
-        while len(candidates):
-            chosen = _first_of_their_bodies(a[candidates], b[candidates], dynamic)
-            picked = candidates[chosen]
-            group.append(picked)
-            used[a[picked]] = used[b[picked]] = True
-            candidates = candidates[~chosen]
-            free = ~((used[a[candidates]] & dynamic[a[candidates]])
-                     | (used[b[candidates]] & dynamic[b[candidates]]))
-            candidates = candidates[free]
-        group = np.sort(np.concatenate(group))
-        groups.append(group)
-        left = np.setdiff1d(left, group, assume_unique=True)
-    return groups
-
-
-def _first_of_their_bodies(a: np.ndarray, b: np.ndarray, dynamic: np.ndarray) -> np.ndarray:
-    """Which contacts come first (lowest position) among those of each of their dynamic bodies
-    (the first contact always does)."""
-    pos = np.arange(len(a))
-    ends, at = np.concatenate([a, b]), np.concatenate([pos, pos])
-    dyn = dynamic[ends]
-    first = np.full(len(dynamic), len(a))
-    np.minimum.at(first, ends[dyn], at[dyn])
-    return (~dynamic[a] | (first[a] == pos)) & (~dynamic[b] | (first[b] == pos))
 
 
 @dataclass
@@ -176,7 +143,7 @@ class ContactSet:
     def coloured(self, dynamic: np.ndarray) -> ContactSet:
         """The manifolds ordered by colour for bodies that are ``dynamic`` (N,) now."""
         a, b = self.ab[:, 0], self.ab[:, 1]
-        groups = colour(a, b, dynamic)
+        groups = colour(np.stack([a, b], axis=1), dynamic)
         order = np.concatenate(groups) if groups else np.zeros(0, np.int64)
         out = self.take(order)
         ends = np.cumsum([len(g) for g in groups]).tolist()

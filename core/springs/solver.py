@@ -1,21 +1,24 @@
 """Spring-mesh solver: advances a :class:`SpringMeshState` one frame interval in sub-steps.
 
-Per sub-step: collide (resting contacts) -> forces (gravity, springs, bending, virtual springs,
-drag, wind on faces, contact) -> integrate (any scene integrator; IMPLICIT is Baraff-Witkin)
--> pins (exactly on their animated targets) -> limit strain (optional, Provot) -> respond
-(continuous collisions, as particles) -> with IMPLICIT, when vertices hit a collider, the
-sub-step again with them as landing constraints (up to LANDING_ROUNDS times) -> check (finite,
-not torn apart).
+Per sub-step: collide (resting contacts: vertices on colliders, and the vertices of faces
+resting on a collider's corner, crease or sphere) -> forces (gravity, springs, bending,
+virtual springs, drag, wind on faces, contact) -> integrate (any scene integrator; IMPLICIT is
+Baraff-Witkin) -> pins (exactly on their animated targets) -> limit strain (optional, Provot)
+-> respond (continuous collisions, as particles) -> with IMPLICIT, when vertices hit a
+collider or faces must be lifted off its features, the sub-step again with them as landing
+constraints (up to LANDING_ROUNDS times) -> keep the colliders' features off the faces and
+edges (:mod:`..contact.features`) -> check (finite, not torn apart).
 """
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..bounds import DEFAULT_BOUNDS, StateBounds
 from ..contact import ColliderFrame, ColliderPaths, ContactForce, Contacts, respond, resting_contacts
+from ..contact.features import FaceSet, keep_off_features, resting_on_features
 from ..errors import PhysanimError, SimulationError
 from ..forces import AnchorSprings, DampedSprings, Gravity, Wind
 from ..integrators import make_integrator
@@ -24,6 +27,7 @@ from ..world import SolverSettings, SolverSystem, World, WorldFrame
 from .forces import AngularSprings, LinearDrag, MassShared
 from .implicit import BaraffWitkin
 from . import attach
+from . import landing as landing_
 from .model import SpringMeshModel, SpringMeshState
 from .ode import MeshOde, SubstepForces
 from .strain import limit_strain
@@ -96,21 +100,6 @@ class SpringDrive:
     targets: dict = field(default_factory=dict)
 
 
-def _bounce(v: np.ndarray, landing: Contacts, rest_speed: float) -> None:
-    """After a re-solved step the landing vertices are on the surface, still approaching it at
-    their landing speed: they leave it at restitution times that speed (relative to the
-    surface; a bounce slower than ``rest_speed`` ends in contact), as the collision pass would
-    have made them."""
-    sel = landing.held
-    idx, n = landing.index[sel], landing.normal[sel]
-    surface_vn = np.einsum("ij,ij->i", landing.surface_velocity[sel], n)
-    approach = landing.normal_speed[sel] - surface_vn
-    out = -landing.restitution[sel] * np.minimum(approach, 0.0)
-    out = np.where(out < rest_speed, 0.0, out)
-    vn = np.einsum("ij,ij->i", v[idx], n)
-    v[idx] += (surface_vn + out - vn)[:, None] * n
-
-
 @dataclass
 class _FrameStep:
     """One frame interval of a spring mesh in progress (between begin and end of frame)."""
@@ -175,6 +164,9 @@ class SpringMeshSolver:
         self._inv_mass = np.where(self.free, 1.0 / model.vertex_mass, 0.0)
         self._mass_share = model.vertex_mass / model.vertex_mass.sum()
         self.drag = LinearDrag(model.settings.drag)
+        edges = model.spring_family == 0
+        self.faces = FaceSet.of(model.triangles, np.stack([model.spring_i[edges],
+                                                           model.spring_j[edges]], axis=1))
         self._check_stability(frame_dt / self.substeps, frame)
 
     def _fail(self, message: str, frame, cls=PhysanimError):
@@ -231,7 +223,13 @@ class SpringMeshSolver:
         pin_v = (step.rest1 - step.rest0) / inputs.frame_dt
         if step.held is not None:
             attach.hold(self.model, state, step.held, s0, s1, h, pin_x1, pin_v)
+        start = state.x.copy() if step.paths and self.faces else None
         contact = resting_contacts(step.paths, state.x, state.v, s0, step.rest_speed)
+        if start is not None:  # faces resting on features: their points rest too (on a body
+            # stepped first, the coupling takes them as pressed on it: not through a feature)
+            contact = resting_on_features(step.paths, self.faces, state.x, state.v,
+                                          self._inv_mass, s0, step.rest_speed,
+                                          frozenset(inputs.bodies)).merged(contact)
         forces = self._forces(step, t, s0, s1)
         solved = self._solve(step, forces, contact, t, s0, s1, pin_x1, pin_v)
         touched = [contact]
@@ -239,10 +237,23 @@ class SpringMeshSolver:
         if solved is not None:
             x, v, collided, touched, outside = solved
             x[~self.free], v[~self.free] = pin_x1[~self.free], pin_v[~self.free]
+            if start is not None:
+                touched = [*touched, self._keep_off(step, start, x, v, s0, s1, outside)]
             state.x, state.v, step.hits = x, v, step.hits + collided
         if outside is not None:
             self._react(step, touched, outside, s1)
         self._check(state, inputs.frame)
+
+    def _keep_off(self, step: _FrameStep, x0: np.ndarray, x: np.ndarray, v: np.ndarray,
+                  s0: float, s1: float, outside: np.ndarray | None) -> Contacts:
+        """The colliders' corners, creases and spheres kept off the mesh's faces and edges
+        (:mod:`..contact.features`): x and v in place; their impulses join ``outside``."""
+        before = v.copy() if outside is not None else None
+        kept = keep_off_features(step.paths, self.faces, x0, x, v, self._inv_mass, s0, s1,
+                                 step.rest_speed)
+        if outside is not None and len(kept):
+            outside += self.model.vertex_mass[:, None] * (v - before)
+        return kept
 
     def _react(self, step: _FrameStep, touched: list, outside: np.ndarray, s1: float) -> None:
         """Two-way coupling with the bodies stepped first this frame: the attached ones move
@@ -362,7 +373,7 @@ class SpringMeshSolver:
             self._step(ode, t, h, pin_x1, pin_v, step.inputs.frame)
             solved = state.v.copy()
             if landing is not None:
-                _bounce(state.v, landing, step.rest_speed)
+                landing_.bounce(state.v, landing, step.rest_speed)
             if not paths:
                 return None
             x, v, count, hit = respond(paths, x0, state.x, v0, state.v, s0, s1, h,
@@ -370,16 +381,26 @@ class SpringMeshSolver:
             collided = max(collided, count)  # the first round finds the step's collisions
             hits.append(hit)
             outside = self._outside(v, solved)
-            first = (x, v, outside) if first is None else first
-            more = None if not (implicit and round_ < LANDING_ROUNDS) else \
-                self._landing(landing if landing is not None else contact, hit, x0, h)
+            again = implicit and round_ < LANDING_ROUNDS
+            base = landing if landing is not None else contact
+            more = landing_.contacts(base, hit, x0, h, self.free) if again else None
+            # once no vertex lands anew, the faces the colliders' features reach: the first
+            # round's projection of them is the safeguard's fallback
+            placed, faced = (x, v), None
+            if implicit and self.faces and (first is None or (again and more is None)):
+                faced, *placed = landing_.off_features(step.paths, self.faces, x0, x, v,
+                                                       self._inv_mass, s0, s1, step.rest_speed)
+            if first is None:
+                first = (*placed, self._outside(placed[1], solved))
+            if again and more is None:
+                more = landing_.contacts(base, Contacts.none(), x0, h, self.free, faced)
             if more is None:
                 break
             landing = more
         if landing is not None and ode.energy(*first[:2]) < ode.energy(x, v):
             # a safeguard: landing constraints must not end with more energy than projecting
-            # the hits after the first solve (a stiff mesh whose landing vertices are forced
-            # apart can store more spring energy than that)
+            # the hits (and the faces off the features) after the first solve (a stiff mesh
+            # whose landing vertices are forced apart can store more spring energy than that)
             x, v, outside = first
         return x, v, collided, hits, outside
 
@@ -409,20 +430,6 @@ class SpringMeshSolver:
             limited = model.spring_family < 2  # edge and shear springs, not bending ones
             limit_strain(state.x, state.v, model.spring_i[limited], model.spring_j[limited],
                          model.spring_rest[limited], self._inv_mass, model.settings.max_stretch, h)
-
-    def _landing(self, base: Contacts, hit: Contacts, x0, h: float) -> Contacts | None:
-        """Contacts for re-solving a step in which free vertices hit a collider (``hit``: their
-        first collisions, from :func:`~..contact.respond`): each becomes a held constraint
-        whose normal velocity is the one that takes it from its start to where the collision
-        put it — merged with ``base`` (the step's resting contacts, or the last round's set;
-        a resting vertex that was hit lands instead). None when no vertex that is not held
-        already was hit."""
-        keep = self.free[hit.index] & ~np.isin(hit.index, base.index[base.held])
-        if not keep.any():
-            return None
-        hit = hit.take(keep)
-        land_vn = np.einsum("ij,ij->i", hit.point - x0[hit.index], hit.normal) / h
-        return base.merged(replace(hit, normal_speed=land_vn, held=np.ones(len(hit), bool)))
 
     def _check(self, state: SpringMeshState, frame) -> None:
         if not (np.all(np.isfinite(state.x)) and np.all(np.isfinite(state.v))):

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from physanim.core.rigid import quaternion as quat
-from physanim.core.rigid.contact_set import colour, tangents
+from physanim.core.colouring import colour
+from physanim.core.rigid.contact_set import tangents
 from physanim.core.rigid import contact_solver as cs_
 from physanim.core.rigid.contact_solver import Softness
 
@@ -61,7 +62,7 @@ def test_colouring_never_puts_a_dynamic_body_twice_in_a_group():
     dynamic = rng.random(bodies) < 0.8
     a = rng.integers(0, bodies, 2000)
     b = (a + rng.integers(1, bodies, 2000)) % bodies
-    groups = colour(a, b, dynamic)
+    groups = colour(np.stack([a, b], axis=1), dynamic)
     seen = np.concatenate(groups)
     assert np.array_equal(np.sort(seen), np.arange(2000))  # every contact, once
     for g in groups:

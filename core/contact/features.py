@@ -1,0 +1,332 @@
+"""Colliders against a system's faces and edges: what collisions of points cannot see. A sphere
+smaller than a mesh's faces, a cone's tip or a rod's edge passes between a mesh's vertices
+without any vertex entering it; here the collider's corners and round parts
+(:class:`~.path.Features`) are kept off the mesh's triangles and its creased edges off the
+mesh's edges.
+
+Per collider, in its local frame (a moving collider becomes a still one, as for points):
+
+1. detect: pairs (corner or sphere, triangle) and (crease, edge) whose boxes over the
+   sub-step overlap, then those apart by less than the contact gap at its end or that
+   crossed during it (continuous tests, :mod:`..collision.crossing`);
+2. separate: each pair's gap restored by moving the mesh's corners along the pair's normal,
+   in proportion to their inverse mass and their weight in the nearest point (the impulse
+   that moves the nearest point by exactly the shortfall); Gauss-Seidel passes over groups
+   of pairs that share no moving point (:func:`..colouring.colour`) until every pair is
+   within TOLERANCE, then detect again (a moved face may meet another part of a feature);
+3. respond: the nearest point's approach to the collider cancelled (a bounce of restitution
+   times it when faster than the rest speed), Coulomb friction on its sliding, spread over
+   the corners the same way;
+4. fail safe: when the rounds run out with pairs still crossed, their points go back to
+   where they started in the collider's frame.
+
+:func:`resting_on_features` gives the points of faces resting on features as resting contacts
+for the next solve, which then does not pull the faces back onto them.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from ..collision.crossing import box_pairs, segment_segment, triangle_point
+from ..colouring import colour
+from ..transforms import dot_rows, norm_rows
+from .contacts import Contacts
+from .path import CONTACT_DISTANCE, SKIN, ColliderPath, Features
+
+# [m] kept between a collider's features and a mesh's faces, beyond its thickness: less than
+# the SKIN a colliding point is placed at, so on a flat face the vertices' own contacts and these
+# never push against each other
+FACE_GAP = 0.5 * SKIN
+PASSES = 16  # position passes at most
+TOLERANCE = 0.05  # a pass leaving every pair within this fraction of the gap is the last
+VELOCITY_PASSES = 4
+MIN_SHARE = 0.25  # of a pair's weight on moving points, below which pinned ones hold it
+ROUNDS = 8  # detections per sub-step: a moved face may come near another part of a feature
+
+
+@dataclass(frozen=True)
+class FaceSet:
+    """The faces and edges of a system's points.
+
+    Attributes:
+        triangles: (m, 3) point indices.
+        edges: (q, 2) every edge: the triangles' sides, then the edges on no triangle.
+        loose: (r, 2) the edges on no triangle (a wire, a rope): round features meet them
+            too (a triangle's sides meet them through the triangle).
+    """
+
+    triangles: np.ndarray
+    edges: np.ndarray
+    loose: np.ndarray
+
+    @classmethod
+    def of(cls, triangles: np.ndarray, edges: np.ndarray) -> FaceSet:
+        """From triangles (m, 3) and mesh edges (q, 2) (some of them the triangles' sides)."""
+        triangles = np.asarray(triangles, np.int64).reshape(-1, 3)
+        edges = np.unique(np.sort(np.asarray(edges, np.int64).reshape(-1, 2), axis=1), axis=0)
+        sides = np.unique(np.sort(np.stack([triangles, np.roll(triangles, -1, axis=1)], -1)
+                                  .reshape(-1, 2), axis=1), axis=0)
+        key = np.int64(max(int(edges.max(initial=0)), int(sides.max(initial=0))) + 1)
+        loose = edges[~np.isin(edges[:, 0] * key + edges[:, 1], sides[:, 0] * key + sides[:, 1])]
+        return cls(triangles, np.concatenate([sides, loose]), loose)
+
+    def __bool__(self) -> bool:
+        return bool(len(self.triangles) or len(self.edges))
+
+
+class _Pairs(NamedTuple):
+    """Pairs of one collider (c of them), in its local frame at the sub-step's end.
+
+    vertex (c, 3) mesh points (an edge's third is its first, of weight 0); weight (c, 3);
+    normal (c, 3) from the feature to the mesh; anchor (c, 3) the feature's nearest point
+    on its surface; depth (c,) their separation when found (negative: crossed, or inside a
+    round feature); gap the distance to keep [local units].
+    """
+
+    vertex: np.ndarray
+    weight: np.ndarray
+    normal: np.ndarray
+    anchor: np.ndarray
+    depth: np.ndarray
+    gap: float
+
+    def take(self, rows) -> _Pairs:
+        return _Pairs(*(a[rows] for a in self[:5]), self.gap)
+
+
+def keep_off_features(paths: list[ColliderPath], faces: FaceSet, x0: np.ndarray, x1: np.ndarray,
+                      v: np.ndarray, inv_mass: np.ndarray, s0: float, s1: float,
+                      rest_speed: float, rounds: int = ROUNDS) -> Contacts:
+    """Keep the colliders' features off ``faces`` over a sub-step: points x0 (at s0) -> x1 (at
+    s1), (n, 3) [m], velocities v (n, 3) [m/s]; x1 and v are changed in place. Points of zero
+    inverse mass (pinned) are never moved. Returns the touched points as contacts (one row per
+    point and collider, ``collider`` its index in ``paths``). ``rounds``: detections at most
+    (an estimate with fewer skips the fail-safe)."""
+    found = []
+    for ci, path in enumerate(paths):
+        features = path.features(s0, s1)
+        if not len(features):
+            continue
+        found_pairs, settled = [], True
+        for _ in range(rounds):
+            pairs = _detect(path, features, faces, x0, x1, s0, s1)
+            if pairs is None:
+                break
+            found_pairs.append(pairs)
+            if not _separate(path, pairs, x1, inv_mass, s1):
+                break
+        else:
+            settled = False
+        if found_pairs:
+            pairs = _Pairs(*(np.concatenate(a) for a in zip(*(r[:5] for r in found_pairs))),
+                           found_pairs[0].gap)
+            found.append(_respond(path, pairs, x1, v, inv_mass, s1, rest_speed, ci))
+        if not settled and rounds == ROUNDS:
+            _fail_safe(path, features, faces, x0, x1, v, inv_mass, s0, s1)
+    out = Contacts.none()
+    for c in found:
+        out = out.merged(c)
+    return out
+
+
+def _fail_safe(path: ColliderPath, features: Features, faces: FaceSet, x0, x1, v, inv_mass,
+               s0: float, s1: float) -> None:
+    """Points of pairs still crossed after the passes (rare: pushes that undo each other
+    round after round) go back to where they were at the start in the collider's frame,
+    moving with it — a state in which they did not cross it — and again for what that
+    uncovers, so nothing ever ends a sub-step through a feature."""
+    for _ in range(ROUNDS):
+        pairs = _detect(path, features, faces, x0, x1, s0, s1)
+        if pairs is None:
+            return
+        _, _, rows = _shares(pairs, inv_mass)
+        stuck = pairs.vertex[rows][pairs.depth[rows] < 0.0]
+        stuck = np.unique(stuck[inv_mass[stuck] > 0.0])
+        if not len(stuck):
+            return
+        home = path.to_local(x0[stuck], s0)
+        x1[stuck] = path.to_world(home, np.ones_like(home), s1)[0]
+        v[stuck] = path.surface_velocity(home, s1)
+
+
+def resting_on_features(paths: list[ColliderPath], faces: FaceSet, x: np.ndarray,
+                        v: np.ndarray, inv_mass: np.ndarray, s: float, rest_speed: float,
+                        skip: frozenset = frozenset()) -> Contacts:
+    """The points of faces and edges resting on the colliders' features at s (x (n, 3) [m],
+    v (n, 3) [m/s]): pairs nearer than the gap plus CONTACT_DISTANCE whose nearest point does
+    not leave faster than ``rest_speed``, as resting contacts of their points (the normal
+    their pairs' weighted mean). A solve that holds them there does not pull the faces back
+    onto the feature, which the separation after it would then have to undo. Colliders named
+    in ``skip`` give none."""
+    found = Contacts.none()
+    for ci, path in enumerate(paths):
+        features = path.features(s, s)
+        if not len(features) or path.frame.name in skip:
+            continue
+        pairs = _detect(path, features, faces, x, x, s, s, CONTACT_DISTANCE)
+        if pairs is None:
+            continue
+        share, _, rows = _shares(pairs, inv_mass)
+        pairs = pairs.take(rows)
+        anchor, n = path.to_world(pairs.anchor, pairs.normal, s)
+        surface = path.surface_velocity(pairs.anchor, s)
+        rel = np.einsum("ck,ckj->cj", pairs.weight, v[pairs.vertex]) - surface
+        rest = dot_rows(rel, n) < rest_speed
+        if rest.any():
+            world = pairs._replace(normal=n, anchor=anchor).take(rest)
+            found = found.merged(_per_point(world, share[rows][rest], surface[rest], len(x),
+                                            path.frame, ci, x))
+    return found
+
+
+def _detect(path: ColliderPath, f: Features, faces: FaceSet, x0, x1, s0: float,
+            s1: float, reach: float = 0.0) -> _Pairs | None:
+    """Pairs apart by less than the gap (plus ``reach`` [m]) or crossed, in local units."""
+    l0, l1 = path.to_local(x0, s0), path.to_local(x1, s1)
+    scale = float(path.per_metre.mean())
+    gap = (path.offset + FACE_GAP) * scale
+    near = gap + reach * scale
+    vertex, weight, normal, anchor, depth = [], [], [], [], []
+
+    def keep(apart, ids, w, sep_normal, point):
+        hit = apart < near
+        vertex.append(ids[hit])
+        weight.append(w[hit])
+        normal.append(sep_normal[hit])
+        anchor.append(point[hit])
+        depth.append(apart[hit])
+
+    if len(f.points0) and len(faces.triangles):
+        t0, t1 = l0[faces.triangles], l1[faces.triangles]
+        grow = (f.radius + near)[:, None]
+        i, j = box_pairs(np.minimum(t0.min(1), t1.min(1)), np.maximum(t0.max(1), t1.max(1)),
+                         np.minimum(f.points0, f.points1) - grow,
+                         np.maximum(f.points0, f.points1) + grow)
+        if len(i):
+            sep = triangle_point(t0[i], t1[i], f.points0[j], f.points1[j])
+            r = f.radius[j]
+            point = f.points1[j] + r[:, None] * sep.normal
+            keep(sep.gap - r, faces.triangles[i], sep.weight, sep.normal, point)
+    for ends0, ends1, radius, edges in (
+            (f.segments0, f.segments1, np.zeros(len(f.segments0)), faces.edges),
+            (np.repeat(f.points0[:, None], 2, 1), np.repeat(f.points1[:, None], 2, 1), f.radius,
+             faces.loose)):
+        if not (len(ends0) and len(edges)):
+            continue
+        e0, e1 = l0[edges], l1[edges]
+        grow = (radius + near)[:, None]
+        i, j = box_pairs(np.minimum(e0.min(1), e1.min(1)), np.maximum(e0.max(1), e1.max(1)),
+                         np.minimum(ends0.min(1), ends1.min(1)) - grow,
+                         np.maximum(ends0.max(1), ends1.max(1)) + grow)
+        if not len(i):
+            continue
+        sep = segment_segment(e0[i, 0], e0[i, 1], ends0[j, 0], ends0[j, 1],
+                              e1[i, 0], e1[i, 1], ends1[j, 0], ends1[j, 1])
+        r = radius[j]
+        point = np.einsum("ck,ckj->cj", sep.other, ends1[j]) + r[:, None] * sep.normal
+        ids = np.concatenate([edges[i], edges[i, :1]], axis=1)
+        w = np.concatenate([sep.weight, np.zeros((len(i), 1))], axis=1)
+        keep(sep.gap - r, ids, w, sep.normal, point)
+    if not vertex or not sum(len(a) for a in vertex):
+        return None
+    return _Pairs(np.concatenate(vertex), np.concatenate(weight), np.concatenate(normal),
+                  np.concatenate(anchor), np.concatenate(depth), gap)
+
+
+def _shares(pairs: _Pairs, inv_mass: np.ndarray):
+    """Each pair's corners' shares of a push (weight times inverse mass, (c, 3)), their sum
+    against the weights (c,), and the pairs a push can move: at least MIN_SHARE of their
+    nearest point's weight on points that move (one nearer a pinned point than that is
+    held by it: moving the rest would take a push of the shortfall over that weight)."""
+    share = pairs.weight * inv_mass[pairs.vertex]
+    denom = np.einsum("ck,ck->c", pairs.weight, share)
+    movable = np.where(share > 0.0, pairs.weight, 0.0).sum(axis=1)
+    return share, denom, np.nonzero((denom > 0.0) & (movable >= MIN_SHARE))[0]
+
+
+def _separate(path: ColliderPath, pairs: _Pairs, x1, inv_mass, s1: float) -> bool:
+    """Restore the pairs' gaps (in x1, in place): Gauss-Seidel over groups of pairs that share
+    no moving point (each group one vectorised step). Returns whether any was short."""
+    vertex, weight, normal = pairs.vertex, pairs.weight, pairs.normal
+    share, denom, rows = _shares(pairs, inv_mass)
+    l1 = path.to_local(x1, s1)
+
+    def short(rows):
+        q = np.einsum("ck,ckj->cj", weight[rows], l1[vertex[rows]])
+        return pairs.gap - dot_rows(q - pairs.anchor[rows], normal[rows])
+
+    if not len(rows) or short(rows).max() <= TOLERANCE * pairs.gap:
+        return False
+    groups = colour(vertex[rows], inv_mass > 0.0)
+    for _ in range(PASSES):
+        for g in groups:
+            g = rows[g]
+            step = np.maximum(short(g), 0.0) / denom[g]
+            np.add.at(l1, vertex[g], (share[g] * step[:, None])[:, :, None] * normal[g][:, None, :])
+        if short(rows).max() <= TOLERANCE * pairs.gap:
+            break
+    touched = np.unique(vertex[rows])
+    x1[touched] = path.to_world(l1[touched], np.ones((len(touched), 3)), s1)[0]
+    return True
+
+
+def _respond(path: ColliderPath, pairs: _Pairs, x1, v, inv_mass, s1: float, rest_speed: float,
+             which: int) -> Contacts:
+    vertex, weight = pairs.vertex, pairs.weight
+    share, denom, rows = _shares(pairs, inv_mass)
+    anchor, n = path.to_world(pairs.anchor, pairs.normal, s1)
+    surface = path.surface_velocity(pairs.anchor, s1)
+    mu, e = path.frame.friction, path.frame.restitution
+    groups = [rows[g] for g in colour(vertex[rows], inv_mass > 0.0)] if len(rows) else []
+
+    def normal_speed(g):
+        rel = np.einsum("ck,ckj->cj", weight[g], v[vertex[g]]) - surface[g]
+        return rel, dot_rows(rel, n[g])
+
+    _, vn = normal_speed(rows)
+    # what each pair's normal speed must reach: a bounce when approaching faster than the
+    # rest speed, resting contact when slower, nothing for a separating pair
+    floor = np.full(len(vertex), -np.inf)
+    floor[rows] = np.where(vn < 0.0, np.where(-e * vn > rest_speed, -e * vn, 0.0), -np.inf)
+    for k in range(VELOCITY_PASSES):
+        changed = False
+        for g in groups:
+            rel, vn = normal_speed(g)
+            dvn = np.maximum(floor[g] - vn, 0.0)
+            if not dvn.any():
+                continue
+            changed = True
+            change = dvn[:, None] * n[g]
+            if k == 0 and mu > 0.0:  # Coulomb: the sliding stops or slows by mu times the push
+                slide = rel - vn[:, None] * n[g]
+                speed = norm_rows(slide)
+                change -= (np.minimum(speed, mu * dvn) / np.maximum(speed, 1e-300))[:, None] * slide
+            step = change / denom[g][:, None]
+            np.add.at(v, vertex[g], share[g][:, :, None] * step[:, None, :])
+        if not changed:
+            break
+    world = pairs._replace(normal=n, anchor=anchor).take(rows)
+    return _per_point(world, share[rows], surface[rows], len(v), path.frame, which)
+
+
+def _per_point(pairs: _Pairs, share: np.ndarray, surface: np.ndarray, count: int, frame,
+               which: int, at: np.ndarray | None = None) -> Contacts:
+    """Contacts of the points that world-space ``pairs`` move: each with the mean of its
+    pairs' normals weighted by its share of them (the nearest pair's point and surface
+    velocity; its own position when ``at`` is given)."""
+    rows = np.nonzero(share > 0.0)
+    index, first = np.unique(pairs.vertex[rows], return_index=True)
+    pair = rows[0][first]
+    summed = np.zeros((count, 3))
+    np.add.at(summed, pairs.vertex[rows], pairs.weight[rows][:, None] * pairs.normal[rows[0]])
+    normal = summed[index]
+    length = norm_rows(normal)
+    normal = np.where((length > 0.5)[:, None], normal / np.maximum(length, 1e-300)[:, None],
+                      pairs.normal[pair])
+    point = pairs.anchor[pair] if at is None else at[index]
+    return Contacts.of(index, point, normal, surface[pair],
+                       np.full(len(index), frame.friction), np.full(len(index), frame.restitution),
+                       collider=np.full(len(index), which))

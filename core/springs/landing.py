@@ -1,0 +1,68 @@
+"""Landing: a sub-step whose vertices hit a collider is solved again with them as constraints
+landing on it (their neighbours feel the stop through the springs, instead of a projection
+after the fact that stretches stiff springs: energy from nowhere). Vertices whose faces the
+colliders' features must lift land the same way. Used by :mod:`.solver`."""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from ..contact import Contacts
+from ..contact.features import FaceSet, keep_off_features
+
+ESTIMATE_ROUNDS = 2  # detection rounds that estimate where the faces' vertices must land
+
+
+def contacts(base: Contacts, hit: Contacts, x0: np.ndarray, h: float, free: np.ndarray,
+             faced: Contacts | None = None) -> Contacts | None:
+    """Contacts for re-solving a step in which free vertices hit a collider (``hit``: their
+    first collisions, from :func:`~..contact.respond`): each becomes a held constraint whose
+    normal velocity is the one that takes it from its start x0 to where the collision put it
+    in the step h [s] — merged with ``base`` (the step's resting contacts, or the last round's
+    set; a resting vertex that was hit lands instead). ``faced``: vertices the colliders'
+    features push off the faces (:func:`off_features`), which land where that puts them even
+    when held already (the last round left their faces short). None when no vertex needs to
+    land anew."""
+    keep = free[hit.index] & ~np.isin(hit.index, base.index[base.held])
+    land = [hit.take(keep)]
+    if faced is not None and len(faced):
+        land.append(faced.take(free[faced.index]))
+    if not sum(len(c) for c in land):
+        return None
+    for c in land:
+        vn = np.einsum("ij,ij->i", c.point - x0[c.index], c.normal) / h
+        base = base.merged(replace(c, normal_speed=vn, held=np.ones(len(c), bool)))
+    return base
+
+
+def off_features(paths: list, faces: FaceSet, x0: np.ndarray, x: np.ndarray, v: np.ndarray,
+                 inv_mass: np.ndarray, s0: float, s1: float,
+                 rest_speed: float) -> tuple[Contacts, np.ndarray, np.ndarray]:
+    """Where keeping the colliders' features off the faces puts a step's vertices (x, v at
+    its end; x0 at its start), as hits to land on, and that projection (positions,
+    velocities)."""
+    placed, pushed = x.copy(), v.copy()
+    kept = keep_off_features(paths, faces, x0, placed, pushed, inv_mass, s0, s1, rest_speed,
+                             ESTIMATE_ROUNDS)
+    moved = np.nonzero(np.any(placed != x, axis=1))[0]
+    moved = moved[np.isin(moved, kept.index)]
+    rows = np.searchsorted(kept.index, moved)
+    return Contacts.of(moved, placed[moved], kept.normal[rows], kept.surface_velocity[rows],
+                       kept.friction[rows], kept.restitution[rows],
+                       collider=kept.collider[rows]), placed, pushed
+
+
+def bounce(v: np.ndarray, landing: Contacts, rest_speed: float) -> None:
+    """After a re-solved step the landing vertices are on the surface, still approaching it at
+    their landing speed: they leave it at restitution times that speed (relative to the
+    surface; a bounce slower than ``rest_speed`` ends in contact), as the collision pass would
+    have made them."""
+    sel = landing.held
+    idx, n = landing.index[sel], landing.normal[sel]
+    surface_vn = np.einsum("ij,ij->i", landing.surface_velocity[sel], n)
+    approach = landing.normal_speed[sel] - surface_vn
+    out = -landing.restitution[sel] * np.minimum(approach, 0.0)
+    out = np.where(out < rest_speed, 0.0, out)
+    vn = np.einsum("ij,ij->i", v[idx], n)
+    v[idx] += (surface_vn + out - vn)[:, None] * n

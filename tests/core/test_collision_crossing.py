@@ -1,0 +1,161 @@
+"""Continuous crossing of a point and a triangle, and of two segments, over a step
+(:mod:`physanim.core.collision.crossing`), against brute force: the pair's coplanarity
+function sampled at 20,000 times, every sign change located and tested for the point being in
+the triangle (the segments meeting) there. Pairs whose answer hangs on rounding (a sampled
+crossing within 1e-4 of the triangle's boundary, the segments' ends, or an end on the plane)
+are left out; the rest must agree exactly. Also: the box pairing against all pairs, the creases
+of meshes, and the colouring of constraints on three points."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from physanim.core.collision.crossing import (box_pairs, closest_on_segments, segment_segment,
+                                              triangle_point)
+from physanim.core.collision.mesh import TriangleMesh
+from physanim.core.collision.shapes import box_mesh, cylinder_mesh
+from physanim.core.colouring import colour
+from physanim.tests.core.helpers import grid
+
+SAMPLES = 20_000
+MARGIN = 1e-4
+
+
+def _lerp(a0, a1, t):
+    return a0 + t * (a1 - a0)
+
+
+def _bary(p, a, b, c):
+    """Unclamped barycentric weights of p in triangle abc (3, 3 arrays)."""
+    m = np.stack([b - a, c - a], axis=1)
+    uv = np.linalg.lstsq(m, p - a, rcond=None)[0]
+    return np.array([1.0 - uv.sum(), uv[0], uv[1]])
+
+
+def _truth_point(t0, t1, p0, p1):
+    """(crossed, decided): brute force for one pair."""
+    ts = np.linspace(0.0, 1.0, SAMPLES + 1)
+    tri = t0[None] + ts[:, None, None] * (t1 - t0)[None]
+    p = p0[None] + ts[:, None] * (p1 - p0)[None]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    f = np.einsum("ij,ij->i", p - tri[:, 0], n)
+    if abs(f[0]) < 1e-9 or abs(f[-1]) < 1e-9:
+        return False, False
+    change = np.nonzero(np.sign(f[1:]) != np.sign(f[:-1]))[0]
+    for k in change:
+        t = ts[k] + (ts[k + 1] - ts[k]) * f[k] / (f[k] - f[k + 1])
+        w = _bary(_lerp(p0, p1, t), *_lerp(t0, t1, t))
+        if abs(w.min()) < MARGIN:
+            return False, False
+        if w.min() > 0.0:
+            return bool(np.sign(f[-1]) != np.sign(f[k])), True
+    return False, True
+
+
+def _truth_segments(a0, b0, c0, d0, a1, b1, c1, d1):
+    ts = np.linspace(0.0, 1.0, SAMPLES + 1)[:, None]
+    a, b, c, d = (_lerp(u, w, ts) for u, w in ((a0, a1), (b0, b1), (c0, c1), (d0, d1)))
+    f = np.einsum("ij,ij->i", c - a, np.cross(b - a, d - c))
+    if abs(f[0]) < 1e-9 or abs(f[-1]) < 1e-9:
+        return False, False
+    change = np.nonzero(np.sign(f[1:]) != np.sign(f[:-1]))[0]
+    for k in change:
+        t = ts[k, 0] + (ts[k + 1, 0] - ts[k, 0]) * f[k] / (f[k] - f[k + 1])
+        s, u = closest_on_segments(*(_lerp(x0, x1, t)[None] for x0, x1 in
+                                     ((a0, a1), (b0, b1), (c0, c1), (d0, d1))))
+        if min(s[0], 1 - s[0], u[0], 1 - u[0]) < MARGIN:
+            return False, False
+        return bool(np.sign(f[-1]) != np.sign(f[k])), True
+    return False, True
+
+
+def test_point_triangle_crossings_agree_with_brute_force():
+    rng = np.random.default_rng(4)
+    count = 800
+    t0 = rng.normal(size=(count, 3, 3))
+    t1 = t0 + 0.7 * rng.normal(size=(count, 3, 3))
+    p0 = t0.mean(axis=1) + rng.normal(size=(count, 3))
+    p1 = p0 + 1.5 * rng.normal(size=(count, 3))
+    sep = triangle_point(t0, t1, p0, p1)
+    decided = crossed = 0
+    for i in range(count):
+        truth, ok = _truth_point(t0[i], t1[i], p0[i], p1[i])
+        if ok:
+            decided += 1
+            crossed += truth
+            assert sep.crossed[i] == truth, i
+    assert decided > 600 and crossed > 20  # the sample holds both answers
+    # a crossed pair's gap is minus the point's distance behind the plane, its normal the
+    # plane's, pointing from the point back to where the triangle was
+    i = np.nonzero(sep.crossed)[0]
+    n = np.cross(t1[i, 1] - t1[i, 0], t1[i, 2] - t1[i, 0])
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    assert np.allclose(np.abs(np.einsum("ij,ij->i", sep.normal[i], n)), 1.0)
+    assert np.allclose(sep.gap[i], -np.abs(np.einsum("ij,ij->i", p1[i] - t1[i, 0], n)))
+
+
+def test_segment_crossings_agree_with_brute_force():
+    rng = np.random.default_rng(5)
+    count = 800
+    ends0 = rng.normal(size=(count, 4, 3))
+    ends1 = ends0 + 0.8 * rng.normal(size=(count, 4, 3))
+    sep = segment_segment(*(ends0[:, k] for k in range(4)), *(ends1[:, k] for k in range(4)))
+    decided = crossed = 0
+    for i in range(count):
+        truth, ok = _truth_segments(*ends0[i], *ends1[i])
+        if ok:
+            decided += 1
+            crossed += truth
+            assert sep.crossed[i] == truth, i
+    assert decided > 500 and crossed > 20
+
+
+def test_a_point_falling_through_a_still_triangle_crosses_and_is_sent_back():
+    tri = np.array([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]])
+    for end, crossed in ((-0.1, True), (0.05, False)):
+        sep = triangle_point(tri, tri, np.array([[0.2, 0.2, 0.3]]), np.array([[0.2, 0.2, end]]))
+        assert sep.crossed[0] == crossed
+        # the normal points from the point to the triangle as they came: down
+        assert np.allclose(sep.normal[0], (0.0, 0.0, -1.0))
+        assert sep.gap[0] == pytest.approx(end)  # negative: behind the triangle
+        assert np.allclose(sep.weight[0], (0.6, 0.2, 0.2))
+    # beside the triangle: never crossed, separated along the nearest points
+    sep = triangle_point(tri, tri, np.array([[2.0, 0.0, 0.3]]), np.array([[2.0, 0.0, -0.1]]))
+    assert not sep.crossed[0] and sep.gap[0] == pytest.approx(np.hypot(1.0, 0.1))
+
+
+def test_box_pairs_are_every_overlapping_pair():
+    rng = np.random.default_rng(6)
+    lo_a = rng.uniform(0, 10, (300, 3))
+    hi_a = lo_a + rng.uniform(0, 1.5, (300, 3))
+    lo_b = rng.uniform(0, 10, (200, 3))
+    hi_b = lo_b + rng.uniform(0, 3.0, (200, 3))
+    i, j = box_pairs(lo_a, hi_a, lo_b, hi_b)
+    brute = np.all((lo_a[:, None] <= hi_b[None]) & (lo_b[None] <= hi_a[:, None]), axis=2)
+    assert sorted(zip(i.tolist(), j.tolist())) == sorted(zip(*np.nonzero(brute)))
+
+
+def test_creases_are_the_edges_out_of_flat_regions():
+    box = box_mesh(1.0)
+    edges, corners = box.creases
+    assert len(edges) == 12 and len(corners) == 8  # no face diagonal
+    segments = 12
+    cylinder = cylinder_mesh(1.0, 1.0, segments)
+    edges, corners = cylinder.creases
+    # two rims and the sides; the caps' fanned spokes and centres lie in flat regions
+    assert len(edges) == 3 * segments and len(corners) == 2 * segments
+    x, _, tris, *_ = grid(4, 4)
+    edges, corners = TriangleMesh(x, tris).creases
+    assert len(edges) == 12 and len(corners) == 12  # a flat sheet: only its open border
+
+
+def test_colouring_never_puts_a_moving_point_twice_in_a_group():
+    rng = np.random.default_rng(7)
+    points = 50
+    moving = rng.random(points) < 0.8
+    members = rng.integers(0, points, (1500, 3))
+    groups = colour(members, moving)
+    assert np.array_equal(np.sort(np.concatenate(groups)), np.arange(1500))
+    for g in groups:
+        used = np.concatenate([np.unique(row[moving[row]]) for row in members[g]])
+        assert len(np.unique(used)) == len(used)
