@@ -343,6 +343,11 @@ class PHYSANIM_PT_spring_mesh(_PhysicsPanel, bpy.types.Panel):
             col.prop(p, "bend_damping", text="Damping")
         if not faces:
             layout.label(text="No faces: only edge springs (no shear or bending)", icon='INFO')
+        col = layout.column(align=True)
+        col.prop(p, "self_collision")
+        if p.self_collision:
+            col.prop(p, "self_distance")
+            col.prop(p, "self_friction")
         layout.prop_search(p, "pin_group", ob, "vertex_groups")
         if p.pin_group:
             layout.prop(p, "pin_stiffness")

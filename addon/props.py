@@ -357,6 +357,16 @@ class PHYSANIM_PG_spring_mesh(bpy.types.PropertyGroup):
                                description="Strain limit of edge and shear springs (0.1 = never "
                                            "longer than 110%; 0 = off): soft springs solve fast "
                                            "and still do not stretch like rubber")
+    self_collision: BoolProperty(name="Self Collision", default=False, options=STATIC,
+                                 description="Keep the mesh off itself: its vertices off its "
+                                             "faces and its edges off its edges, no crossing "
+                                             "ever (cloth folding onto itself, a heap)")
+    self_distance: FloatProperty(name="Distance", min=1.0e-4, max=1.0, soft_max=0.05,
+                                 default=0.01, subtype='DISTANCE', unit='LENGTH', options=STATIC,
+                                 description="Kept between the mesh's layers")
+    self_friction: FloatProperty(name="Friction", min=0.0, max=100.0, soft_max=2.0, default=0.2,
+                                 options=STATIC, description="Coulomb friction between the "
+                                 "mesh's layers")
     pin_group: StringProperty(name="Pin Group", description="Vertex group: weight 1 pins a "
                               "vertex to its animated position, less holds it with a spring")
     pin_stiffness: FloatProperty(name="Pin Stiffness", min=0.0, max=1.0e9, soft_max=1.0e5,

@@ -129,7 +129,9 @@ class SpringMeshBake:
             ob.name, mass=p.mass, mass_mode=p.mass_mode, stiffness=p.stiffness, damping=p.damping,
             shear_stiffness=p.shear_stiffness, shear_damping=p.shear_damping,
             bend_mode=p.bend_mode, bend_stiffness=p.bend_stiffness, bend_damping=p.bend_damping,
-            drag=p.drag, pin_stiffness=p.pin_stiffness, max_stretch=p.max_stretch)
+            drag=p.drag, pin_stiffness=p.pin_stiffness, max_stretch=p.max_stretch,
+            self_collision=p.self_collision, self_distance=p.self_distance,
+            self_friction=p.self_friction)
         builder = SpringMeshBuilder(settings, rest, mesh.edges, mesh.triangles, mesh.loop_start,
                                     mesh.loop_total, mesh.loop_vertices, pin)
         if pin is not None:

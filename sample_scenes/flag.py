@@ -1,4 +1,5 @@
-"""Flag: a cloth grid pinned along the pole flaps in a gusty wind."""
+"""Flag: a cloth grid pinned along the pole flaps in a gusty wind, never folding through
+itself (self-collision)."""
 from __future__ import annotations
 
 import math
@@ -45,6 +46,7 @@ def build(scene) -> None:
     p.bend_mode, p.bend_stiffness, p.bend_damping = 'ANGULAR', 5e-4, 1e-5
     p.drag = 0.4
     p.pin_group = "Pole"
+    p.self_collision = True  # its folds lie on each other instead of passing through
     wind = bpy.data.objects.new("Wind", None)
     wind.empty_display_type = 'SINGLE_ARROW'
     wind.rotation_euler = (0.0, math.radians(90.0), math.radians(10.0))  # local Z -> +X, a bit +Y
@@ -69,6 +71,8 @@ def check(scene) -> list[str]:
     rest = _common.evaluated_vertices(flag)
     edges = np.array([e.vertices[:] for e in flag.data.edges])
     rest_len = np.linalg.norm(rest[edges[:, 0]] - rest[edges[:, 1]], axis=1)
+    flag.data.calc_loop_triangles()
+    tris = [t.vertices[:] for t in flag.data.loop_triangles]
     samples = []
     for frame in range(30, scene.physanim.frame_end + 1, 10):
         scene.frame_set(frame)
@@ -82,6 +86,10 @@ def check(scene) -> list[str]:
         if np.percentile(strain, 99) > 0.2 or strain.max() > 1.0:
             problems.append(f"frame {frame}: the cloth stretched by {strain.max():.0%} "
                             f"(99th percentile {np.percentile(strain, 99):.0%})")
+        crossed = _crossings(x, tris)
+        if crossed:
+            problems.append(f"frame {frame}: the flag passes through itself ({crossed} "
+                            "triangle pairs overlap)")
         samples.append(x)
     samples = np.array(samples)
     free_end = samples[:, ~np.isin(np.arange(len(rest)), pinned)]
@@ -90,3 +98,12 @@ def check(scene) -> list[str]:
     if free_end.std(axis=0).mean() < 0.02:
         problems.append("the flag does not flap: it hardly moves between frames")
     return problems
+
+
+def _crossings(x: np.ndarray, tris: list) -> int:
+    """Overlapping triangle pairs that share no vertex (Blender's BVH overlap test)."""
+    from mathutils import Vector
+    from mathutils.bvhtree import BVHTree
+
+    tree = BVHTree.FromPolygons([Vector(p) for p in x.tolist()], tris)
+    return sum(1 for a, b in tree.overlap(tree) if a < b and not set(tris[a]) & set(tris[b]))

@@ -26,24 +26,19 @@ for the next solve, which then does not pull the faces back onto them.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import numpy as np
 
 from ..collision.crossing import box_pairs, segment_segment, triangle_point
-from ..colouring import colour
 from ..transforms import dot_rows, norm_rows
 from .contacts import Contacts
+from .pair_solve import PointPairs, respond, separate, shares
 from .path import CONTACT_DISTANCE, SKIN, ColliderPath, Features
 
 # [m] kept between a collider's features and a mesh's faces, beyond its thickness: less than
 # the SKIN a colliding point is placed at, so on a flat face the vertices' own contacts and these
 # never push against each other
 FACE_GAP = 0.5 * SKIN
-PASSES = 16  # position passes at most
-TOLERANCE = 0.05  # a pass leaving every pair within this fraction of the gap is the last
-VELOCITY_PASSES = 4
-MIN_SHARE = 0.25  # of a pair's weight on moving points, below which pinned ones hold it
 ROUNDS = 8  # detections per sub-step: a moved face may come near another part of a feature
 
 
@@ -77,26 +72,6 @@ class FaceSet:
         return bool(len(self.triangles) or len(self.edges))
 
 
-class _Pairs(NamedTuple):
-    """Pairs of one collider (c of them), in its local frame at the sub-step's end.
-
-    vertex (c, 3) mesh points (an edge's third is its first, of weight 0); weight (c, 3);
-    normal (c, 3) from the feature to the mesh; anchor (c, 3) the feature's nearest point
-    on its surface; depth (c,) their separation when found (negative: crossed, or inside a
-    round feature); gap the distance to keep [local units].
-    """
-
-    vertex: np.ndarray
-    weight: np.ndarray
-    normal: np.ndarray
-    anchor: np.ndarray
-    depth: np.ndarray
-    gap: float
-
-    def take(self, rows) -> _Pairs:
-        return _Pairs(*(a[rows] for a in self[:5]), self.gap)
-
-
 def keep_off_features(paths: list[ColliderPath], faces: FaceSet, x0: np.ndarray, x1: np.ndarray,
                       v: np.ndarray, inv_mass: np.ndarray, s0: float, s1: float,
                       rest_speed: float, rounds: int = ROUNDS) -> Contacts:
@@ -121,9 +96,8 @@ def keep_off_features(paths: list[ColliderPath], faces: FaceSet, x0: np.ndarray,
         else:
             settled = False
         if found_pairs:
-            pairs = _Pairs(*(np.concatenate(a) for a in zip(*(r[:5] for r in found_pairs))),
-                           found_pairs[0].gap)
-            found.append(_respond(path, pairs, x1, v, inv_mass, s1, rest_speed, ci))
+            found.append(_respond(path, PointPairs.joined(found_pairs), v, inv_mass, s1,
+                                  rest_speed, ci))
         if not settled and rounds == ROUNDS:
             _fail_safe(path, features, faces, x0, x1, v, inv_mass, s0, s1)
     out = Contacts.none()
@@ -142,7 +116,7 @@ def _fail_safe(path: ColliderPath, features: Features, faces: FaceSet, x0, x1, v
         pairs = _detect(path, features, faces, x0, x1, s0, s1)
         if pairs is None:
             return
-        _, _, rows = _shares(pairs, inv_mass)
+        _, _, rows = shares(pairs, inv_mass)
         stuck = pairs.vertex[rows][pairs.depth[rows] < 0.0]
         stuck = np.unique(stuck[inv_mass[stuck] > 0.0])
         if not len(stuck):
@@ -169,7 +143,7 @@ def resting_on_features(paths: list[ColliderPath], faces: FaceSet, x: np.ndarray
         pairs = _detect(path, features, faces, x, x, s, s, CONTACT_DISTANCE)
         if pairs is None:
             continue
-        share, _, rows = _shares(pairs, inv_mass)
+        share, _, rows = shares(pairs, inv_mass)
         pairs = pairs.take(rows)
         anchor, n = path.to_world(pairs.anchor, pairs.normal, s)
         surface = path.surface_velocity(pairs.anchor, s)
@@ -183,7 +157,7 @@ def resting_on_features(paths: list[ColliderPath], faces: FaceSet, x: np.ndarray
 
 
 def _detect(path: ColliderPath, f: Features, faces: FaceSet, x0, x1, s0: float,
-            s1: float, reach: float = 0.0) -> _Pairs | None:
+            s1: float, reach: float = 0.0) -> PointPairs | None:
     """Pairs apart by less than the gap (plus ``reach`` [m]) or crossed, in local units."""
     l0, l1 = path.to_local(x0, s0), path.to_local(x1, s1)
     scale = float(path.per_metre.mean())
@@ -232,87 +206,33 @@ def _detect(path: ColliderPath, f: Features, faces: FaceSet, x0, x1, s0: float,
         keep(sep.gap - r, ids, w, sep.normal, point)
     if not vertex or not sum(len(a) for a in vertex):
         return None
-    return _Pairs(np.concatenate(vertex), np.concatenate(weight), np.concatenate(normal),
-                  np.concatenate(anchor), np.concatenate(depth), gap)
+    return PointPairs(np.concatenate(vertex), np.concatenate(weight), np.concatenate(normal),
+                      np.concatenate(anchor), np.concatenate(depth), gap)
 
 
-def _shares(pairs: _Pairs, inv_mass: np.ndarray):
-    """Each pair's corners' shares of a push (weight times inverse mass, (c, 3)), their sum
-    against the weights (c,), and the pairs a push can move: at least MIN_SHARE of their
-    nearest point's weight on points that move (one nearer a pinned point than that is
-    held by it: moving the rest would take a push of the shortfall over that weight)."""
-    share = pairs.weight * inv_mass[pairs.vertex]
-    denom = np.einsum("ck,ck->c", pairs.weight, share)
-    movable = np.where(share > 0.0, pairs.weight, 0.0).sum(axis=1)
-    return share, denom, np.nonzero((denom > 0.0) & (movable >= MIN_SHARE))[0]
-
-
-def _separate(path: ColliderPath, pairs: _Pairs, x1, inv_mass, s1: float) -> bool:
-    """Restore the pairs' gaps (in x1, in place): Gauss-Seidel over groups of pairs that share
-    no moving point (each group one vectorised step). Returns whether any was short."""
-    vertex, weight, normal = pairs.vertex, pairs.weight, pairs.normal
-    share, denom, rows = _shares(pairs, inv_mass)
+def _separate(path: ColliderPath, pairs: PointPairs, x1, inv_mass, s1: float) -> bool:
+    """Restore the pairs' gaps (x1 in place, moved in the collider's frame). Returns whether
+    any was short."""
     l1 = path.to_local(x1, s1)
-
-    def short(rows):
-        q = np.einsum("ck,ckj->cj", weight[rows], l1[vertex[rows]])
-        return pairs.gap - dot_rows(q - pairs.anchor[rows], normal[rows])
-
-    if not len(rows) or short(rows).max() <= TOLERANCE * pairs.gap:
+    moved = separate(pairs, l1, inv_mass)
+    if moved is None:
         return False
-    groups = colour(vertex[rows], inv_mass > 0.0)
-    for _ in range(PASSES):
-        for g in groups:
-            g = rows[g]
-            step = np.maximum(short(g), 0.0) / denom[g]
-            np.add.at(l1, vertex[g], (share[g] * step[:, None])[:, :, None] * normal[g][:, None, :])
-        if short(rows).max() <= TOLERANCE * pairs.gap:
-            break
-    touched = np.unique(vertex[rows])
-    x1[touched] = path.to_world(l1[touched], np.ones((len(touched), 3)), s1)[0]
+    x1[moved] = path.to_world(l1[moved], np.ones((len(moved), 3)), s1)[0]
     return True
 
 
-def _respond(path: ColliderPath, pairs: _Pairs, x1, v, inv_mass, s1: float, rest_speed: float,
+def _respond(path: ColliderPath, pairs: PointPairs, v, inv_mass, s1: float, rest_speed: float,
              which: int) -> Contacts:
-    vertex, weight = pairs.vertex, pairs.weight
-    share, denom, rows = _shares(pairs, inv_mass)
     anchor, n = path.to_world(pairs.anchor, pairs.normal, s1)
     surface = path.surface_velocity(pairs.anchor, s1)
-    mu, e = path.frame.friction, path.frame.restitution
-    groups = [rows[g] for g in colour(vertex[rows], inv_mass > 0.0)] if len(rows) else []
-
-    def normal_speed(g):
-        rel = np.einsum("ck,ckj->cj", weight[g], v[vertex[g]]) - surface[g]
-        return rel, dot_rows(rel, n[g])
-
-    _, vn = normal_speed(rows)
-    # what each pair's normal speed must reach: a bounce when approaching faster than the
-    # rest speed, resting contact when slower, nothing for a separating pair
-    floor = np.full(len(vertex), -np.inf)
-    floor[rows] = np.where(vn < 0.0, np.where(-e * vn > rest_speed, -e * vn, 0.0), -np.inf)
-    for k in range(VELOCITY_PASSES):
-        changed = False
-        for g in groups:
-            rel, vn = normal_speed(g)
-            dvn = np.maximum(floor[g] - vn, 0.0)
-            if not dvn.any():
-                continue
-            changed = True
-            change = dvn[:, None] * n[g]
-            if k == 0 and mu > 0.0:  # Coulomb: the sliding stops or slows by mu times the push
-                slide = rel - vn[:, None] * n[g]
-                speed = norm_rows(slide)
-                change -= (np.minimum(speed, mu * dvn) / np.maximum(speed, 1e-300))[:, None] * slide
-            step = change / denom[g][:, None]
-            np.add.at(v, vertex[g], share[g][:, :, None] * step[:, None, :])
-        if not changed:
-            break
+    rows = respond(pairs, v, inv_mass, n, surface, path.frame.friction,
+                   path.frame.restitution, rest_speed)
+    share = shares(pairs, inv_mass)[0]
     world = pairs._replace(normal=n, anchor=anchor).take(rows)
     return _per_point(world, share[rows], surface[rows], len(v), path.frame, which)
 
 
-def _per_point(pairs: _Pairs, share: np.ndarray, surface: np.ndarray, count: int, frame,
+def _per_point(pairs: PointPairs, share: np.ndarray, surface: np.ndarray, count: int, frame,
                which: int, at: np.ndarray | None = None) -> Contacts:
     """Contacts of the points that world-space ``pairs`` move: each with the mean of its
     pairs' normals weighted by its share of them (the nearest pair's point and surface

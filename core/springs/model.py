@@ -37,6 +37,9 @@ class SpringMeshSettings:
         drag: viscous air drag per unit mass [1/s]. pin_stiffness: [N/m] of soft pins (weight
         below 1 scales it). max_stretch: strain limit of edge and shear springs (0.1 = they
         never stretch past 110 %; 0 = no limit), Provot's deformation constraints.
+        self_collision: keep the mesh off itself (:mod:`.self_collision`). self_distance:
+        kept between its vertices and triangles, edges and edges [m]. self_friction: Coulomb
+        mu between its layers.
     """
 
     name: str
@@ -52,6 +55,9 @@ class SpringMeshSettings:
     drag: float = 0.1
     pin_stiffness: float = 1000.0
     max_stretch: float = 0.0
+    self_collision: bool = False
+    self_distance: float = 0.01
+    self_friction: float = 0.2
 
     def __post_init__(self):
         owner = f'spring mesh "{self.name}"'
@@ -62,10 +68,12 @@ class SpringMeshSettings:
         if not (math.isfinite(self.mass) and self.mass > 0.0):
             raise ValueError(f"{owner}: mass must be > 0 kg (got {self.mass})")
         for key in ("stiffness", "damping", "shear_stiffness", "shear_damping", "bend_stiffness",
-                    "bend_damping", "drag", "pin_stiffness", "max_stretch"):
+                    "bend_damping", "drag", "pin_stiffness", "max_stretch", "self_friction"):
             value = getattr(self, key)
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError(f"{owner}: {key} must be finite and >= 0 (got {value})")
+        if not (math.isfinite(self.self_distance) and self.self_distance > 0.0):
+            raise ValueError(f"{owner}: self_distance must be > 0 m (got {self.self_distance})")
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,8 @@ Baraff-Witkin) -> pins (exactly on their animated targets) -> limit strain (opti
 -> respond (continuous collisions, as particles) -> with IMPLICIT, when vertices hit a
 collider or faces must be lifted off its features, the sub-step again with them as landing
 constraints (up to LANDING_ROUNDS times) -> keep the colliders' features off the faces and
-edges (:mod:`..contact.features`) -> check (finite, not torn apart).
+edges (:mod:`..contact.features`) -> keep the mesh off itself (optional,
+:mod:`.self_collision`) -> check (finite, not torn apart).
 """
 from __future__ import annotations
 
@@ -29,6 +30,7 @@ from .implicit import BaraffWitkin
 from . import attach
 from . import landing as landing_
 from .model import SpringMeshModel, SpringMeshState
+from .self_collision import SelfCollision
 from .ode import MeshOde, SubstepForces
 from .strain import limit_strain
 from .wind import FaceWind
@@ -167,6 +169,9 @@ class SpringMeshSolver:
         edges = model.spring_family == 0
         self.faces = FaceSet.of(model.triangles, np.stack([model.spring_i[edges],
                                                            model.spring_j[edges]], axis=1))
+        self.itself = SelfCollision(self.faces, model.vertex_mass, self._inv_mass,
+                                    s.self_distance, s.self_friction) \
+            if s.self_collision else None
         self._check_stability(frame_dt / self.substeps, frame)
 
     def _fail(self, message: str, frame, cls=PhysanimError):
@@ -223,9 +228,9 @@ class SpringMeshSolver:
         pin_v = (step.rest1 - step.rest0) / inputs.frame_dt
         if step.held is not None:
             attach.hold(self.model, state, step.held, s0, s1, h, pin_x1, pin_v)
-        start = state.x.copy() if step.paths and self.faces else None
+        start = state.x.copy() if (step.paths and self.faces) or self.itself else None
         contact = resting_contacts(step.paths, state.x, state.v, s0, step.rest_speed)
-        if start is not None:  # faces resting on features: their points rest too (on a body
+        if step.paths and self.faces:  # faces resting on features: their points rest too (on a body
             # stepped first, the coupling takes them as pressed on it: not through a feature)
             contact = resting_on_features(step.paths, self.faces, state.x, state.v,
                                           self._inv_mass, s0, step.rest_speed,
@@ -237,9 +242,13 @@ class SpringMeshSolver:
         if solved is not None:
             x, v, collided, touched, outside = solved
             x[~self.free], v[~self.free] = pin_x1[~self.free], pin_v[~self.free]
-            if start is not None:
+            if self.faces:
                 touched = [*touched, self._keep_off(step, start, x, v, s0, s1, outside)]
             state.x, state.v, step.hits = x, v, step.hits + collided
+        if self.itself is not None:  # its own impulses: equal and opposite, none from outside
+            grounded = np.unique(np.concatenate([c.index for c in touched]))
+            step.hits += self.itself.keep_apart(start, state.x, state.v, step.rest_speed,
+                                                grounded)
         if outside is not None:
             self._react(step, touched, outside, s1)
         self._check(state, inputs.frame)

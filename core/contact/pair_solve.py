@@ -1,0 +1,131 @@
+"""Pairs of weighted point sums kept apart along a normal: (sum_k w_k x_k - anchor) . n >= gap
+for each pair, over points of one system (weights signed: a point against a triangle is its
+triangle's barycentric weights and minus one for the point; ``anchor`` is a part that does not
+move, a collider's feature). Shared by colliders' features against faces (:mod:`.features`)
+and a mesh against itself.
+
+* :func:`separate` restores the gaps: each pair's shortfall s is removed by moving its points
+  along n by w_k m_k^-1 s / sum_j w_j^2 m_j^-1 (the impulse that moves the weighted sum by
+  exactly s), Gauss-Seidel over groups of pairs that share no moving point
+  (:func:`..colouring.colour`: each group one vectorised step).
+* :func:`respond` does the same for velocities: the weighted sum's approach along n is
+  cancelled (a bounce of restitution times it when faster than the rest speed), Coulomb
+  friction on its sliding.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from ..colouring import colour
+from ..transforms import dot_rows, norm_rows
+
+PASSES = 16  # position passes at most
+TOLERANCE = 0.05  # a pass leaving every pair within this fraction of the gap is the last
+VELOCITY_PASSES = 4
+MIN_SHARE = 0.25  # of a pair's weight on moving points, below which pinned ones hold it
+
+
+class PointPairs(NamedTuple):
+    """c pairs.
+
+    Attributes:
+        vertex: (c, k) point indices (a row may repeat a point with weight 0).
+        weight: (c, k) signed weights.
+        normal: (c, 3) unit directions the weighted sum must keep its distance along.
+        anchor: (c, 3) the still part (zero: none).
+        depth: (c,) the separation when found (negative: crossed or overlapping).
+        gap: the distance to keep.
+    """
+
+    vertex: np.ndarray
+    weight: np.ndarray
+    normal: np.ndarray
+    anchor: np.ndarray
+    depth: np.ndarray
+    gap: float
+
+    def take(self, rows) -> PointPairs:
+        return PointPairs(*(a[rows] for a in self[:5]), self.gap)
+
+    @classmethod
+    def joined(cls, parts: list[PointPairs]) -> PointPairs:
+        return cls(*(np.concatenate(a) for a in zip(*(p[:5] for p in parts))), parts[0].gap)
+
+
+def shares(pairs: PointPairs, inv_mass: np.ndarray):
+    """Each pair's points' shares of a push (weight times inverse mass, (c, k)), their sum
+    against the weights (c,), and the pairs a push can move: at least MIN_SHARE of their
+    weight on points that move (one nearer a pinned point than that is held by it: moving
+    the rest would take a push of the shortfall over that weight)."""
+    share = pairs.weight * inv_mass[pairs.vertex]
+    denom = np.einsum("ck,ck->c", pairs.weight, share)
+    size = np.abs(pairs.weight)
+    movable = np.where(share != 0.0, size, 0.0).sum(axis=1) / np.maximum(size.sum(axis=1),
+                                                                         1e-300)
+    return share, denom, np.nonzero((denom > 0.0) & (movable >= MIN_SHARE))[0]
+
+
+def separate(pairs: PointPairs, x: np.ndarray, inv_mass: np.ndarray) -> np.ndarray | None:
+    """Restore the pairs' gaps in x (n, 3), in place. Returns the points moved, or None when
+    no pair was short."""
+    vertex, weight, normal = pairs.vertex, pairs.weight, pairs.normal
+    share, denom, rows = shares(pairs, inv_mass)
+
+    def short(rows):
+        q = np.einsum("ck,ckj->cj", weight[rows], x[vertex[rows]])
+        return pairs.gap - dot_rows(q - pairs.anchor[rows], normal[rows])
+
+    if not len(rows) or short(rows).max() <= TOLERANCE * pairs.gap:
+        return None
+    groups = colour(vertex[rows], inv_mass > 0.0)
+    for _ in range(PASSES):
+        for g in groups:
+            g = rows[g]
+            step = np.maximum(short(g), 0.0) / denom[g]
+            np.add.at(x, vertex[g], (share[g] * step[:, None])[:, :, None] * normal[g][:, None, :])
+        if short(rows).max() <= TOLERANCE * pairs.gap:
+            break
+    return np.unique(vertex[rows])
+
+
+def respond(pairs: PointPairs, v: np.ndarray, inv_mass: np.ndarray, normal: np.ndarray,
+            surface: np.ndarray, friction: float, restitution: float,
+            rest_speed: float) -> np.ndarray:
+    """Velocities v (n, 3) [m/s] in place: each pair's weighted sum stops approaching the
+    anchor's velocity ``surface`` (c, 3) along ``normal`` (c, 3) (world directions). Returns
+    the pairs that can move (rows)."""
+    vertex, weight = pairs.vertex, pairs.weight
+    share, denom, rows = shares(pairs, inv_mass)
+    groups = [rows[g] for g in colour(vertex[rows], inv_mass > 0.0)] if len(rows) else []
+
+    def normal_speed(g):
+        rel = np.einsum("ck,ckj->cj", weight[g], v[vertex[g]]) - surface[g]
+        return rel, dot_rows(rel, normal[g])
+
+    _, vn = normal_speed(rows)
+    # what each pair's normal speed must reach: a bounce when approaching faster than the
+    # rest speed, resting contact when slower, nothing for a separating pair
+    e = restitution
+    floor = np.full(len(vertex), -np.inf)
+    floor[rows] = np.where(vn < 0.0, np.where(-e * vn > rest_speed, -e * vn, 0.0), -np.inf)
+    for k in range(VELOCITY_PASSES):
+        changed = False
+        for g in groups:
+            rel, vn = normal_speed(g)
+            dvn = np.maximum(floor[g] - vn, 0.0)
+            if not dvn.any():
+                continue
+            changed = True
+            change = dvn[:, None] * normal[g]
+            if k == 0 and friction > 0.0:  # Coulomb: sliding stops or slows by mu times the push
+                slide = rel - vn[:, None] * normal[g]
+                speed = norm_rows(slide)
+                change -= (np.minimum(speed, friction * dvn)
+                           / np.maximum(speed, 1e-300))[:, None] * slide
+            step = change / denom[g][:, None]
+            np.add.at(v, vertex[g], share[g][:, :, None] * step[:, None, :])
+        if not changed:
+            break
+    return rows

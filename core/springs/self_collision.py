@@ -1,0 +1,137 @@
+"""A spring mesh against itself: cloth folding onto itself, a cloth dropped into a heap. Its
+vertices are kept off its triangles and its edges off its edges (pairs that share no vertex),
+``distance`` apart, and no pair ever crosses.
+
+Per sub-step, after the step and the colliders (positions x0 -> x1):
+
+1. detect: vertex-triangle and edge-edge pairs whose boxes over the sub-step overlap (the
+   library's uniform grid), then those nearer than the distance at the end or that crossed
+   during the step (continuous tests, :mod:`..collision.crossing`: the side each came from);
+2. separate: each pair's weighted points pushed apart along its normal, in proportion to
+   their inverse masses (:mod:`..contact.pair_solve`, Gauss-Seidel over coloured pairs),
+   then detect again, up to ROUNDS times;
+3. respond: the pairs' approach speeds cancelled, Coulomb friction on their sliding — equal
+   and opposite on both sides, so the mesh's momentum is unchanged;
+4. fail safe: points of pairs still crossed go back to where they started the sub-step (a
+   state in which nothing crossed) with their group's mean velocity, as often as that
+   uncovers more; if any remain, the whole mesh does.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..collision.crossing import box_pairs, segment_segment, triangle_point
+from ..contact.features import FaceSet
+from ..contact.pair_solve import PointPairs, respond, separate, shares
+
+ROUNDS = 8  # detections per sub-step
+GROUNDED_SHARE = 0.01  # of the inverse mass a point touching a collider keeps here
+
+
+class SelfCollision:
+    """Keeps one mesh's faces and edges apart.
+
+    Args:
+        faces: the mesh's triangles and edges. mass: (n,) [kg] (pinned points: inverse mass 0
+        in ``inv_mass``). inv_mass: (n,) [1/kg]. distance: kept between any vertex and
+        triangle, edge and edge that share no vertex [m] (> 0). friction: Coulomb mu.
+    """
+
+    def __init__(self, faces: FaceSet, mass: np.ndarray, inv_mass: np.ndarray, distance: float,
+                 friction: float):
+        self.faces = faces
+        self.mass = mass
+        self.inv_mass = inv_mass
+        self.distance = float(distance)
+        self.friction = float(friction)
+
+    def keep_apart(self, x0: np.ndarray, x1: np.ndarray, v: np.ndarray, rest_speed: float,
+                   grounded: np.ndarray | None = None) -> int:
+        """Sub-step x0 -> x1 (n, 3) [m], velocities v (n, 3) [m/s]; x1 and v in place.
+        ``grounded``: (k,) points touching a collider this sub-step, which the mesh's own
+        pushes move GROUNDED_SHARE as far as the others (a layer on the ground is hardly
+        pushed into it: the one on top moves; two layers meeting on it still part). Every
+        pair sees the same inverse masses, which keeps the passes convergent. Returns the
+        pairs handled."""
+        inv_mass = self.inv_mass
+        if grounded is not None and len(grounded):
+            inv_mass = inv_mass.copy()
+            inv_mass[grounded] *= GROUNDED_SHARE
+        found, settled = [], True
+        for _ in range(ROUNDS):
+            pairs = self._detect(x0, x1)
+            if pairs is None:
+                break
+            found.append(pairs)
+            if separate(pairs, x1, inv_mass) is None:
+                break
+        else:
+            settled = False
+        if not found:
+            return 0
+        pairs = PointPairs.joined(found)
+        respond(pairs, v, inv_mass, pairs.normal, np.zeros_like(pairs.normal), self.friction,
+                0.0, rest_speed)
+        if not settled:
+            self._fail_safe(x0, x1, v)
+        return len(shares(pairs, inv_mass)[2])
+
+    def _fail_safe(self, x0, x1, v) -> None:
+        for _ in range(ROUNDS):
+            stuck = self._crossed(x0, x1)
+            if not len(stuck):
+                return
+            self._restart(stuck, x0, x1, v)
+        if len(self._crossed(x0, x1)):
+            self._restart(np.nonzero(self.inv_mass > 0.0)[0], x0, x1, v)
+
+    def _crossed(self, x0, x1) -> np.ndarray:
+        """The moving points of pairs that crossed."""
+        pairs = self._detect(x0, x1)
+        if pairs is None:
+            return np.zeros(0, np.int64)
+        stuck = pairs.vertex[(pairs.depth < 0.0)[:, None] & (pairs.weight != 0.0)]
+        return np.unique(stuck[self.inv_mass[stuck] > 0.0])
+
+    def _restart(self, points: np.ndarray, x0, x1, v) -> None:
+        """``points`` back where they started, moving together (momentum kept)."""
+        m = self.mass[points][:, None]
+        x1[points] = x0[points]
+        v[points] = (m * v[points]).sum(axis=0) / m.sum()
+
+    def _detect(self, x0: np.ndarray, x1: np.ndarray) -> PointPairs | None:
+        """Pairs nearer than the distance at the end, or crossed."""
+        d = self.distance
+        tris, edges = self.faces.triangles, self.faces.edges
+        lo, hi = np.minimum(x0, x1) - 0.5 * d, np.maximum(x0, x1) + 0.5 * d
+        vertex, weight, normal, depth = [], [], [], []
+        if len(tris):
+            i, j = box_pairs(lo[tris].min(axis=1), hi[tris].max(axis=1), lo, hi)
+            keep = ~np.any(tris[i] == j[:, None], axis=1)
+            i, j = i[keep], j[keep]
+            if len(i):
+                sep = triangle_point(x0[tris[i]], x1[tris[i]], x0[j], x1[j])
+                near = sep.gap < d
+                vertex.append(np.concatenate([tris[i], j[:, None]], axis=1)[near])
+                weight.append(np.concatenate([sep.weight, -np.ones((len(i), 1))], axis=1)[near])
+                normal.append(sep.normal[near])
+                depth.append(sep.gap[near])
+        if len(edges):
+            box_lo, box_hi = lo[edges].min(axis=1), hi[edges].max(axis=1)
+            i, j = box_pairs(box_lo, box_hi, box_lo, box_hi)
+            a, b = edges[i], edges[j]
+            keep = (i < j) & ~np.any(a[:, :, None] == b[:, None, :], axis=(1, 2))
+            a, b = a[keep], b[keep]
+            if len(a):
+                sep = segment_segment(x0[a[:, 0]], x0[a[:, 1]], x0[b[:, 0]], x0[b[:, 1]],
+                                      x1[a[:, 0]], x1[a[:, 1]], x1[b[:, 0]], x1[b[:, 1]])
+                near = sep.gap < d
+                vertex.append(np.concatenate([a, b], axis=1)[near])
+                weight.append(np.concatenate([sep.weight, -sep.other], axis=1)[near])
+                normal.append(sep.normal[near])
+                depth.append(sep.gap[near])
+        if not sum(len(x) for x in vertex):
+            return None
+        normal = np.concatenate(normal)
+        return PointPairs(np.concatenate(vertex), np.concatenate(weight), normal,
+                          np.zeros_like(normal), np.concatenate(depth), d)
