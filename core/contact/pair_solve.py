@@ -7,7 +7,8 @@ and a mesh against itself.
 * :func:`separate` restores the gaps: each pair's shortfall s is removed by moving its points
   along n by w_k m_k^-1 s / sum_j w_j^2 m_j^-1 (the impulse that moves the weighted sum by
   exactly s), Gauss-Seidel over groups of pairs that share no moving point
-  (:func:`..colouring.colour`: each group one vectorised step).
+  (:func:`..colouring.colour`: each group one vectorised step), or relaxed Jacobi passes
+  where pairs crowd on few points.
 * :func:`respond` does the same for velocities: the weighted sum's approach along n is
   cancelled (a bounce of restitution times it when faster than the rest speed), Coulomb
   friction on its sliding.
@@ -23,7 +24,9 @@ from ..transforms import dot_rows, norm_rows
 
 PASSES = 16  # position passes at most
 TOLERANCE = 0.05  # a pass leaving every pair within this fraction of the gap is the last
-VELOCITY_PASSES = 4
+VELOCITY_PASSES = 4  # Gauss-Seidel velocity passes at most
+RELAXED_PASSES = 32  # relaxed Jacobi velocity passes at most
+CROWD = 12  # pairs on one point beyond which passes are relaxed Jacobi, not coloured
 MIN_SHARE = 0.25  # of a pair's weight on moving points, below which pinned ones hold it
 
 
@@ -67,9 +70,36 @@ def shares(pairs: PointPairs, inv_mass: np.ndarray):
     return share, denom, np.nonzero((denom > 0.0) & (movable >= MIN_SHARE))[0]
 
 
-def separate(pairs: PointPairs, x: np.ndarray, inv_mass: np.ndarray) -> np.ndarray | None:
-    """Restore the pairs' gaps in x (n, 3), in place. Returns the points moved, or None when
-    no pair was short."""
+def _groups(pairs: PointPairs, rows: np.ndarray, inv_mass: np.ndarray,
+            coloured: bool | None) -> list | None:
+    """Gauss-Seidel's groups of pairs that share no moving point; or None (``coloured``
+    False, or None and some moving point in more than CROWD pairs): relaxed Jacobi passes
+    (:func:`_apply`) — a heap puts dozens of pairs on a point, which would take as many
+    colours as the passes it saves."""
+    vertex = pairs.vertex[rows]
+    if coloured is None:
+        moving = vertex[inv_mass[vertex] > 0.0]
+        coloured = not len(moving) or np.bincount(moving).max() <= CROWD
+    return colour(vertex, inv_mass > 0.0) if coloured else None
+
+
+def _apply(x: np.ndarray, vertex: np.ndarray, delta: np.ndarray, relax: bool) -> None:
+    """x[vertex] += delta ((c, k) points, (c, k, 3) moves). ``relax``: a Jacobi pass — each
+    pair's moves scaled by one over the most pairs moving any of its points, the same factor
+    for all its points, so a pair's equal and opposite impulses stay so (momentum kept) and
+    no point takes more than about one full push."""
+    if relax:
+        moves = np.any(delta != 0.0, axis=2)
+        count = np.bincount(vertex[moves], minlength=len(x))
+        most = np.where(moves, count[vertex], 0).max(axis=1)
+        delta = delta / np.maximum(most, 1)[:, None, None]
+    np.add.at(x, vertex, delta)
+
+
+def separate(pairs: PointPairs, x: np.ndarray, inv_mass: np.ndarray,
+             coloured: bool | None = True) -> np.ndarray | None:
+    """Restore the pairs' gaps in x (n, 3), in place (``coloured``: see :func:`_groups`).
+    Returns the points moved, or None when no pair was short."""
     vertex, weight, normal = pairs.vertex, pairs.weight, pairs.normal
     share, denom, rows = shares(pairs, inv_mass)
 
@@ -79,26 +109,30 @@ def separate(pairs: PointPairs, x: np.ndarray, inv_mass: np.ndarray) -> np.ndarr
 
     if not len(rows) or short(rows).max() <= TOLERANCE * pairs.gap:
         return None
-    groups = colour(vertex[rows], inv_mass > 0.0)
+    groups = _groups(pairs, rows, inv_mass, coloured)
+    relax = groups is None
     for _ in range(PASSES):
-        for g in groups:
+        for g in [np.arange(len(rows))] if relax else groups:
             g = rows[g]
             step = np.maximum(short(g), 0.0) / denom[g]
-            np.add.at(x, vertex[g], (share[g] * step[:, None])[:, :, None] * normal[g][:, None, :])
+            _apply(x, vertex[g], (share[g] * step[:, None])[:, :, None] * normal[g][:, None, :],
+                   relax)
         if short(rows).max() <= TOLERANCE * pairs.gap:
             break
     return np.unique(vertex[rows])
 
 
 def respond(pairs: PointPairs, v: np.ndarray, inv_mass: np.ndarray, normal: np.ndarray,
-            surface: np.ndarray, friction: float, restitution: float,
-            rest_speed: float) -> np.ndarray:
+            surface: np.ndarray, friction: float, restitution: float, rest_speed: float,
+            coloured: bool | None = True) -> np.ndarray:
     """Velocities v (n, 3) [m/s] in place: each pair's weighted sum stops approaching the
-    anchor's velocity ``surface`` (c, 3) along ``normal`` (c, 3) (world directions). Returns
-    the pairs that can move (rows)."""
+    anchor's velocity ``surface`` (c, 3) along ``normal`` (c, 3) (world directions);
+    ``coloured``: see :func:`_groups`. Returns the pairs that can move (rows)."""
     vertex, weight = pairs.vertex, pairs.weight
     share, denom, rows = shares(pairs, inv_mass)
-    groups = [rows[g] for g in colour(vertex[rows], inv_mass > 0.0)] if len(rows) else []
+    groups = _groups(pairs, rows, inv_mass, coloured) if len(rows) else []
+    relax = groups is None
+    groups = [rows] if relax else [rows[g] for g in groups]
 
     def normal_speed(g):
         rel = np.einsum("ck,ckj->cj", weight[g], v[vertex[g]]) - surface[g]
@@ -110,7 +144,7 @@ def respond(pairs: PointPairs, v: np.ndarray, inv_mass: np.ndarray, normal: np.n
     e = restitution
     floor = np.full(len(vertex), -np.inf)
     floor[rows] = np.where(vn < 0.0, np.where(-e * vn > rest_speed, -e * vn, 0.0), -np.inf)
-    for k in range(VELOCITY_PASSES):
+    for k in range(RELAXED_PASSES if relax else VELOCITY_PASSES):
         changed = False
         for g in groups:
             rel, vn = normal_speed(g)
@@ -125,7 +159,7 @@ def respond(pairs: PointPairs, v: np.ndarray, inv_mass: np.ndarray, normal: np.n
                 change -= (np.minimum(speed, friction * dvn)
                            / np.maximum(speed, 1e-300))[:, None] * slide
             step = change / denom[g][:, None]
-            np.add.at(v, vertex[g], share[g][:, :, None] * step[:, None, :])
+            _apply(v, vertex[g], share[g][:, :, None] * step[:, None, :], relax)
         if not changed:
             break
     return rows

@@ -8,8 +8,9 @@ Per sub-step, after the step and the colliders (positions x0 -> x1):
    library's uniform grid), then those nearer than the distance at the end or that crossed
    during the step (continuous tests, :mod:`..collision.crossing`: the side each came from);
 2. separate: each pair's weighted points pushed apart along its normal, in proportion to
-   their inverse masses (:mod:`..contact.pair_solve`, Gauss-Seidel over coloured pairs),
-   then detect again, up to ROUNDS times;
+   their inverse masses (:mod:`..contact.pair_solve`: Gauss-Seidel over coloured pairs, or
+   relaxed Jacobi passes where a heap crowds dozens of pairs on a point), then detect again,
+   up to ROUNDS times;
 3. respond: the pairs' approach speeds cancelled, Coulomb friction on their sliding — equal
    and opposite on both sides, so the mesh's momentum is unchanged;
 4. fail safe: points of pairs still crossed go back to where they started the sub-step (a
@@ -63,7 +64,7 @@ class SelfCollision:
             if pairs is None:
                 break
             found.append(pairs)
-            if separate(pairs, x1, inv_mass) is None:
+            if separate(pairs, x1, inv_mass, coloured=None) is None:
                 break
         else:
             settled = False
@@ -71,7 +72,7 @@ class SelfCollision:
             return 0
         pairs = PointPairs.joined(found)
         respond(pairs, v, inv_mass, pairs.normal, np.zeros_like(pairs.normal), self.friction,
-                0.0, rest_speed)
+                0.0, rest_speed, coloured=None)
         if not settled:
             self._fail_safe(x0, x1, v)
         return len(shares(pairs, inv_mass)[2])

@@ -246,9 +246,7 @@ class SpringMeshSolver:
                 touched = [*touched, self._keep_off(step, start, x, v, s0, s1, outside)]
             state.x, state.v, step.hits = x, v, step.hits + collided
         if self.itself is not None:  # its own impulses: equal and opposite, none from outside
-            grounded = np.unique(np.concatenate([c.index for c in touched]))
-            step.hits += self.itself.keep_apart(start, state.x, state.v, step.rest_speed,
-                                                grounded)
+            self._keep_apart(step, start, touched, s1)
         if outside is not None:
             self._react(step, touched, outside, s1)
         self._check(state, inputs.frame)
@@ -263,6 +261,19 @@ class SpringMeshSolver:
         if outside is not None and len(kept):
             outside += self.model.vertex_mass[:, None] * (v - before)
         return kept
+
+    def _keep_apart(self, step: _FrameStep, start: np.ndarray, touched: list, s1: float) -> None:
+        """The mesh kept off itself (:mod:`.self_collision`); the colliders then stop whatever
+        its pushes drove at them (a layer on a two-sided plane pushed through it would stay
+        beneath)."""
+        state = step.state
+        grounded = np.unique(np.concatenate([c.index for c in touched]))
+        before = state.x.copy()
+        step.hits += self.itself.keep_apart(start, state.x, state.v, step.rest_speed, grounded)
+        if step.paths:
+            x, v, count, _ = respond(step.paths, before, state.x, state.v, state.v, s1, s1,
+                                     step.h, step.rest_speed)
+            state.x, state.v, step.hits = x, v, step.hits + count
 
     def _react(self, step: _FrameStep, touched: list, outside: np.ndarray, s1: float) -> None:
         """Two-way coupling with the bodies stepped first this frame: the attached ones move
