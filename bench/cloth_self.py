@@ -33,6 +33,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench import blender_side, common  # blender_side first: it sets up Blender before bpy
 import bpy
 
+from bench.cloth import world_vertices
+
 FPS = 24
 
 
@@ -42,14 +44,6 @@ def build(grid: int, frames: int):
     ob.rotation_euler = (math.radians(87.0), 0.0, 0.0)
     ground = blender_side.grid_object(scene, "Ground", 1, 5.0, 0.0)
     return scene, ob, ground
-
-
-def world_vertices(ob) -> np.ndarray:
-    me = ob.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
-    co = np.empty(len(me.vertices) * 3, np.float32)
-    me.vertices.foreach_get("co", co)
-    m = np.array(ob.matrix_world)
-    return co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]
 
 
 def crossings(x: np.ndarray, tris: list) -> int:
