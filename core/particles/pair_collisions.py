@@ -2,39 +2,49 @@
 piles, momentum conserved exactly, and no pair passing through another within a sub-step.
 
 After a sub-step has moved every particle (forces, colliders), the pairs that can touch during
-it are found on the cell grid (their spheres within reach of each other once the sub-step's
-motion is allowed for) and resolved as speculative contacts with sequential impulses, a few
-Jacobi passes (Box2D's way, for spheres):
+it are found by the library's uniform grid on the boxes of their sweeps, and resolved as
+speculative contacts by sequential impulses, as Box2D does for bodies:
 
     contact   along the pair's normal n at the sub-step's start, the relative velocity may close
               at most the gap between the spheres over the step: (v_i - v_j) . n >= -gap / h.
               A pair that meets no faster than that never touches, and never passes through
               however fast it flies (the gap is closed exactly, not crossed)
+    overlap   what the sub-step leaves overlapping (born inside each other, a heap pressing
+              down) is pushed apart in position only (split impulses: no one keeps speed
+              from an overlap, particles born inside each other drift apart), with friction
+              on the pushes as on impulses (Macklin et al. 2014), so a push cannot make a heap
+              flow
     bounce    a pair that meets faster than the rest speed leaves at restitution times its
               approach speed along n
     friction  the sliding velocity in the contact plane is taken back, up to mu times the
               normal impulse (all of it within that: static friction)
     momentum  every impulse acts on both, equal and opposite, shared in inverse proportion to
-              their masses: a pair's and the system's momentum are kept exactly
+              their masses: a pair's and the system's momentum are kept exactly (a particle on
+              a collider that a pair presses into it moves only along it: the collider takes
+              that part, and its friction holds the foot of a heap)
 
-The velocity changes act over the whole sub-step (x += h dv), then whatever overlap is left
-(particles born inside each other, a heap pressing down) is pushed apart in position only,
-without giving anyone speed. A particle in several contacts takes each pair's impulse scaled by
-1 / (the larger contact count of the pair): the Jacobi passes stay stable in a heap.
+The passes are Gauss-Seidel over groups of pairs that share no particle (graph colouring; each
+group one vectorised step), sweeping the groups forwards then backwards, warm-started from the
+impulses the pairs had a sub-step before (a heap holds its weight from the first pass and does
+not creep).
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
-from ..collision.neighbours import neighbour_pairs
+from ..collision.broadphase_grid import UniformGrid
+from ..colouring import colour
 from ..errors import PhysanimError
+from ..transforms import dot_rows, norm_rows
 
-POSITION_PASSES = 3  # position passes per velocity pass (they stop once the overlap is left)
-TOLERANCE = 0.002  # of the sum of radii: overlap the position passes leave (0.4 % of a radius)
-RELAX = 1.5  # over-relaxation of the position passes (a particle's mean push, times this)
+SLACK = 0.1  # pairs within (1 + SLACK) x their reach (after the sub-step's motion) take part
+SLOP = 0.0025  # of the sum of radii: the overlap resting pairs keep (0.5 % of a radius), so
+#               their contact, and its warm start, lasts from one sub-step to the next
+BETA = 0.5  # of an overlap beyond the slop each position pass takes out (Baumgarte's factor)
 
 
 @dataclass(frozen=True)
@@ -43,8 +53,9 @@ class ParticleCollisions:
 
     Args:
         name: the force object's name (messages). restitution: 0 .. 1 of the approach speed
-        kept along the normal. friction: Coulomb's mu between particles. iterations: Jacobi
-        passes per sub-step (more: stiffer heaps). emitters: member emitters' indices.
+        kept along the normal. friction: Coulomb's mu between particles. iterations:
+        Gauss-Seidel sweeps per sub-step (more: stiffer heaps, less overlap in tall ones).
+        emitters: member emitters' indices.
     """
 
     name: str
@@ -65,12 +76,12 @@ class ParticleCollisions:
                              f"{self.iterations})")
 
     def max_step(self, mass: float) -> float:
-        """No step bound: the passes are position-based (unconditionally stable)."""
+        """No step bound: impulses are clamped, speculative contacts never overshoot."""
         return math.inf
 
     def resolve(self, x: np.ndarray, v: np.ndarray, x0: np.ndarray, v0: np.ndarray,
                 radius: np.ndarray, mass: np.ndarray, emitter: np.ndarray, h: float,
-                rest_speed: float, support: tuple[np.ndarray, np.ndarray] | None = None,
+                rest_speed: float, support: tuple | None = None,
                 ids: np.ndarray | None = None, warm: tuple | None = None
                 ) -> tuple[np.ndarray, np.ndarray, int, tuple]:
         """The sub-step's particle-particle collisions.
@@ -79,12 +90,14 @@ class ParticleCollisions:
             x, v: (n, 3) positions and velocities at the sub-step's end (after colliders).
             x0, v0: (n, 3) at its start. radius, mass: (n,). emitter: (n,) emitter indices.
             h: the sub-step [s]. rest_speed: approach speeds below it do not bounce [m/s].
-            support: (indices, normals (k, 3)) of the particles resting on a collider: a
-                neighbour cannot push them into it (the collider takes that push, as the
-                ground holds up a heap).
+            support: (indices, normals (k, 3), frictions (k,), surface velocities (k, 3)) of
+                the particles resting on a collider: a neighbour cannot push them into it
+                (the collider takes that push, as the ground holds up a heap) and its
+                friction holds them.
             ids: (n,) the particles' unique ids; warm: the last sub-step's (pair keys,
-                normal impulses), returned by it: pairs still in contact start from the
-                impulse they had (a heap holds its weight from the first pass).
+                normal impulses, friction impulses), returned by it: pairs still in contact
+                start from the impulses they had (a heap holds its weight from the first
+                pass).
 
         Returns:
             New (x, v), the number of pairs that touched and the warm start for the next
@@ -92,97 +105,196 @@ class ParticleCollisions:
         """
         members = (np.arange(len(x)) if not self.emitters
                    else np.flatnonzero(np.isin(emitter, self.emitters)))
-        none = (np.zeros(0, np.int64), np.zeros(0))
+        none = (np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 3)))
         if len(members) < 2:
             return x, v, 0, none
         xm, x0m, vm = x[members], x0[members], v[members].copy()
-        held, floor = _supported(members, support, len(x))
+        floor = _supported(members, support, len(x))
         r, w = radius[members], 1.0 / mass[members]
-        moved = np.linalg.norm(xm - x0m, axis=1)
-        try:
-            i, j = neighbour_pairs(x0m, max(2.0 * float(r.max()) + 2.0 * float(moved.max()),
-                                            1e-9))
-        except ValueError as exc:  # crowded: every particle within reach of every other
-            raise PhysanimError(f"{exc} — the particles are crowded or fly too far in a "
-                                "sub-step: raise Substeps, or lower the rate", obj=self.name,
-                                kind="force") from exc
+        i, j = _swept_pairs(x0m, xm, r, self.name)
         d0 = x0m[i] - x0m[j]
-        dist = np.linalg.norm(d0, axis=1)
+        dist = norm_rows(d0)
         reach = r[i] + r[j]
         gap = dist - reach
-        # pairs that can meet this sub-step: those whose closing motion covers their gap
         normal = np.where(dist[:, None] > 1e-12, d0 / np.maximum(dist, 1e-300)[:, None],
                           np.array([0.0, 0.0, 1.0]))  # two centres at one place: any axis
-        closing = -np.einsum("ij,ij->i", (xm[i] - x0m[i]) - (xm[j] - x0m[j]), normal)
-        near = gap <= np.maximum(closing, 0.0) + 1e-9
-        candidates = (i, j, reach)  # the position passes look at all: pushes move others
+        # the pairs that can meet this sub-step (their closing motion covers their gap), and
+        # those within SLACK of it (a neighbour's push can bring them together)
+        closing = -dot_rows((xm[i] - x0m[i]) - (xm[j] - x0m[j]), normal)
+        near = gap <= np.maximum(closing, 0.0) + SLACK * reach
         i, j, normal, gap, reach = i[near], j[near], normal[near], gap[near], reach[near]
         if not len(i):
-            new = _apart(xm.copy(), w, *candidates, held, floor, xm,
-                         POSITION_PASSES * self.iterations)
-            x = x.copy()
-            x[members] = new
             return x, v, 0, none
-        share = w[i] / (w[i] + w[j])  # of a pair's impulse that i takes (j: the rest)
-        count = np.bincount(np.concatenate([i, j]), minlength=len(members))
-        scale = 1.0 / np.maximum(count[i], count[j])
-        approach = np.einsum("ij,ij->i", v0[members][i] - v0[members][j], normal)
+        share = _share(w, i, j, normal, floor)
+        approach = dot_rows(v0[members][i] - v0[members][j], normal)
         meets = approach * h < -np.maximum(gap, 0.0)  # it would touch within the step
         bounce = meets & (approach < -rest_speed)
+        # the least relative normal velocity: a bounce, closing no more than the gap, or
+        # parting an overlap (with the bias; without it in the relax passes)
         lower = np.where(bounce, -self.restitution * approach,
-                         -np.maximum(gap, 0.0) / h)  # the least relative normal velocity
+                         -np.maximum(gap + SLOP * reach, 0.0) / h)
         start_v = vm.copy()
         keys = _pair_keys(ids, members, i, j)
-        taken = _warm(keys, warm)  # accumulated normal impulse (as a relative velocity)
-        _move(vm, i, j, normal * taken[:, None], share)
-        _hold(vm, held, floor, vm)
-        rubbed = np.zeros((len(i), 3))  # the friction impulse so far (a relative velocity)
-        for _ in range(self.iterations):
-            rel = np.einsum("ij,ij->i", vm[i] - vm[j], normal)
-            step = np.maximum(taken + (lower - rel) * scale, 0.0) - taken
-            taken += step
-            _move(vm, i, j, normal * step[:, None], share)
-            # friction: the sliding velocity taken back, the pair's friction impulse over all
-            # passes at most mu times its normal impulse (Coulomb's cone)
-            slide = vm[i] - vm[j]
-            slide -= np.einsum("ij,ij->i", slide, normal)[:, None] * normal
-            total = rubbed - slide * scale[:, None]
-            length = np.linalg.norm(total, axis=1)
-            limit = self.friction * taken
-            total *= np.minimum(1.0, limit / np.where(length > 0.0, length, 1.0))[:, None]
-            _move(vm, i, j, total - rubbed, share)
-            rubbed = total
-            _hold(vm, held, floor, vm)
-        new = xm + h * (vm - start_v)
-        new = _apart(new, w, *candidates, held, floor, xm, POSITION_PASSES * self.iterations)
+        # accumulated normal and friction impulses (as relative velocities), from where the
+        # last sub-step left them: the friction within its cone in the new contact plane
+        taken, rubbed = _warm(keys, warm)
+        rubbed -= dot_rows(rubbed, normal)[:, None] * normal
+        rubbed *= _within(norm_rows(rubbed), self.friction * taken)[:, None]
+        _move(vm, i, j, normal * taken[:, None] + rubbed, share[0])
+        _hold(vm, np.flatnonzero(floor.held), floor)
+        groups = colour(np.stack([i, j], axis=1), np.ones(len(members), bool))
+        _Solve(i, j, normal, share, floor, self.friction, groups, taken, rubbed).sweeps(
+            vm, lower, self.iterations)
+        new = _apart(xm + h * (vm - start_v), vm, w, i, j, reach, floor, x0m,
+                     self.friction, h, self.iterations, groups)
         x, v = x.copy(), v.copy()
         x[members], v[members] = new, vm
         touching = taken > 0.0
-        return x, v, int(touching.sum()), (keys[touching], taken[touching])
+        return x, v, int(touching.sum()), (keys[touching], taken[touching], rubbed[touching])
 
-def _apart(x: np.ndarray, w: np.ndarray, i: np.ndarray, j: np.ndarray, reach: np.ndarray,
-           held: np.ndarray, floor: np.ndarray, origin: np.ndarray, passes: int) -> np.ndarray:
-    """Overlap left (born inside each other, a heap pressing down) pushed apart in position
-    only (no one gains speed, momentum untouched): each pass, every overlapping pair along its
-    current line, each particle taking the mean of its pushes, over-relaxed; a particle on a
-    collider is not pushed into it."""
-    share = w[i] / (w[i] + w[j])
-    for _ in range(passes):
-        d = x[i] - x[j]
-        dist = np.linalg.norm(d, axis=1)
-        depth = reach - dist
-        over = depth > TOLERANCE * reach
-        if not over.any():
+
+class _Solve(NamedTuple):
+    """Sequential impulses over the pairs (i, j) with their normals, shares (:func:`_share`),
+    the colliders under the particles, friction, the colour groups and the accumulated normal
+    (c,) and friction (c, 3) impulses (updated in place)."""
+
+    i: np.ndarray
+    j: np.ndarray
+    normal: np.ndarray
+    share: tuple[np.ndarray, np.ndarray]
+    floor: _Floor
+    friction: float
+    groups: list
+    taken: np.ndarray
+    rubbed: np.ndarray
+
+    def sweeps(self, v: np.ndarray, lower: np.ndarray, count: int) -> None:
+        """``count`` Gauss-Seidel sweeps on v (n, 3) in place: each pair's relative normal
+        velocity at least ``lower`` (c,), its sliding taken back within Coulomb's cone; the
+        groups in turn forwards and backwards (no order favoured: a heap does not walk)."""
+        taken, rubbed = self.taken, self.rubbed
+        for sweep in range(count):
+            for g in self.groups if sweep % 2 == 0 else self.groups[::-1]:
+                a, b, n = self.i[g], self.j[g], self.normal[g]
+                rel = v[a] - v[b]
+                along = dot_rows(rel, n)
+                step = np.maximum(taken[g] + lower[g] - along, 0.0) - taken[g]
+                taken[g] += step
+                total = rubbed[g] - _across(rel, n)
+                total *= _within(norm_rows(total), self.friction * taken[g])[:, None]
+                change = step[:, None] * n + total - rubbed[g]
+                rubbed[g] = total
+                _push(v, a, b, change, (self.share[0][g], self.share[1][g]), self.floor)
+
+
+def _apart(x: np.ndarray, v: np.ndarray, w: np.ndarray, i: np.ndarray, j: np.ndarray,
+           reach: np.ndarray, floor: _Floor, start: np.ndarray, friction: float, h: float,
+           passes: int, groups: list) -> np.ndarray:
+    """Overlaps pushed apart in position only, x (n, 3) in place and returned: Gauss-Seidel
+    over the pairs' colour ``groups``, each pair along its current line, until none overlaps
+    more than the slop (at most ``passes``; a tall heap finishes over the next sub-steps).
+    Friction acts on a push as on an impulse of its depth over h: the pair's sliding since the
+    sub-step's ``start`` is taken back, and so is its sliding velocity v, each up to mu times
+    the depth (over h). A particle the push presses into its collider moves along it only."""
+    if _excess(x, i, j, reach).max() <= 0.5 * SLOP * reach.min():
+        return x
+    for sweep in range(passes):
+        for g in groups if sweep % 2 == 0 else groups[::-1]:
+            a, b = i[g], j[g]
+            d = x[a] - x[b]
+            dist = norm_rows(d)
+            depth = BETA * (reach[g] * (1.0 - SLOP) - dist)
+            over = depth > 0.0
+            if not over.any():
+                continue
+            a, b, d, dist, depth = a[over], b[over], d[over], dist[over], depth[over]
+            n = np.where(dist[:, None] > 1e-12, d / np.maximum(dist, 1e-300)[:, None],
+                         np.array([0.0, 0.0, 1.0]))  # two centres at one place: any axis
+            grip = friction * depth
+            share = _share(w, a, b, n, floor)
+            slid = _across((x[a] - start[a]) - (x[b] - start[b]), n)
+            slid *= _within(norm_rows(slid), grip)[:, None]
+            _push(x, a, b, depth[:, None] * n - slid, share, floor, hold=False)
+            slip = _across(v[a] - v[b], n)
+            slip *= _within(norm_rows(slip), grip / h)[:, None]
+            _push(v, a, b, -slip, share, floor)
+        if _excess(x, i, j, reach).max() <= 0.5 * SLOP * reach.min():
             break
-        a, b, depth, d, dist = i[over], j[over], depth[over], d[over], dist[over]
-        normal = np.where(dist[:, None] > 1e-12, d / np.maximum(dist, 1e-300)[:, None],
-                          np.array([0.0, 0.0, 1.0]))  # two centres at one place: any axis
-        count = np.maximum(np.bincount(np.concatenate([a, b]), minlength=len(x)), 1)
-        before = x.copy()
-        _move(x, a, b, normal * depth[:, None], share[over])
-        x = before + RELAX * (x - before) / count[:, None]
-        _hold(x - origin, held, floor, x)
     return x
+
+
+def _excess(x: np.ndarray, i: np.ndarray, j: np.ndarray, reach: np.ndarray) -> np.ndarray:
+    """How much each pair overlaps beyond the slop."""
+    return reach * (1.0 - SLOP) - norm_rows(x[i] - x[j])
+
+
+def _across(rel: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """The part of ``rel`` (c, 3) across the unit normals n."""
+    return rel - dot_rows(rel, n)[:, None] * n
+
+
+def _within(length: np.ndarray, limit: np.ndarray) -> np.ndarray:
+    """The factor that brings vectors ``length`` long within ``limit`` (1 when they are)."""
+    return np.minimum(1.0, limit / np.where(length > 0.0, length, 1.0))
+
+
+def _swept_pairs(x0: np.ndarray, x1: np.ndarray, r: np.ndarray, name: str
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """The pairs whose spheres' sweeps over the sub-step can meet: their boxes (the sphere at
+    both ends, grown by a tenth of the radius for the pushes of the position passes) overlap,
+    on the library's uniform grid with cells about a diameter wide (a fast particle's long box
+    spans more cells, and only it pays for its speed)."""
+    grow = 1.1 * r[:, None]
+    lo, hi = np.minimum(x0, x1) - grow, np.maximum(x0, x1) + grow
+    try:
+        pairs = UniformGrid(cell_size=2.2 * float(np.median(r)) or None).pairs(lo, hi)
+    except ValueError as exc:
+        raise PhysanimError(f"{exc} — the particles fly too far in a sub-step: raise "
+                            "Substeps", obj=name, kind="force") from exc
+    return pairs[:, 0], pairs[:, 1]
+
+
+def _share(w: np.ndarray, i: np.ndarray, j: np.ndarray, n: np.ndarray, floor: _Floor
+           ) -> tuple[np.ndarray, np.ndarray]:
+    """Of a change of a pair's relative motion along n (i away from j, equal and opposite
+    pushes) the parts i and j take, (c, 2), in inverse proportion to the masses (they sum to
+    one); and which of them the pair presses into the collider under it, (c, 2) bool: such a
+    particle moves only along the collider (:func:`_push`), so it takes a larger part for the
+    pair to part by the same amount: w over w_i a_i + w_j a_j, a = 1 - (n . its collider's
+    normal)^2 (1 for the others)."""
+    ci, cj = dot_rows(n, floor.normal[i]), dot_rows(n, floor.normal[j])
+    block = np.stack([ci < 0.0, cj > 0.0], axis=1)  # i is pushed along +n, j along -n
+    ai = np.where(block[:, 0], 1.0 - ci * ci, 1.0)
+    aj = np.where(block[:, 1], 1.0 - cj * cj, 1.0)
+    denom = w[i] * ai + w[j] * aj
+    free = denom <= 1e-9 * (w[i] + w[j])  # pressed both ways: let both move
+    denom = np.where(free, w[i] + w[j], denom)
+    return np.stack([w[i], w[j]], axis=1) / denom[:, None], block & ~free[:, None]
+
+
+def _push(v: np.ndarray, i: np.ndarray, j: np.ndarray, change: np.ndarray,
+          share: tuple[np.ndarray, np.ndarray], floor: _Floor, hold: bool = True) -> None:
+    """One group's pairs (no particle twice): v[i] += share_i * change, v[j] -= share_j *
+    change (:func:`_share`: away from colliders, mass-weighted, so the pair's momentum is
+    unchanged). A particle the pair presses into its collider moves only along it, by
+    Coulomb's law slowed by up to its friction times the push the collider took; for the
+    others, whatever points into a collider under them is taken out (:func:`_hold`; not with
+    ``hold`` False: v is positions, and the colliders see the moves afterwards)."""
+    part, block = share
+    for k, sign, col in ((i, 1.0, 0), (j, -1.0, 1)):
+        d = (sign * part[:, col])[:, None] * change
+        held = block[:, col]
+        if held.any():
+            f = floor.normal[k[held]]
+            pressed = dot_rows(d[held], f)
+            along = d[held] - pressed[:, None] * f
+            grip = floor.friction[k[held]] * np.abs(pressed)
+            d[held] = along * (1.0 - _within(norm_rows(along), grip))[:, None]
+        v[k] += d
+        if hold:
+            k = k[~held & floor.held[k]]
+            if len(k):
+                _hold(v, k, floor)
 
 
 def _pair_keys(ids, members: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
@@ -194,44 +306,64 @@ def _pair_keys(ids, members: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.nda
     return lo * np.int64(1 << 31) + hi
 
 
-def _warm(keys: np.ndarray, warm) -> np.ndarray:
-    """The last sub-step's normal impulse of each pair still in contact (0 for new pairs)."""
-    out = np.zeros(len(keys))
+def _warm(keys: np.ndarray, warm) -> tuple[np.ndarray, np.ndarray]:
+    """The last sub-step's normal (c,) and friction (c, 3) impulses of each pair still in
+    contact (zero for new pairs)."""
+    taken, rubbed = np.zeros(len(keys)), np.zeros((len(keys), 3))
     if warm is None or not len(warm[0]) or not len(keys):
-        return out
-    old_keys, old_impulse = warm
+        return taken, rubbed
+    old_keys, old_taken, old_rubbed = warm
     order = np.argsort(old_keys)
     at = np.minimum(np.searchsorted(old_keys[order], keys), len(order) - 1)
     hit = old_keys[order][at] == keys
-    out[hit] = old_impulse[order][at[hit]]
-    return out
+    taken[hit] = old_taken[order][at[hit]]
+    rubbed[hit] = old_rubbed[order][at[hit]]
+    return taken, rubbed
 
 
-def _supported(members: np.ndarray, support, n: int):
-    """Which members rest on a collider (indices into members) and its normal there."""
+class _Floor(NamedTuple):
+    """The collider under each member: whether there is one (n,), its normal (n, 3; zero:
+    none), friction (n,) and surface velocity (n, 3)."""
+
+    held: np.ndarray
+    normal: np.ndarray
+    friction: np.ndarray
+    velocity: np.ndarray
+
+
+def _supported(members: np.ndarray, support, n: int) -> _Floor:
+    """The colliders under the members resting on one (``support``: see ``resolve``)."""
+    count = len(members)
+    floor = _Floor(np.zeros(count, bool), np.zeros((count, 3)), np.zeros(count),
+                   np.zeros((count, 3)))
     if support is None or not len(support[0]):
-        return np.zeros(0, np.int64), np.zeros((0, 3))
+        return floor
     where = np.full(n, -1, np.int64)
-    where[members] = np.arange(len(members))
+    where[members] = np.arange(count)
     k = where[support[0]]
     keep = k >= 0
-    return k[keep], np.asarray(support[1])[keep]
+    floor.held[k[keep]] = True
+    for mine, given in zip(floor[1:], support[1:]):
+        mine[k[keep]] = np.asarray(given)[keep]
+    return floor
 
 
-def _hold(change: np.ndarray, held: np.ndarray, floor: np.ndarray, out: np.ndarray) -> None:
-    """Where ``change`` (a velocity, or a move) of a supported particle points into its
-    collider, take that part out of ``out``: the collider pushes back."""
-    if not len(held):
-        return
-    into = np.einsum("ij,ij->i", change[held], floor)
-    out[held] -= np.minimum(into, 0.0)[:, None] * floor
+def _hold(v: np.ndarray, k: np.ndarray, floor: _Floor) -> None:
+    """Where the velocity v[k] of a particle on a collider points into it (relative to its
+    surface), take that part out — the collider pushes back — and with it, by Coulomb's law,
+    up to its friction times that much of the sliding along it."""
+    f = floor.normal[k]
+    change = v[k] - floor.velocity[k]
+    along = dot_rows(change, f)
+    into = np.minimum(along, 0.0)
+    slide = change - along[:, None] * f
+    v[k] -= into[:, None] * f + _within(norm_rows(slide), floor.friction[k] * -into)[:, None] * slide
 
 
 def _move(a: np.ndarray, i: np.ndarray, j: np.ndarray, amount: np.ndarray,
           share: np.ndarray) -> None:
-    """a[i] += share * amount, a[j] -= (1 - share) * amount, summed over pairs: mass-weighted,
-    so the pair's momentum (or centre of mass) is unchanged."""
+    """a[i] += share[:, 0] * amount, a[j] -= share[:, 1] * amount, summed over pairs."""
     n = len(a)
     for k in range(3):
-        a[:, k] += (np.bincount(i, amount[:, k] * share, minlength=n)
-                    - np.bincount(j, amount[:, k] * (1.0 - share), minlength=n))
+        a[:, k] += (np.bincount(i, amount[:, k] * share[:, 0], minlength=n)
+                    - np.bincount(j, amount[:, k] * share[:, 1], minlength=n))

@@ -244,7 +244,8 @@ class ParticleSolver:
             x, v, count, warm = spec.resolve(
                 state.particle_x, state.particle_v, x0, v0, state.particle_size,
                 state.particle_mass, state.particle_emitter, h, step.rest_speed,
-                (resting.index, resting.normal), state.particle_id,
+                (resting.index, resting.normal, resting.friction,
+                 resting.surface_velocity), state.particle_id,
                 state.pair_warm.get(spec.name))
             state.pair_warm[spec.name] = warm
             if not count:
