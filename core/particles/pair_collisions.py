@@ -41,7 +41,7 @@ from ..colouring import colour
 from ..errors import PhysanimError
 from ..transforms import dot_rows, norm_rows
 
-SLACK = 0.1  # pairs within (1 + SLACK) x their reach (after the sub-step's motion) take part
+SLACK = 0.02  # pairs within (1 + SLACK) x their reach (after the sub-step's motion) take part
 SLOP = 0.0025  # of the sum of radii: the overlap resting pairs keep (0.5 % of a radius), so
 #               their contact, and its warm start, lasts from one sub-step to the next
 BETA = 0.5  # of an overlap beyond the slop each position pass takes out (Baumgarte's factor)
@@ -146,7 +146,7 @@ class ParticleCollisions:
         _Solve(i, j, normal, share, floor, self.friction, groups, taken, rubbed).sweeps(
             vm, lower, self.iterations)
         new = _apart(xm + h * (vm - start_v), vm, w, i, j, reach, floor, x0m,
-                     self.friction, h, self.iterations, groups)
+                     self.friction, h, 2 * self.iterations, groups)
         x, v = x.copy(), v.copy()
         x[members], v[members] = new, vm
         touching = taken > 0.0
