@@ -7,6 +7,7 @@
 #        tools/bench.sh rigid [--cubes N] [--frames F] [--stack N]
 #        tools/bench.sh chain [--links N] [--frames F]
 #        tools/bench.sh interactions [--quick] [--sizes N,N] [--theta T]
+#        tools/bench.sh sph [--count N] [--frames F] [--emit F]
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 venv="$("$here/tools/venv.sh" "${PHYSANIM_BLENDER:-4.5}")"
@@ -19,6 +20,7 @@ case "${1:-}" in
   rigid) shift; exec "$venv/bin/python" bench/rigid.py "$@" ;;
   chain) shift; exec "$venv/bin/python" bench/chain.py "$@" ;;
   interactions) shift; exec "$venv/bin/python" bench/interactions.py "$@" ;;
+  sph) shift; exec "$venv/bin/python" bench/particle_pairs.py "$@" ;;
   particles) shift; exec "$venv/bin/python" bench/particles.py "$@" ;;
   *) exec "$venv/bin/python" bench/particles.py "$@" ;;
 esac
