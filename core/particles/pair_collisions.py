@@ -262,6 +262,9 @@ def _share(w: np.ndarray, i: np.ndarray, j: np.ndarray, n: np.ndarray, floor: _F
     particle moves only along the collider (:func:`_push`), so it takes a larger part for the
     pair to part by the same amount: w over w_i a_i + w_j a_j, a = 1 - (n . its collider's
     normal)^2 (1 for the others)."""
+    if not (floor.held[i].any() or floor.held[j].any()):  # no collider under any of them
+        share = np.stack([w[i], w[j]], axis=1) / (w[i] + w[j])[:, None]
+        return share, np.zeros(share.shape, bool)
     ci, cj = dot_rows(n, floor.normal[i]), dot_rows(n, floor.normal[j])
     block = np.stack([ci < 0.0, cj > 0.0], axis=1)  # i is pushed along +n, j along -n
     ai = np.where(block[:, 0], 1.0 - ci * ci, 1.0)
@@ -281,20 +284,20 @@ def _push(v: np.ndarray, i: np.ndarray, j: np.ndarray, change: np.ndarray,
     others, whatever points into a collider under them is taken out (:func:`_hold`; not with
     ``hold`` False: v is positions, and the colliders see the moves afterwards)."""
     part, block = share
-    for k, sign, col in ((i, 1.0, 0), (j, -1.0, 1)):
-        d = (sign * part[:, col])[:, None] * change
-        held = block[:, col]
-        if held.any():
-            f = floor.normal[k[held]]
-            pressed = dot_rows(d[held], f)
-            along = d[held] - pressed[:, None] * f
-            grip = floor.friction[k[held]] * np.abs(pressed)
-            d[held] = along * (1.0 - _within(norm_rows(along), grip))[:, None]
-        v[k] += d
-        if hold:
-            k = k[~held & floor.held[k]]
-            if len(k):
-                _hold(v, k, floor)
+    points = np.concatenate([i, j])
+    d = np.concatenate([part[:, :1] * change, -part[:, 1:] * change])
+    held = np.concatenate([block[:, 0], block[:, 1]])
+    if held.any():
+        f = floor.normal[points[held]]
+        pressed = dot_rows(d[held], f)
+        along = d[held] - pressed[:, None] * f
+        grip = floor.friction[points[held]] * np.abs(pressed)
+        d[held] = along * (1.0 - _within(norm_rows(along), grip))[:, None]
+    v[points] += d
+    if hold:
+        k = points[~held & floor.held[points]]
+        if len(k):
+            _hold(v, k, floor)
 
 
 def _pair_keys(ids, members: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
