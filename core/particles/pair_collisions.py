@@ -315,7 +315,8 @@ def _warm(keys: np.ndarray, warm) -> tuple[np.ndarray, np.ndarray]:
     taken, rubbed = np.zeros(len(keys)), np.zeros((len(keys), 3))
     if warm is None or not len(warm[0]) or not len(keys):
         return taken, rubbed
-    old_keys, old_taken, old_rubbed = warm
+    old_keys, old_taken, *rest = warm  # a checkpoint from before friction was kept: none
+    old_rubbed = rest[0] if rest else np.zeros((len(old_keys), 3))
     order = np.argsort(old_keys)
     at = np.minimum(np.searchsorted(old_keys[order], keys), len(order) - 1)
     hit = old_keys[order][at] == keys

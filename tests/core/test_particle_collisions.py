@@ -165,3 +165,21 @@ def test_only_the_named_emitters_collide():
 def test_bad_settings_name_the_force(kwargs):
     with pytest.raises(ValueError, match='force "Sand"'):
         ParticleCollisions("Sand", **kwargs)
+
+
+def test_a_warm_start_without_friction_impulses_still_resumes():
+    """A checkpoint written before friction impulses were kept holds (keys, normal impulses)
+    only: the next sub-step starts from those, with no friction, and does not fail."""
+    model, state = _pair(1.0, 1.0, 0.0, 0.0)
+    state.particle_x[1] = [0.2, 0.0, 0.0]  # touching (radius 0.1 each)
+    spec = ParticleCollisions("Hit", restitution=0.0, friction=0.5)
+    x, v, count, warm = spec.resolve(
+        state.particle_x, state.particle_v - [[-0.1, 0, 0], [0.1, 0, 0]], state.particle_x,
+        state.particle_v - [[-0.1, 0, 0], [0.1, 0, 0]], state.particle_size,
+        state.particle_mass, state.particle_emitter, 0.01, 0.0, ids=state.particle_id)
+    assert count == 1 and len(warm) == 3
+    again = spec.resolve(state.particle_x, state.particle_v, state.particle_x,
+                         state.particle_v, state.particle_size, state.particle_mass,
+                         state.particle_emitter, 0.01, 0.0, ids=state.particle_id,
+                         warm=warm[:2])
+    assert np.isfinite(again[1]).all()
