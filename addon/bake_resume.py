@@ -64,16 +64,19 @@ class Resumable:
             record["rigid_bodies"] = self.rigid_hash
         return record
 
-    def partial_folders(self) -> dict[str, str]:
-        """The folder each system's frames are being written to."""
+    def _writers(self) -> dict:
+        """Each system's cache writer, keyed as :meth:`partial_folders` keys its folder."""
         out = {}
         if self.particles is not None:
-            out.update({f"emitter {name}": str(w.partial_dir)
-                        for name, w in self.particles.writers.items()})
-        out.update({f"spring_mesh {m.ob.name}": str(m.writer.partial_dir) for m in self.meshes})
+            out.update({f"emitter {name}": w for name, w in self.particles.writers.items()})
+        out.update({f"spring_mesh {m.ob.name}": m.writer for m in self.meshes})
         if self.rigid is not None:
-            out["rigid_bodies"] = str(self.rigid.writer.partial_dir)
+            out["rigid_bodies"] = self.rigid.writer
         return out
+
+    def partial_folders(self) -> dict[str, str]:
+        """The folder each system's frames are being written to."""
+        return {key: str(w.partial_dir) for key, w in self._writers().items()}
 
     def checkpoint_state(self) -> bytes:
         """Everything the bake carries to the next frame, pickled in one piece (shared objects
@@ -119,6 +122,11 @@ class Resumable:
         frame = data["frame"]
         samples = frame - self.frame_start + 1
         state = checkpoint.state_of(data)
+        # the first frame's files, queued on the writer threads, land before the frames
+        # resumed from are linked over them (both touched one file at once: USD could not
+        # open it for writing)
+        for writer in self._writers().values():
+            writer.flush()
         folders = self.partial_folders()
         missing = sorted(set(data["folders"]) - set(folders))
         if missing:
