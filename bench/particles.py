@@ -158,8 +158,10 @@ def compare(opts: Options, folder: str) -> list[str]:
         runs.append(particles_compare.run_blender(sc, opts.blender_method))
         print(f"(Blender: {runs[-1].wall:.2f} s)", flush=True)
     runs.append(particles_compare.run_physanim_bake(sc, folder))
-    print(f"(physanim bake: {runs[-1].wall:.2f} s)", flush=True)
-    runs.append(particles_compare.run_core(sc))
+    print(f"(physanim bake at defaults: {runs[-1].wall:.2f} s)", flush=True)
+    runs.append(particles_compare.run_physanim_bake(sc, folder, tuned=True))
+    print(f"(physanim bake, tuned: {runs[-1].wall:.2f} s)", flush=True)
+    runs.append(particles_compare.run_core(sc, particles_compare.default_substeps()))
     print(f"(physanim core: {runs[-1].wall:.2f} s)\n", flush=True)
     print(particles_compare.compare_table(runs, sc) + "\n", flush=True)
     return [p for r in runs for p in r.problems]

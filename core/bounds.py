@@ -38,8 +38,12 @@ class StateBounds:
         if len(x) == 0:
             return None
         with np.errstate(invalid="ignore", over="ignore"):
+            speed2 = np.einsum("ij,ij->i", v, v)
+            # one reduction each when all is well (a NaN fails both comparisons)
+            if np.abs(x).max() <= self.position and speed2.max() <= self.speed * self.speed:
+                return None
             far = ~(np.abs(x) <= self.position).all(axis=1)  # NaN fails the test too
-            fast = ~(np.einsum("ij,ij->i", v, v) <= self.speed * self.speed)
+            fast = ~(speed2 <= self.speed * self.speed)
         bad = far | fast
         if not bad.any():
             return None

@@ -181,6 +181,13 @@ def dot_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", a, b)
 
 
+def rows_at(a: np.ndarray, index: np.ndarray) -> np.ndarray:
+    """``a[index]`` for sorted, unique row indices (``np.nonzero``'s): ``a`` itself (no copy)
+    when they are every row — a settled pile rests whole on its ground, and gathering all of
+    it costs more than the arithmetic done on it. Read-only use: the result may be ``a``."""
+    return a if len(index) == len(a) else a[index]
+
+
 def norm_rows(a: np.ndarray) -> np.ndarray:
     """Euclidean norm of each row of (n, k) ``a``."""
     return np.sqrt(np.einsum("ij,ij->i", a, a))

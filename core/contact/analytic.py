@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..transforms import inverse_affine
+from ..transforms import inverse_affine, rows_at
 from .frame import ColliderFrame
 from .path import CONTACT_DISTANCE, ColliderPath, Features, Hits, SurfacePoints
 
@@ -67,22 +67,61 @@ class AnalyticPath(ColliderPath):
     def near_surface(self, x, s) -> SurfacePoints:
         shape = self.frame.shape
         if shape in ("HALF_SPACE", "PLANE"):
-            # cheap prefilter: world distance to the plane is local z / |grad z|
-            inv = inverse_affine(self._at(s))
-            z = self._local_z(x, s)
-            gap = z - self.extent[2] if shape == "HALF_SPACE" else np.abs(z) - self.extent[2]
-            cand = np.nonzero(np.abs(gap) < CONTACT_DISTANCE * np.linalg.norm(inv[2, :3]))[0]
-        else:
-            cand = np.arange(len(x))
-        if len(cand) == 0:
-            return SurfacePoints.none()
-        l = self.to_local(x[cand], s)
+            return self._near_plane(x, s)
+        l = self.to_local(x, s)
         p, n_local, valid = _closest(shape, l, self.extent)
         p_w, n_w = self.to_world(p, n_local, s)
-        d = np.einsum("ij,ij->i", x[cand] - p_w, n_w)
+        d = np.einsum("ij,ij->i", x - p_w, n_w)
         near = np.nonzero(valid & (d > -CONTACT_DISTANCE) & (d < CONTACT_DISTANCE))[0]
-        return SurfacePoints(cand[near], p_w[near], n_w[near],
-                             self.surface_velocity(p[near], s), d[near])
+        return SurfacePoints(near, p_w[near], n_w[near], self.surface_velocity(p[near], s),
+                             d[near])
+
+    def _near_plane(self, x, s) -> SurfacePoints:
+        """:meth:`near_surface` of the ground and a bounded plane. An affine map keeps planes
+        flat, so a point's world distance to the plane z = c (local) is (z - c) / |grad z|
+        with grad z the inverse matrix's third row, and its closest point lies along that
+        gradient: one row of the inverse for every point, the rest only for the near ones."""
+        inv = inverse_affine(self._at(s))
+        if inv.ndim == 3:  # per-point times: the general route
+            return self._near_plane_general(x, s)
+        grad = inv[2, :3]
+        scale = float(np.linalg.norm(grad))
+        z = self._local_z(x, s)
+        e = self.extent
+        plane = self.frame.shape == "PLANE"
+        d = ((np.abs(z) if plane else z) - e[2]) / scale
+        cand = np.nonzero(np.abs(d) < CONTACT_DISTANCE)[0]
+        xc = rows_at(x, cand)
+        if plane:  # off its edges nothing rests on it
+            lx = xc @ inv[0, :3] + inv[0, 3]
+            ly = xc @ inv[1, :3] + inv[1, 3]
+            inside = (np.abs(lx) <= e[0]) & (np.abs(ly) <= e[1])
+            if not inside.all():
+                cand = cand[inside]
+                xc = xc[inside]
+        if len(cand) == 0:
+            return SurfacePoints.none()
+        d = rows_at(d, cand)
+        n_w = np.empty_like(xc)
+        n_w[:] = grad / scale
+        if plane:  # the side each point is on
+            n_w[rows_at(z, cand) < 0.0] *= -1.0
+        p_w = xc - d[:, None] * n_w
+        if self.path.static:
+            velocity = np.zeros_like(p_w)
+        else:
+            velocity = self.surface_velocity(self.to_local(p_w, s), s)
+        return SurfacePoints(cand, p_w, n_w, velocity, d)
+
+    def _near_plane_general(self, x, s) -> SurfacePoints:
+        """:meth:`_near_plane` with a matrix per point (points at different times)."""
+        l = self.to_local(x, s)
+        p, n_local, valid = _closest(self.frame.shape, l, self.extent)
+        p_w, n_w = self.to_world(p, n_local, s)
+        d = np.einsum("ij,ij->i", x - p_w, n_w)
+        near = np.nonzero(valid & (d > -CONTACT_DISTANCE) & (d < CONTACT_DISTANCE))[0]
+        return SurfacePoints(near, p_w[near], n_w[near], self.surface_velocity(p[near], s[near]),
+                             d[near])
 
     def features(self, s0: float, s1: float) -> Features:
         return self._features
@@ -91,7 +130,7 @@ class AnalyticPath(ColliderPath):
         """Local z of points (the only coordinate planes need): one row of the inverse matrix."""
         inv = inverse_affine(self._at(s))
         if inv.ndim == 2:
-            return x[:, 0] * inv[2, 0] + x[:, 1] * inv[2, 1] + x[:, 2] * inv[2, 2] + inv[2, 3]
+            return x @ inv[2, :3] + inv[2, 3]
         return np.einsum("nj,nj->n", inv[:, 2, :3], x) + inv[:, 2, 3]
 
     def _segment_candidates(self, start, end, s_start, s_end) -> np.ndarray | None:

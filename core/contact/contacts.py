@@ -105,16 +105,25 @@ class ContactForce:
         if len(c) == 0:
             return
         idx, normal = c.index, c.normal
-        f = f_out[idx]
+        # every point resting (a settled pile): slices, not gathers (indices sorted, unique)
+        rows = slice(None) if len(idx) == len(f_out) else idx
+        f = f_out[rows]
         fn = np.einsum("ij,ij->i", f, normal)
         push = np.minimum(fn, 0.0)  # only the component into the surface is cancelled
-        f = f - push[:, None] * normal
-        rel = p.v[idx] - c.surface_velocity
+        rel = p.v[rows] - c.surface_velocity
+        # the tangential parts of the velocity and of the force (f_n drops out of both)
         vt = rel - np.einsum("ij,ij->i", rel, normal)[:, None] * normal
-        ft = f - np.einsum("ij,ij->i", f, normal)[:, None] * normal
+        ft = f - fn[:, None] * normal
         # friction that would stop the sliding within this step (static friction) ...
-        need = -(p.mass[idx, None] * vt / self.h + ft)
-        need_mag = np.linalg.norm(need, axis=1)
+        need = vt
+        need *= -p.mass[rows, None] / self.h
+        need -= ft
+        need_mag = np.sqrt(np.einsum("ij,ij->i", need, need))
         cap = c.friction * -push  # ... limited by Coulomb's mu |f_n| (kinetic friction)
         scale = np.minimum(1.0, cap / np.where(need_mag > 0.0, need_mag, np.inf))
-        f_out[idx] = f + scale[:, None] * need
+        need *= scale[:, None]
+        need -= push[:, None] * normal
+        if rows is idx:
+            f_out[idx] = f + need
+        else:
+            f_out += need

@@ -108,6 +108,17 @@ class SurfacePoints:
         return cls(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)),
                    np.zeros(0))
 
+    def take(self, rows: np.ndarray) -> SurfacePoints:
+        """These points' rows ``rows`` (indices or a mask)."""
+        return SurfacePoints(self.index[rows], self.point[rows], self.normal[rows],
+                             self.velocity[rows], self.gap[rows])
+
+    @classmethod
+    def joined(cls, parts: list[SurfacePoints]) -> SurfacePoints:
+        """The rows of ``parts`` one after another."""
+        return cls(*(np.concatenate([getattr(p, k) for p in parts])
+                     for k in ("index", "point", "normal", "velocity", "gap")))
+
 
 class ColliderPath:
     """One collider during one frame interval, with its motion path.

@@ -17,8 +17,9 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..transforms import rows_at
 from .contacts import Contacts
-from .path import SKIN, ColliderPath
+from .path import SKIN, ColliderPath, SurfacePoints
 
 PASSES = 3  # a bounce's remaining motion may hit another collider: re-test up to this often
 
@@ -59,11 +60,17 @@ def respond(colliders: list[ColliderPath], x0: np.ndarray, x1: np.ndarray, v0: n
     first = _FirstHits(len(x1))
     if not colliders or len(x1) == 0:
         return Response(x1.copy(), v1.copy(), 0, first.contacts())
+    # pass 1 tests everyone (no gather) on the paths as given: most sub-steps hit nothing
+    nearest = _nearest_hits(colliders, (x0, x1, np.full(len(x1), float(s0)),
+                                        np.full(len(x1), float(s1))))
+    if not (nearest.collider >= 0).any():
+        return Response(x1.copy(), v1.copy(), 0, first.contacts())
     remainder = _Remainder(x0, x1, v0, v1, s0, s1, h)
-    active = None  # pass 1 tests everyone (no gather); later passes only re-test the hit ones
+    active = None  # later passes only re-test the hit ones
     hits, touched = 0, []
-    for _ in range(PASSES):
-        nearest = _nearest_hits(colliders, remainder, active)
+    for pass_ in range(PASSES):
+        if pass_:
+            nearest = _nearest_hits(colliders, remainder.segments(active))
         hit = nearest.collider >= 0
         if not hit.any():
             break
@@ -152,11 +159,10 @@ class _Nearest(NamedTuple):
         return _Nearest(*(a[sub] for a in self))
 
 
-def _nearest_hits(colliders: list[ColliderPath], remainder: _Remainder,
-                  active: np.ndarray | None) -> _Nearest:
-    """Earliest collider entry of each active path (``active`` indexes ``remainder``; None:
-    every path)."""
-    start, x, s_start, s_end = remainder.segments(active)
+def _nearest_hits(colliders: list[ColliderPath], segments: tuple) -> _Nearest:
+    """Earliest collider entry of each path of ``segments`` (start, end, s_start, s_end:
+    :meth:`_Remainder.segments`)."""
+    start, x, s_start, s_end = segments
     count = len(x)
     nearest = _Nearest(np.full(count, -1), np.full(count, np.inf), np.zeros((count, 3)),
                        np.zeros((count, 3)), np.full(count, -1, dtype=np.int64))
@@ -271,26 +277,25 @@ def resting_contacts(colliders: list[ColliderPath], x: np.ndarray, v: np.ndarray
                      rest_speed: float) -> Contacts:
     """Points resting on a collider at parameter s: within CONTACT_DISTANCE of its surface and
     not moving away faster than ``rest_speed`` (the nearest surface where several are)."""
-    count = len(x)
-    best_d = np.full(count, np.inf)
-    point, normal, surf_v = np.zeros((count, 3)), np.zeros((count, 3)), np.zeros((count, 3))
-    gap, mu, k_r = np.zeros(count), np.zeros(count), np.zeros(count)
-    which = np.full(count, -1, np.int64)
-    for ci, col in enumerate(colliders if count else ()):
+    found = []  # per collider: (its index, its SurfacePoints of the resting points)
+    for ci, col in enumerate(colliders if len(x) else ()):
         surf = col.near_surface(x, s)
-        d = np.abs(surf.gap)
-        near = d < best_d[surf.index]
-        un = np.einsum("ij,ij->i", v[surf.index] - surf.velocity, surf.normal)
-        ok = near & (un < rest_speed)
-        idx = surf.index[ok]
-        best_d[idx] = d[ok]
-        point[idx] = surf.point[ok]
-        normal[idx] = surf.normal[ok]
-        surf_v[idx] = surf.velocity[ok]
-        gap[idx] = surf.gap[ok]
-        mu[idx] = col.frame.friction
-        k_r[idx] = col.frame.restitution
-        which[idx] = ci
-    idx = np.nonzero(np.isfinite(best_d))[0]
-    return Contacts.of(idx, point[idx], normal[idx], surf_v[idx], mu[idx], k_r[idx],
-                       depth=-gap[idx], collider=which[idx])
+        un = np.einsum("ij,ij->i", rows_at(v, surf.index) - surf.velocity, surf.normal)
+        ok = np.nonzero(un < rest_speed)[0]
+        if len(ok):
+            found.append((ci, surf if len(ok) == len(un) else surf.take(ok)))
+    if not found:
+        return Contacts.none()
+    which = np.concatenate([np.full(len(f.index), ci, np.int64) for ci, f in found])
+    surf = SurfacePoints.joined([f for _, f in found])
+    if len(found) > 1:  # a point near several surfaces rests on the nearest (the first tie)
+        order = np.lexsort((np.abs(surf.gap), surf.index))
+        first = np.ones(len(order), bool)
+        first[1:] = surf.index[order[1:]] != surf.index[order[:-1]]
+        keep = order[first]
+        surf, which = surf.take(keep), which[keep]
+    frames = [col.frame for col in colliders]
+    mu = np.array([f.friction for f in frames])[which]
+    k_r = np.array([f.restitution for f in frames])[which]
+    return Contacts.of(surf.index, surf.point, surf.normal, surf.velocity, mu, k_r,
+                       depth=-surf.gap, collider=which)

@@ -275,6 +275,10 @@ class SymplecticEuler(Integrator):
         n = y.shape[0] // 2
         if y.shape[0] != 2 * n:
             raise ValueError(f"symplectic Euler needs y = [x, v] with even dim (got {y.shape[0]})")
-        v_new = y[n:] + dt * system.derivative(t, y)[n:]
-        report = StepReport(steps=1, evaluations=1, h_last=dt)
-        return np.concatenate([y[:n] + dt * v_new, v_new]), report
+        a = system.derivative(t, y)[n:]
+        out = np.empty_like(y)  # [x_new, v_new], filled without temporaries
+        v_new = np.multiply(a, dt, out=out[n:])
+        v_new += y[n:]
+        np.multiply(v_new, dt, out=out[:n])
+        out[:n] += y[:n]
+        return out, StepReport(steps=1, evaluations=1, h_last=dt)

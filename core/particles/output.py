@@ -36,7 +36,8 @@ def emitter_arrays(model: ParticleModel, state: ParticleState, emitter: int,
     v and stretching it along v. Without them the renderer scales instances by ``size``.
     """
     settings = model.emitters[emitter]
-    sel = state.particle_emitter == emitter
+    # one emitter: all the particles, as views (the float32 copies below are the only ones)
+    sel = slice(None) if len(model.emitters) == 1 else state.particle_emitter == emitter
     ids = state.particle_id[sel]
     if len(ids) and ids[-1] > np.iinfo(np.int32).max:
         raise PhysanimError(f"particle id {int(ids[-1]):,} exceeds the cache's 32-bit id range "

@@ -87,8 +87,9 @@ class _ParticleOde:
 
     def set_state(self, y: np.ndarray) -> None:
         n = self._n
-        self.state.particle_x = y[:3 * n].reshape(n, 3).copy()
-        self.state.particle_v = y[3 * n:].reshape(n, 3).copy()
+        # views of the integrator's fresh result (it keeps no reference to it)
+        self.state.particle_x = y[:3 * n].reshape(n, 3)
+        self.state.particle_v = y[3 * n:].reshape(n, 3)
 
     def derivative(self, t: float, y: np.ndarray) -> np.ndarray:
         n = self._n
@@ -100,7 +101,10 @@ class _ParticleOde:
         self.contact.constrain(view, f)  # it cancels what the forces push into surfaces
         if self.constraints is not None:  # last: holds the rods against every other force
             self.constraints.constrain(view, f)
-        return np.concatenate([y[3 * n:], (f / self.state.particle_mass[:, None]).ravel()])
+        out = np.empty_like(y)
+        out[:3 * n] = y[3 * n:]
+        np.divide(f, self.state.particle_mass[:, None], out=out[3 * n:].reshape(n, 3))
+        return out
 
 
 def point_rows(c: PointConstraint, held: np.ndarray, s0: float, t: float, h: float,
