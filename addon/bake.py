@@ -28,7 +28,7 @@ from ..core.world import World
 from . import budget, convert, extract, follow, inputs_hash, limits, rigid, rigid_keys
 from . import aim as aim_solver
 from . import resume as checkpoint
-from . import springs, timing
+from . import allocator, springs, timing
 from .bake_failures import Failures
 from .bake_resume import Resumable
 from .cache_paths import relative_path
@@ -91,6 +91,9 @@ class BakeJob(Resumable, Failures):
         self.suspended = {ob.name: springs.suspend_modifier(ob) for ob in self.roles.spring_meshes}
         # ... and each rigid body from its own animation, not an earlier bake's keys
         self.rigid_suspended = {ob.name: rigid_keys.suspend(ob) for ob in self.roles.rigid_bodies}
+        # sub-steps reuse their freed arrays instead of faulting fresh memory in (glibc);
+        # given back by finish() and abort()
+        self.memory = allocator.Reuse()
         try:
             self._prepare(context)
             if self._resume_from is not None:
@@ -302,6 +305,8 @@ class BakeJob(Resumable, Failures):
         """Swap the new caches in and point every result at them. Returns a summary."""
         from . import results
 
+        self.memory.end()  # the simulation is over
+
         meta = {"frame_start": self.frame_start, "frame_end": self.frame_end,
                 "fps": convert.fps(self.scene), "kind": "particles"}
         final_state = None  # the last frame's, for a later extension
@@ -419,6 +424,8 @@ class BakeJob(Resumable, Failures):
     def abort(self) -> None:
         """Delete partial caches and restore the frame; the previous bake is untouched."""
         from . import results
+
+        self.memory.end()
 
         keep = self._keep_partial
         if self._owns_checkpoint and not keep:

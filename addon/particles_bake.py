@@ -156,6 +156,8 @@ class ParticleBake:
         for what, values in (("position", state.particle_x), ("velocity", state.particle_v),
                              ("size", state.particle_size[:, None]),
                              ("age", state.particle_age[:, None])):
+            if np.isfinite(values).all():
+                continue
             bad = ~np.isfinite(values).all(axis=1)
             if bad.any():
                 raise self._particle_error(state, int(np.argmax(bad)), frame,
@@ -163,6 +165,8 @@ class ParticleBake:
                                            "ever written to a bake", values)
         for what, values, unit in (("position", state.particle_x, "m"),
                                    ("velocity", state.particle_v, "m/s")):
+            if not len(values) or np.abs(values).max() <= FLOAT32_MAX:
+                continue
             big = (np.abs(values) > FLOAT32_MAX).any(axis=1)
             if big.any():
                 raise self._particle_error(

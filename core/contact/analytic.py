@@ -93,8 +93,7 @@ class AnalyticPath(ColliderPath):
         cand = np.nonzero(np.abs(d) < CONTACT_DISTANCE)[0]
         xc = rows_at(x, cand)
         if plane:  # off its edges nothing rests on it
-            lx = xc @ inv[0, :3] + inv[0, 3]
-            ly = xc @ inv[1, :3] + inv[1, 3]
+            lx, ly = _affine_row(xc, inv[0]), _affine_row(xc, inv[1])
             inside = (np.abs(lx) <= e[0]) & (np.abs(ly) <= e[1])
             if not inside.all():
                 cand = cand[inside]
@@ -130,7 +129,7 @@ class AnalyticPath(ColliderPath):
         """Local z of points (the only coordinate planes need): one row of the inverse matrix."""
         inv = inverse_affine(self._at(s))
         if inv.ndim == 2:
-            return x @ inv[2, :3] + inv[2, 3]
+            return _affine_row(x, inv[2])
         return np.einsum("nj,nj->n", inv[:, 2, :3], x) + inv[:, 2, 3]
 
     def _segment_candidates(self, start, end, s_start, s_end) -> np.ndarray | None:
@@ -145,6 +144,18 @@ class AnalyticPath(ColliderPath):
             return np.nonzero(z1 < level)[0]
         z0 = self._local_z(start, s_start)
         return np.nonzero((z0 > level) & (z1 <= level) | (z0 < -level) & (z1 >= -level))[0]
+
+
+def _affine_row(x: np.ndarray, row: np.ndarray) -> np.ndarray:
+    """One local coordinate of world points x (n, 3): row (4,) of an inverse affine matrix.
+    A row along one axis (a ground or plane that is not turned) reads one column; others take
+    one single-threaded pass (a BLAS product would keep a second core spinning, which the
+    bake's writer thread needs)."""
+    axes = np.nonzero(row[:3])[0]
+    if len(axes) == 1:
+        k = int(axes[0])
+        return x[:, k] * row[k] + row[3]
+    return np.einsum("ij,j->i", x, row[:3]) + row[3]
 
 
 def _features(shape: str, e: np.ndarray) -> Features:

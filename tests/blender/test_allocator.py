@@ -1,0 +1,72 @@
+"""Memory reuse during a bake (``addon/allocator.py``): while a bake runs, freed state-sized
+arrays are reused instead of being faulted in afresh; when it ends (finished or failed) glibc's
+defaults are back. Counted in page faults (``ru_minflt``), not timed."""
+from __future__ import annotations
+
+import platform
+import resource
+import sys
+from pathlib import Path
+
+import bpy
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.skipif(
+    platform.system() != "Linux" or platform.libc_ver()[0] != "glibc",
+    reason="the allocator tuning is glibc's (elsewhere it does nothing)")
+
+
+def _allocator(ext):
+    return sys.modules[f"{ext.__name__}.addon.allocator"]
+
+
+def _faults_of_substeps(substeps: int = 20, arrays: int = 8) -> int:
+    """Minor page faults of ``substeps`` rounds that each hold ``arrays`` fresh (100000, 3)
+    float64 arrays at once, as a particle sub-step's passes do, then free them."""
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+    for _ in range(substeps):
+        held = [np.ones((100_000, 3)) for _ in range(arrays)]
+        del held
+    return resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before
+
+
+def test_freed_arrays_are_reused_while_a_bake_holds_memory(physanim_ext):
+    allocator = _allocator(physanim_ext)
+    _faults_of_substeps(2)
+    plain = _faults_of_substeps()
+    with allocator.reuse() as hold:
+        assert hold.active
+        _faults_of_substeps(2)  # the heap grows once ...
+        reused = _faults_of_substeps()  # ... and is reused from then on
+    after = _faults_of_substeps()
+    pages = 20 * 8 * 100_000 * 3 * 8 // 4096  # every array faulted in afresh
+    assert plain > pages // 2, plain  # glibc's defaults: fresh memory each time
+    assert reused < pages // 20, (reused, plain)
+    assert after > pages // 2, after  # given back when the bake ends
+
+
+def test_a_bake_holds_memory_reuse_until_it_ends_and_a_failed_one_lets_it_go(physanim_ext,
+                                                                                tmp_path: Path):
+    allocator = _allocator(physanim_ext)
+    bake = sys.modules[f"{physanim_ext.__name__}.addon.bake"]
+    scene = bpy.context.scene
+    scene.physanim.frame_start, scene.physanim.frame_end = 1, 6
+    ob = bpy.data.objects.new("Spray", None)
+    scene.collection.objects.link(ob)
+    ob.physanim.emitter.enabled = True  # the defaults
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "scene.blend"))
+    users = []
+    bake.run(bpy.context, on_frame=lambda job: users.append(allocator._GLIBC.users))
+    assert users and all(u == 1 for u in users), users
+    assert allocator._GLIBC.users == 0
+
+    def fail(job):
+        users.append(allocator._GLIBC.users)
+        if job.frame >= 3:
+            raise RuntimeError("stop here")
+
+    users.clear()
+    with pytest.raises(RuntimeError, match="stop here"):
+        bake.run(bpy.context, on_frame=fail)
+    assert users[-1] == 1 and allocator._GLIBC.users == 0
