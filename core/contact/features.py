@@ -163,6 +163,8 @@ def _detect(path: ColliderPath, f: Features, faces: FaceSet, x0, x1, s0: float,
     scale = float(path.per_metre.mean())
     gap = (path.offset + FACE_GAP) * scale
     near = gap + reach * scale
+    if not _within_reach(f, l0, l1, near):
+        return None
     vertex, weight, normal, anchor, depth = [], [], [], [], []
 
     def keep(apart, ids, w, sep_normal, point):
@@ -208,6 +210,23 @@ def _detect(path: ColliderPath, f: Features, faces: FaceSet, x0, x1, s0: float,
         return None
     return PointPairs(np.concatenate(vertex), np.concatenate(weight), np.concatenate(normal),
                       np.concatenate(anchor), np.concatenate(depth), gap)
+
+
+def _within_reach(f: Features, l0: np.ndarray, l1: np.ndarray, near: float) -> bool:
+    """Whether any feature's box (grown by its radius and ``near``) meets the box of the whole
+    mesh over the sub-step, l0 -> l1 (n, 3) local: most of the time none does (a cloth on a
+    wide ground plane is far from its corners and edges), and then no face or edge needs a
+    box of its own."""
+    if not len(l0):
+        return False
+    lo = np.minimum(l0.min(0), l1.min(0))
+    hi = np.maximum(l0.max(0), l1.max(0))
+    grow = (f.radius + near)[:, None]
+    boxes = [(np.minimum(f.points0, f.points1) - grow, np.maximum(f.points0, f.points1) + grow)]
+    if len(f.segments0):
+        boxes.append((np.minimum(f.segments0.min(1), f.segments1.min(1)) - near,
+                      np.maximum(f.segments0.max(1), f.segments1.max(1)) + near))
+    return any(bool(np.any(np.all((b_lo <= hi) & (b_hi >= lo), axis=1))) for b_lo, b_hi in boxes)
 
 
 def _separate(path: ColliderPath, pairs: PointPairs, x1, inv_mass, s1: float) -> bool:
