@@ -16,6 +16,7 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import ctypes.util
+import os
 import platform
 
 # mallopt(3) parameters and glibc's documented defaults for them
@@ -27,13 +28,24 @@ BAKING = {M_MMAP_THRESHOLD: 32 * 1024 * 1024, M_TRIM_THRESHOLD: 1 << 30,
           M_TOP_PAD: 64 * 1024 * 1024}
 
 
+def is_glibc() -> bool:
+    """Whether this process runs on glibc (asked of the C library itself: instant, where
+    ``platform.libc_ver`` would scan the Blender executable)."""
+    if platform.system() != "Linux":
+        return False
+    try:
+        return os.confstr("CS_GNU_LIBC_VERSION").startswith("glibc")
+    except (ValueError, OSError, AttributeError):
+        return False
+
+
 class _Glibc:
     """The process's glibc allocator controls, or None where there is no glibc."""
 
     def __init__(self):
         self.lib = None
         self.users = 0  # bakes running (a UI bake and a script's bake may overlap)
-        if platform.system() == "Linux" and platform.libc_ver()[0] == "glibc":
+        if is_glibc():
             with contextlib.suppress(OSError):
                 lib = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
                 if hasattr(lib, "mallopt") and hasattr(lib, "malloc_trim"):
