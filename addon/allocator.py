@@ -6,8 +6,11 @@ them within the sub-step. glibc gives memory above its trim threshold back to th
 free and maps large blocks afresh, so every such array costs page faults on first touch: on the
 project machine about 1 ms per 2.4 MB array, more than the arithmetic done on it (a 100,000-
 particle bake spent a third of its time there). While any bake runs, :func:`reuse` raises the
-thresholds so freed blocks stay in the heap for the next sub-step; when the last bake ends they
-go back to glibc's documented defaults and the free memory is returned (``malloc_trim``).
+thresholds so freed blocks stay in the heap for the next sub-step; when the last bake ends, the
+free memory is returned (``malloc_trim``) and the thresholds are left where glibc's own dynamic
+mode settles once a large block has been freed (any ``mallopt`` of them ends that mode for the
+process, so it cannot be switched back on): blocks up to 32 MiB from the heap, up to twice that
+kept free at its top.
 
 Elsewhere (macOS, Windows, musl) this does nothing: their allocators keep memory differently.
 """
@@ -19,13 +22,15 @@ import ctypes.util
 import os
 import platform
 
-# mallopt(3) parameters and glibc's documented defaults for them
+# mallopt(3) parameters
 M_TRIM_THRESHOLD, M_TOP_PAD, M_MMAP_THRESHOLD = -1, -2, -3
-DEFAULT = 128 * 1024  # [bytes] each of the three, per mallopt(3)
-# while baking: blocks up to glibc's largest allowed mmap threshold (32 MiB on 64-bit: a
-# 1,000,000-particle (n, 3) array is 24 MB) come from the heap; up to 1 GiB of free heap is kept
-BAKING = {M_MMAP_THRESHOLD: 32 * 1024 * 1024, M_TRIM_THRESHOLD: 1 << 30,
-          M_TOP_PAD: 64 * 1024 * 1024}
+MMAP_MAX = 32 * 1024 * 1024  # [bytes] the largest mmap threshold glibc allows (64-bit): a
+# 1,000,000-particle (n, 3) array is 24 MB
+# while baking: every block up to MMAP_MAX comes from the heap; up to 1 GiB of free heap is kept
+BAKING = {M_MMAP_THRESHOLD: MMAP_MAX, M_TRIM_THRESHOLD: 1 << 30, M_TOP_PAD: 64 * 1024 * 1024}
+# after: glibc's dynamic mode's settled state (threshold at the largest freed block, trim at
+# twice it) and its default top pad (128 KiB, mallopt(3))
+AFTER = {M_MMAP_THRESHOLD: MMAP_MAX, M_TRIM_THRESHOLD: 2 * MMAP_MAX, M_TOP_PAD: 128 * 1024}
 
 
 def is_glibc() -> bool:
@@ -62,13 +67,13 @@ class _Glibc:
         return True
 
     def release(self) -> None:
-        """Back to the defaults and free memory returned (last user)."""
+        """Free memory returned and the thresholds at :data:`AFTER` (last user)."""
         if self.lib is None or self.users == 0:
             return
         self.users -= 1
         if self.users == 0:
-            for param in BAKING:
-                self.lib.mallopt(param, DEFAULT)
+            for param, value in AFTER.items():
+                self.lib.mallopt(param, value)
             self.lib.malloc_trim(0)
 
 

@@ -415,7 +415,7 @@ class BakeJob(Resumable, Failures):
             if self.rigid is not None:
                 self.rigid.flush()
             self._save_checkpoint()
-        except (OSError, pickle.PicklingError, PhysanimError):
+        except BaseException:  # whatever a writer thread raised: nothing kept, all restored
             self.abort()
             raise
         self._keep_partial = True

@@ -29,9 +29,10 @@ def _allocator(ext):
     return sys.modules[f"{ext.__name__}.addon.allocator"]
 
 
-def _faults_of_substeps(substeps: int = 20, arrays: int = 8) -> int:
+def _faults_of_substeps(substeps: int = 10, arrays: int = 40) -> int:
     """Minor page faults of ``substeps`` rounds that each hold ``arrays`` fresh (100000, 3)
-    float64 arrays at once, as a particle sub-step's passes do, then free them."""
+    float64 arrays at once (96 MB: a million-particle bake's passes hold more), then free
+    them."""
     import resource  # Unix only (the module is skipped elsewhere)
 
     before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
@@ -41,19 +42,18 @@ def _faults_of_substeps(substeps: int = 20, arrays: int = 8) -> int:
     return resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before
 
 
-def test_freed_arrays_are_reused_while_a_bake_holds_memory(physanim_ext):
+def test_freed_arrays_are_reused_while_a_bake_holds_memory_and_returned_after(physanim_ext):
     allocator = _allocator(physanim_ext)
-    _faults_of_substeps(2)
-    plain = _faults_of_substeps()
+    pages = 10 * 40 * 100_000 * 3 * 8 // 4096  # every array faulted in afresh
     with allocator.reuse() as hold:
         assert hold.active
         _faults_of_substeps(2)  # the heap grows once ...
         reused = _faults_of_substeps()  # ... and is reused from then on
     after = _faults_of_substeps()
-    pages = 20 * 8 * 100_000 * 3 * 8 // 4096  # every array faulted in afresh
-    assert plain > pages // 2, plain  # glibc's defaults: fresh memory each time
-    assert reused < pages // 20, (reused, plain)
-    assert after > pages // 2, after  # given back when the bake ends
+    assert reused < pages // 50, (reused, pages)
+    # the bake's thresholds are gone: beyond glibc's settled trim threshold (64 MiB) the
+    # memory goes back to the system again
+    assert after > pages // 4, (after, pages)
 
 
 def test_a_bake_holds_memory_reuse_until_it_ends_and_a_failed_one_lets_it_go(physanim_ext,
@@ -80,3 +80,30 @@ def test_a_bake_holds_memory_reuse_until_it_ends_and_a_failed_one_lets_it_go(phy
     with pytest.raises(RuntimeError, match="stop here"):
         bake.run(bpy.context, on_frame=fail)
     assert users[-1] == 1 and allocator._GLIBC.users == 0
+
+
+def test_a_cancelled_bake_whose_writer_failed_still_lets_memory_reuse_go(physanim_ext,
+                                                                           tmp_path: Path):
+    """Esc or Ctrl+C keeps the frames so far, but a writer that failed leaves nothing to keep:
+    the job aborts (and lets go of the memory) whatever the writer raised."""
+    allocator = _allocator(physanim_ext)
+    bake = sys.modules[f"{physanim_ext.__name__}.addon.bake"]
+    scene = bpy.context.scene
+    scene.physanim.frame_start, scene.physanim.frame_end = 1, 20
+    ob = bpy.data.objects.new("Spray", None)
+    scene.collection.objects.link(ob)
+    ob.physanim.emitter.enabled = True
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "scene.blend"))
+    job = bake.BakeJob(bpy.context)
+    for _ in range(3):
+        job.step(bpy.context)
+    assert allocator._GLIBC.users == 1
+
+    def broken():
+        raise ValueError("the writer thread failed")
+
+    job.particles.flush = broken
+    with pytest.raises(ValueError, match="writer thread failed"):
+        job.suspend()
+    assert allocator._GLIBC.users == 0
+    assert not any(tmp_path.glob("physanim_cache/**/*.npz"))  # nothing kept
