@@ -197,3 +197,37 @@ def test_multigrid_solves_a_stiff_sheet_block_jacobi_cannot_within_the_cap():
 def test_unknown_preconditioner_is_refused():
     with pytest.raises(ValueError, match="preconditioner"):
         BaraffWitkin(preconditioner="ILU")
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("normals", ["one", "each", "none"])
+def test_filtered_matrix_equals_s_a_s_plus_i_minus_s(seed, normals):
+    """What the implicit step's preconditioner is built from: S A S + (I - S), S removing each
+    pinned vertex's motion and each pressed vertex's normal — the same whether the pressed
+    vertices share one normal (a flat ground: its own faster path) or not."""
+    from physanim.core.springs.implicit import BaraffWitkin
+
+    n, pairs, blocks, hinge, grad, c, index, values = _random_terms(seed)
+    builder = MatrixBuilder(BlockPattern(n, [pairs, hinge]))
+    builder.add_pairs(pairs, blocks)
+    builder.add_rank_one(hinge, grad, c)
+    builder.add_diagonal(index, values)
+    matrix = builder.finish()
+    dense = _dense(n, pairs, blocks, hinge, grad, c, index, values)
+    rng = np.random.default_rng(seed + 7)
+    free = rng.random(n) > 0.2
+    pressed = np.zeros(0, np.int64) if normals == "none" else \
+        np.nonzero(free & (rng.random(n) > 0.4))[0]
+    normal = rng.normal(size=(len(pressed), 3)) if normals == "each" else \
+        np.tile(rng.normal(size=3), (len(pressed), 1))
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    s = np.zeros((3 * n, 3 * n))
+    for v in range(n):
+        s[3 * v:3 * v + 3, 3 * v:3 * v + 3] = np.eye(3) * free[v]
+    for v, nv in zip(pressed, normal):
+        s[3 * v:3 * v + 3, 3 * v:3 * v + 3] -= np.outer(nv, nv)
+    expected = s @ dense @ s + np.eye(3 * n) - s
+    filtered = BaraffWitkin._filtered(matrix, free.copy(), pressed, normal)
+    u = rng.normal(size=(n, 3))
+    np.testing.assert_allclose(filtered @ u, (expected @ u.ravel()).reshape(n, 3), atol=1e-10)
+    np.testing.assert_allclose(matrix @ u, (dense @ u.ravel()).reshape(n, 3), atol=1e-12)
