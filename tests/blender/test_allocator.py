@@ -29,6 +29,18 @@ def _allocator(ext):
     return sys.modules[f"{ext.__name__}.addon.allocator"]
 
 
+def _spray(ext, folder: Path, frame_end: int):
+    """A saved file with one emitter at its defaults baking frames 1..frame_end; returns the
+    add-on's bake module."""
+    scene = bpy.context.scene
+    scene.physanim.frame_start, scene.physanim.frame_end = 1, frame_end
+    ob = bpy.data.objects.new("Spray", None)
+    scene.collection.objects.link(ob)
+    ob.physanim.emitter.enabled = True  # the defaults
+    bpy.ops.wm.save_as_mainfile(filepath=str(folder / "scene.blend"))
+    return sys.modules[f"{ext.__name__}.addon.bake"]
+
+
 def _faults_of_substeps(substeps: int = 10, arrays: int = 40) -> int:
     """Minor page faults of ``substeps`` rounds that each hold ``arrays`` fresh (100000, 3)
     float64 arrays at once (96 MB: a million-particle bake's passes hold more), then free
@@ -59,13 +71,7 @@ def test_freed_arrays_are_reused_while_a_bake_holds_memory_and_returned_after(ph
 def test_a_bake_holds_memory_reuse_until_it_ends_and_a_failed_one_lets_it_go(physanim_ext,
                                                                                 tmp_path: Path):
     allocator = _allocator(physanim_ext)
-    bake = sys.modules[f"{physanim_ext.__name__}.addon.bake"]
-    scene = bpy.context.scene
-    scene.physanim.frame_start, scene.physanim.frame_end = 1, 6
-    ob = bpy.data.objects.new("Spray", None)
-    scene.collection.objects.link(ob)
-    ob.physanim.emitter.enabled = True  # the defaults
-    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "scene.blend"))
+    bake = _spray(physanim_ext, tmp_path, 6)
     users = []
     bake.run(bpy.context, on_frame=lambda job: users.append(allocator._GLIBC.users))
     assert users and all(u == 1 for u in users), users
@@ -87,13 +93,7 @@ def test_a_cancelled_bake_whose_writer_failed_still_lets_memory_reuse_go(physani
     """Esc or Ctrl+C keeps the frames so far, but a writer that failed leaves nothing to keep:
     the job aborts (and lets go of the memory) whatever the writer raised."""
     allocator = _allocator(physanim_ext)
-    bake = sys.modules[f"{physanim_ext.__name__}.addon.bake"]
-    scene = bpy.context.scene
-    scene.physanim.frame_start, scene.physanim.frame_end = 1, 20
-    ob = bpy.data.objects.new("Spray", None)
-    scene.collection.objects.link(ob)
-    ob.physanim.emitter.enabled = True
-    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "scene.blend"))
+    bake = _spray(physanim_ext, tmp_path, 20)
     job = bake.BakeJob(bpy.context)
     for _ in range(3):
         job.step(bpy.context)
