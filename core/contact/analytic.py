@@ -68,12 +68,18 @@ class AnalyticPath(ColliderPath):
         shape = self.frame.shape
         if shape in ("HALF_SPACE", "PLANE"):
             return self._near_plane(x, s)
+        return self._near_closest(x, s)
+
+    def _near_closest(self, x, s) -> SurfacePoints:
+        """:meth:`near_surface` through each point's closest surface point in local space (any
+        shape; ``s`` a scalar or one parameter per point)."""
         l = self.to_local(x, s)
-        p, n_local, valid = _closest(shape, l, self.extent)
+        p, n_local, valid = _closest(self.frame.shape, l, self.extent)
         p_w, n_w = self.to_world(p, n_local, s)
         d = np.einsum("ij,ij->i", x - p_w, n_w)
         near = np.nonzero(valid & (d > -CONTACT_DISTANCE) & (d < CONTACT_DISTANCE))[0]
-        return SurfacePoints(near, p_w[near], n_w[near], self.surface_velocity(p[near], s),
+        s_near = s if np.ndim(s) == 0 else np.asarray(s)[near]
+        return SurfacePoints(near, p_w[near], n_w[near], self.surface_velocity(p[near], s_near),
                              d[near])
 
     def _near_plane(self, x, s) -> SurfacePoints:
@@ -83,7 +89,7 @@ class AnalyticPath(ColliderPath):
         gradient: one row of the inverse for every point, the rest only for the near ones."""
         inv = inverse_affine(self._at(s))
         if inv.ndim == 3:  # per-point times: the general route
-            return self._near_plane_general(x, s)
+            return self._near_closest(x, s)
         grad = inv[2, :3]
         scale = float(np.linalg.norm(grad))
         z = self._local_z(x, s)
@@ -111,16 +117,6 @@ class AnalyticPath(ColliderPath):
         else:
             velocity = self.surface_velocity(self.to_local(p_w, s), s)
         return SurfacePoints(cand, p_w, n_w, velocity, d)
-
-    def _near_plane_general(self, x, s) -> SurfacePoints:
-        """:meth:`_near_plane` with a matrix per point (points at different times)."""
-        l = self.to_local(x, s)
-        p, n_local, valid = _closest(self.frame.shape, l, self.extent)
-        p_w, n_w = self.to_world(p, n_local, s)
-        d = np.einsum("ij,ij->i", x - p_w, n_w)
-        near = np.nonzero(valid & (d > -CONTACT_DISTANCE) & (d < CONTACT_DISTANCE))[0]
-        return SurfacePoints(near, p_w[near], n_w[near], self.surface_velocity(p[near], s[near]),
-                             d[near])
 
     def features(self, s0: float, s1: float) -> Features:
         return self._features

@@ -6,6 +6,8 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from ..transforms import norm_rows, rows_at
+
 
 @dataclass(frozen=True)
 class Contacts:
@@ -105,25 +107,23 @@ class ContactForce:
         if len(c) == 0:
             return
         idx, normal = c.index, c.normal
-        # every point resting (a settled pile): slices, not gathers (indices sorted, unique)
-        rows = slice(None) if len(idx) == len(f_out) else idx
-        f = f_out[rows]
+        f = rows_at(f_out, idx)  # every point resting (a settled pile): no gathers
         fn = np.einsum("ij,ij->i", f, normal)
         push = np.minimum(fn, 0.0)  # only the component into the surface is cancelled
-        rel = p.v[rows] - c.surface_velocity
+        rel = rows_at(p.v, idx) - c.surface_velocity
         # the tangential parts of the velocity and of the force (f_n drops out of both)
         vt = rel - np.einsum("ij,ij->i", rel, normal)[:, None] * normal
         ft = f - fn[:, None] * normal
         # friction that would stop the sliding within this step (static friction) ...
         need = vt
-        need *= -p.mass[rows, None] / self.h
+        need *= -rows_at(p.mass, idx)[:, None] / self.h
         need -= ft
-        need_mag = np.sqrt(np.einsum("ij,ij->i", need, need))
+        need_mag = norm_rows(need)
         cap = c.friction * -push  # ... limited by Coulomb's mu |f_n| (kinetic friction)
         scale = np.minimum(1.0, cap / np.where(need_mag > 0.0, need_mag, np.inf))
         need *= scale[:, None]
         need -= push[:, None] * normal
-        if rows is idx:
-            f_out[idx] = f + need
-        else:
+        if f is f_out:
             f_out += need
+        else:
+            f_out[idx] = f + need

@@ -332,7 +332,7 @@ class BaraffWitkin(Integrator):
         """:meth:`_filtered` when every pressed vertex has the same normal ``n`` (3,): with
         S = f I - p n n^T per vertex (f: free, p: pressed), S_r B S_c = f_r f_c B
         - f_c p_r n (n^T B) - f_r p_c (B n) n^T + p_r p_c (n^T B n) n n^T, a few passes over
-        the whole matrix instead of two 3 x 3 products per block (half the time)."""
+        the whole matrix instead of two 3 x 3 products per block (a third of the time)."""
         p = matrix.pattern
         f = free.astype(np.float64)
         pr = np.zeros(p.n)
