@@ -193,6 +193,14 @@ def norm_rows(a: np.ndarray) -> np.ndarray:
     return np.sqrt(np.einsum("ij,ij->i", a, a))
 
 
+def tangents(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit tangents (k, 3) completing each unit normal (k, 3) to an orthonormal basis."""
+    helper = np.where((np.abs(n[:, 0]) < 0.57)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+    t1 = np.cross(n, helper)
+    t1 /= np.linalg.norm(t1, axis=1)[:, None]
+    return t1, np.cross(n, t1)
+
+
 def inverse3(a: np.ndarray) -> np.ndarray:
     """Inverse of (..., 3, 3) matrices by the adjugate formula."""
     a = np.asarray(a, dtype=np.float64)

@@ -99,7 +99,7 @@ class EmitterSettings:
         non_negative(owner, stretch=self.stretch)
 
 
-POINT_CONSTRAINTS = ("ON_PLANE", "ON_SPHERE", "ON_CIRCLE")
+POINT_CONSTRAINTS = ("ON_PLANE", "ON_SPHERE", "ON_CIRCLE", "ON_CURVE")
 
 
 @dataclass(frozen=True)
@@ -110,9 +110,13 @@ class PointConstraint:
         ON_PLANE   on the plane through o with normal n
         ON_SPHERE  at ``radius`` from o (on a sphere; a pendulum's rod to a pivot)
         ON_CIRCLE  on the circle of ``radius`` about o in that plane (a bead on a wire)
+        ON_CURVE   on the polyline through ``points0`` at the start, ``points1`` at the end
+                   (world positions, vertex by vertex; closed when ``cyclic``): a bead on a
+                   wire of any shape (:class:`~..forces.OnCurves`)
 
     Args: name: what messages call it (the constraint's object). kind: one of
     :data:`POINT_CONSTRAINTS`. matrix0, matrix1: (4, 4) world matrices. radius [m].
+    points0, points1: (P, 3) [m], ON_CURVE only. cyclic: ON_CURVE only.
     """
 
     name: str
@@ -120,9 +124,14 @@ class PointConstraint:
     matrix0: np.ndarray = field(default_factory=lambda: np.eye(4))
     matrix1: np.ndarray = field(default_factory=lambda: np.eye(4))
     radius: float = 1.0
+    points0: np.ndarray | None = None
+    points1: np.ndarray | None = None
+    cyclic: bool = False
 
     def __post_init__(self):
         owner = f'constraint "{self.name}"'
+        if self.kind == "ON_CURVE":
+            self._check_curve(owner)
         if self.kind not in POINT_CONSTRAINTS:
             raise ValueError(f"{owner}: kind must be one of {POINT_CONSTRAINTS} (got {self.kind!r})")
         for key in ("matrix0", "matrix1"):
@@ -130,8 +139,32 @@ class PointConstraint:
             if np.linalg.norm(getattr(self, key)[:3, 2]) < 1e-12:
                 raise ValueError(f"{owner}: its Z axis has zero length (a zero scale)")
         finite(owner, radius=self.radius)
-        if self.kind != "ON_PLANE" and not self.radius > 0.0:
+        if self.kind in ("ON_SPHERE", "ON_CIRCLE") and not self.radius > 0.0:
             raise ValueError(f"{owner}: the radius must be > 0 (got {self.radius})")
+
+    def _check_curve(self, owner: str) -> None:
+        """A wire's points: two (P, 3) finite arrays of the same shape, P >= 2, no two
+        neighbours at one place."""
+        if self.points0 is None or self.points1 is None:
+            raise ValueError(f"{owner}: a wire of any shape needs its points at both ends of "
+                             "the interval")
+        for key in ("points0", "points1"):
+            pts = np.asarray(getattr(self, key), np.float64)
+            if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 2:
+                raise ValueError(f"{owner}: the wire needs at least two points (got an array "
+                                 f"of shape {pts.shape})")
+            if not np.all(np.isfinite(pts)):
+                raise ValueError(f"{owner}: the wire's points must be finite")
+            gaps = np.linalg.norm(np.diff(np.vstack([pts, pts[:1]]) if self.cyclic else pts,
+                                          axis=0), axis=1)
+            if np.any(gaps <= 0.0):
+                k = int(np.argmax(gaps <= 0.0))
+                raise ValueError(f"{owner}: the wire's points {k} and {(k + 1) % len(pts)} are "
+                                 "at the same place")
+            object.__setattr__(self, key, pts)
+        if self.points0.shape != self.points1.shape:
+            raise ValueError(f"{owner}: the wire changed its number of points from "
+                             f"{len(self.points0)} to {len(self.points1)} within a frame")
 
 
 @dataclass(frozen=True)

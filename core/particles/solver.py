@@ -27,7 +27,7 @@ import numpy as np
 from ..bounds import DEFAULT_BOUNDS, StateBounds
 from ..contact import ColliderPaths, ContactForce, respond, resting_contacts
 from ..errors import PhysanimError, SimulationError
-from ..forces import (DampedSprings, Gravity, HardConstraints, OnPlanes, ParticleView,
+from ..forces import (DampedSprings, Gravity, HardConstraints, OnCurves, OnPlanes, ParticleView,
                       Rods, Tethers, on_circles)
 from ..integrators import make_integrator
 from ..world import SolverSettings, SolverSystem, World, WorldFrame
@@ -112,6 +112,9 @@ def point_rows(c: PointConstraint, held: np.ndarray, s0: float, t: float, h: flo
     """The rows of point constraint ``c`` on particles ``held`` for the sub-step starting at
     ``s0`` of the frame (time ``t``): its frame's origin moves linearly over the frame, its axis
     is taken at the sub-step's start."""
+    if c.kind == "ON_CURVE":  # its points move linearly over the frame
+        return [OnCurves(held, c.points0 + s0 * (c.points1 - c.points0),
+                         (c.points1 - c.points0) / frame_dt, c.cyclic, t)]
     o0, o1 = c.matrix0[:3, 3], c.matrix1[:3, 3]
     origin, velocity = o0 + s0 * (o1 - o0), (o1 - o0) / frame_dt
     axis = c.matrix0[:3, 2] + s0 * (c.matrix1[:3, 2] - c.matrix0[:3, 2])

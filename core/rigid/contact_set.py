@@ -9,14 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..colouring import colour
-
-
-def tangents(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Two unit tangents (k, 3) completing each unit normal (k, 3) to an orthonormal basis."""
-    helper = np.where((np.abs(n[:, 0]) < 0.57)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-    t1 = np.cross(n, helper)
-    t1 /= np.linalg.norm(t1, axis=1)[:, None]
-    return t1, np.cross(n, t1)
+from ..transforms import tangents
 
 
 @dataclass

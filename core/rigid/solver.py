@@ -16,11 +16,11 @@ import numpy as np
 from ..bounds import DEFAULT_BOUNDS, StateBounds
 from ..contact import ColliderPaths
 from ..errors import SimulationError
-from ..transforms import TransformPath
+from ..transforms import TransformPath, tangents
 from ..world import SolverSystem, World, WorldFrame
 from .frame_inputs import RigidFrameInputs, RigidPaths, RigidReport
 from . import contact_solver as cs_
-from .contact_set import ContactSet, tangents
+from .contact_set import ContactSet
 from . import as_colliders, dynamics, joint_step, sleep, warm
 from . import reactions as reactions_
 from . import joint_solver as js_

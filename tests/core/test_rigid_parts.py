@@ -10,7 +10,7 @@ import pytest
 
 from physanim.core.rigid import quaternion as quat
 from physanim.core.colouring import colour
-from physanim.core.rigid.contact_set import tangents
+from physanim.core.transforms import tangents
 from physanim.core.rigid import contact_solver as cs_
 from physanim.core.rigid.contact_solver import Softness
 
