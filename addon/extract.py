@@ -18,7 +18,7 @@ from ..core.particles.pair_collisions import ParticleCollisions
 from ..core.particles import (EmitterFrame, EmitterSettings, FrameInputs, ParticleModel,
                               ParticleModelBuilder, PointConstraint, SpringLink)
 from . import convert, limits
-from .mesh_read import evaluated_mesh, mesh_polygons
+from .mesh_read import evaluated_mesh, mesh_polygons, polyline
 from .props import INTERACTION_TYPES
 from .rigid_props import CONSTRAINT_TYPE_ITEMS, POINT_TYPES
 
@@ -82,10 +82,12 @@ def type_name(identifier: str) -> str:
     return next(name for key, name, _ in CONSTRAINT_TYPE_ITEMS if key == identifier)
 
 
-def point_constraints(scene, ob, frame: int) -> list:
+def point_constraints(scene, ob, frame: int, depsgraph) -> list:
     """Emitter ``ob``'s particle constraints at ``frame`` (the scene is there): (constraint
-    object's name, type, world matrix, radius) each — plain data, as a bake's checkpoint
-    keeps it — or an error naming the constraint."""
+    object's name, core kind, world matrix, radius, wire) each — plain data, as a bake's
+    checkpoint keeps it — or an error naming the constraint. On Wire on a Curve object is a
+    wire of the curve's shape (core kind ON_CURVE; ``wire``: its world points and whether it
+    is closed, :func:`curve_wire`), else None."""
     out = []
     for c in attachments(scene, ob, "particles"):
         p = c.physanim.constraint
@@ -94,8 +96,34 @@ def point_constraints(scene, ob, frame: int) -> list:
                                 f"Wire, not by a {type_name(p.type)} joint — choose one of "
                                 "those", obj=c.name, frame=frame, kind="constraint")
         _check_finite(c, frame, "constraint", {"radius": float(p.radius)})
-        out.append((c.name, p.type, world_matrix(c, frame, "constraint"), float(p.radius)))
+        m = world_matrix(c, frame, "constraint")
+        if p.type == 'ON_CIRCLE' and c.type == 'CURVE':
+            out.append((c.name, "ON_CURVE", m, float(p.radius), curve_wire(c, m, depsgraph,
+                                                                          frame)))
+        else:
+            out.append((c.name, p.type, m, float(p.radius), None))
     return out
+
+
+def curve_wire(ob, matrix: np.ndarray, depsgraph, frame) -> tuple[np.ndarray, bool]:
+    """A Curve object's wire at the depsgraph's frame: its evaluated spline (at the curve's
+    resolution, modifiers applied) as (P, 3) world points in order, and whether it is closed
+    (Cyclic); neighbours at one place (a Bezier point's zero-length segment) are merged. An
+    error naming the object when it is not one spline."""
+    mesh = evaluated_mesh(ob, depsgraph, topology=True)
+    line = polyline(mesh.edges, len(mesh.co)) if mesh.edges is not None else None
+    if line is None:
+        raise PhysanimError("On Wire runs particles along one spline: this curve has "
+                            f"{len(ob.data.splines)} splines (or one that branches) — keep one "
+                            "spline, or separate the others into their own objects",
+                            obj=ob.name, frame=frame, kind="constraint")
+    order, closed = line
+    pts = mesh.co[order] @ matrix[:3, :3].T + matrix[:3, 3]
+    keep = np.ones(len(pts), bool)
+    keep[1:] = np.any(pts[1:] != pts[:-1], axis=1)
+    if closed and len(pts) > 1 and not np.any(pts[-1] != pts[0]):
+        keep[-1] = False
+    return pts[keep], closed
 
 
 def gather(scene, only: set[str] | None = None) -> Roles:
@@ -200,6 +228,14 @@ def _check_finite(ob, frame: int, kind: str, values: dict) -> None:
         if isinstance(value, float) and not math.isfinite(value):
             raise PhysanimError(f"{key} is {value} — check its keyframes and drivers",
                                 obj=ob.name, frame=frame, kind=kind)
+
+
+def _wire_ends(start, end) -> tuple:
+    """PointConstraint's (points0, points1, cyclic) from two :func:`curve_wire` results (or
+    None, None, False for no wire)."""
+    if start is None or end is None:
+        return None, None, False
+    return start[0], end[0], start[1]
 
 
 def _framed(name: str, frame: int, kind: str, make, *args):
@@ -365,7 +401,7 @@ class Extractor:
                         f"{key}_random or raise {key}", obj=ob.name, frame=frame, kind="emitter")
             values["active"] = window_active(p.frame_start, p.frame_end,  # this interval's
                                              frame - 1 if since is None else since, frame)
-            values["constraints"] = point_constraints(self.scene, ob, frame)
+            values["constraints"] = point_constraints(self.scene, ob, frame, depsgraph)
             emitters.append((world_matrix(ob, frame, "emitter"), verts, values))
         return emitters
 
@@ -426,8 +462,8 @@ class Extractor:
         # the interval's births are frame b's: they use the emitter's values at b
         for i, ((m0, v0, start), (m1, v1, val)) in enumerate(zip(a.emitters, b.emitters)):
             held = tuple(_framed(name, a.frame, "constraint", PointConstraint, name, kind, ma, mb,
-                                 radius)
-                         for (name, kind, ma, _), (_, _, mb, radius)
+                                 radius, *_wire_ends(wa, wb))
+                         for (name, kind, ma, _, wa), (_, _, mb, radius, wb)
                          in zip(start["constraints"], val["constraints"]))
             emitters.append(EmitterFrame(
                 rate=val["rate"], rate_random=val["rate_random"], speed=val["speed"],

@@ -122,12 +122,31 @@ def _object_record(ob, role: str | None) -> dict:
     record["rotation_mode"] = ob.rotation_mode
     if role is not None:
         record["props"] = _rna_dump(getattr(ob.physanim, role), f"physanim.{role}.", animated)
+    if ob.type == 'CURVE' and role is not None:  # a wire's shape
+        record["curve"] = _curve_record(ob.data)
     if ob.type == 'MESH' and role is not None:
         co = np.empty(len(ob.data.vertices) * 3, np.float32)
         ob.data.vertices.foreach_get("co", co)
         record["mesh"] = (hashlib.sha1(co.tobytes()).hexdigest(), len(ob.data.polygons),
                           _animation_dump(ob.data.shape_keys) if ob.data.shape_keys else [])
     return record
+
+
+def _curve_record(curve) -> list:
+    """A curve's splines: type, resolution, cyclic and every control point (and handle), and
+    its animation (shape keys)."""
+    out = [curve.resolution_u, _animation_dump(curve.shape_keys) if curve.shape_keys else []]
+    for spline in curve.splines:
+        arrays = []
+        for points, keys in ((spline.points, ("co",)),
+                             (spline.bezier_points, ("co", "handle_left", "handle_right"))):
+            for key in keys:
+                width = 4 if points == spline.points else 3
+                co = np.empty(len(points) * width, np.float32)
+                points.foreach_get(key, co)
+                arrays.append(hashlib.sha1(co.tobytes()).hexdigest())
+        out.append((spline.type, spline.resolution_u, spline.use_cyclic_u, arrays))
+    return out
 
 
 def _rigid_record(ob) -> dict:

@@ -126,7 +126,9 @@ class PHYSANIM_PT_constraint(_PhysicsPanel, bpy.types.Panel):
         if mesh and p.object1.type == 'MESH':
             col.prop_search(p, "group1", p.object1, "vertex_groups")
         if points:
-            if p.type != 'ON_PLANE':
+            if p.type == 'ON_CIRCLE' and context.object.type == 'CURVE':
+                col.label(text="The wire is this curve", icon='CURVE_DATA')
+            elif p.type != 'ON_PLANE':
                 col.prop(p, "radius")
             if not particles:
                 layout.label(text="On Plane, On Sphere and On Wire hold an emitter's "

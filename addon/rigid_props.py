@@ -113,8 +113,9 @@ CONSTRAINT_TYPE_ITEMS = [
      "origin, normal to its Z axis (they slide on it)"),
     ('ON_SPHERE', "On Sphere", "An emitter's particles stay at Radius from this object's "
      "origin (on a sphere; each a pendulum on a rod to it)"),
-    ('ON_CIRCLE', "On Wire", "An emitter's particles run on the circle of Radius about this "
-     "object's origin, in its XY plane (beads on a wire)"),
+    ('ON_CIRCLE', "On Wire", "An emitter's particles run along a wire (beads on it): this "
+     "object's curve when it is a Curve object, else the circle of Radius about its origin, "
+     "in its XY plane"),
 ]
 POINT_TYPES = ('ON_PLANE', 'ON_SPHERE', 'ON_CIRCLE')  # for an emitter's particles
 
@@ -185,7 +186,8 @@ class PHYSANIM_PG_constraint(bpy.types.PropertyGroup):
     break_force: FloatProperty(name="Breaking Force", min=1.0e-6, max=1.0e12, default=100.0,
                                unit='NONE', description="Newtons")
     radius: FloatProperty(name="Radius", min=1e-6, max=1.0e5, default=1.0, unit='LENGTH',
-                          description="The sphere's or the wire's radius (On Sphere, On Wire)")
+                          description="The sphere's or the circular wire's radius (On Sphere, "
+                                      "On Wire on an object that is not a curve)")
     disable_collisions: BoolProperty(name="Disable Collisions", default=True, options=STATIC,
                                      description="The two objects do not collide with each "
                                                  "other")

@@ -439,3 +439,68 @@ def test_a_constraint_on_an_object_in_two_roles_holds_what_its_type_says(physani
     mesh = _pc2_world(physanim_ext, cloth)
     np.testing.assert_allclose(mesh[-1], mesh[0], atol=1e-6)
     assert scene.physanim.frame_end == 24
+
+
+def _curve_wire(name, kind='CIRCLE', **placement):
+    add = {'CIRCLE': bpy.ops.curve.primitive_bezier_circle_add,
+           'BEZIER': bpy.ops.curve.primitive_bezier_curve_add}[kind]
+    add(**placement)
+    ob = bpy.context.object
+    ob.name = name
+    return ob
+
+
+def _evaluated_polyline(ob):
+    """The curve's evaluated points in world space, in order, and whether it is closed (read
+    here through Blender's own API, independently of the add-on)."""
+    me = ob.evaluated_get(bpy.context.evaluated_depsgraph_get()).to_mesh()
+    co = np.array([ob.matrix_world @ v.co for v in me.vertices])
+    closed = len(me.edges) == len(me.vertices)
+    ob.evaluated_get(bpy.context.evaluated_depsgraph_get()).to_mesh_clear()
+    return co, closed
+
+
+def _off_polyline(x, pts, closed):
+    a, b = (pts, np.roll(pts, -1, axis=0)) if closed else (pts[:-1], pts[1:])
+    d = b - a
+    u = np.clip(np.einsum("rsk,sk->rs", x[:, None] - a[None], d) / np.einsum("sk,sk->s", d, d),
+                0.0, 1.0)
+    return np.min(np.linalg.norm(x[:, None] - (a[None] + u[..., None] * d[None]), axis=2),
+                  axis=1)
+
+
+def test_an_emitters_particles_run_along_a_curve_object_at_the_defaults(physanim_ext, tmp_path):
+    """On Wire on a Curve object, nothing else set: a default plane emitter under Blender's
+    default Bezier circle (radius 1) stood up vertical about (0, 0, 1). Every particle is on the
+    curve as Blender evaluates it (its 48-point polyline at the default resolution), in every
+    frame, and they run round it (they are not pinned where they were born)."""
+    _scene(tmp_path)
+    bpy.ops.mesh.primitive_plane_add()
+    emitter = bpy.context.object
+    emitter.physanim.emitter.enabled = True
+    wire = _curve_wire("Loop", location=(0.0, 0.0, 1.0), rotation=(math.pi / 2, 0.0, 0.0))
+    c = wire.physanim.constraint
+    c.enabled, c.object1, c.type = True, emitter, 'ON_CIRCLE'
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    frames = [a for a in _particle_frames(physanim_ext, emitter) if len(a["id"])]
+    assert len(frames) > 40
+    x = np.concatenate([a["position"] for a in frames])
+    pts, closed = _evaluated_polyline(wire)
+    assert closed and len(pts) >= 16
+    assert _off_polyline(x, pts, closed).max() < 1e-5
+    assert np.ptp(x[:, 2]) > 1.0 and np.ptp(x[:, 0]) > 1.0  # along the loop, not pinned
+
+
+def test_a_curve_wire_that_is_not_one_spline_says_why(physanim_ext, tmp_path):
+    _scene(tmp_path)
+    bpy.ops.mesh.primitive_plane_add()
+    emitter = bpy.context.object
+    emitter.physanim.emitter.enabled = True
+    wire = _curve_wire("Rails", 'BEZIER', location=(0.0, 0.0, 1.0))
+    second = wire.data.splines.new('POLY')
+    second.points.add(1)
+    second.points[1].co = (0.0, 1.0, 0.0, 1.0)
+    c = wire.physanim.constraint
+    c.enabled, c.object1, c.type = True, emitter, 'ON_CIRCLE'
+    with pytest.raises(RuntimeError, match=r'"Rails".*one spline: this curve has 2 splines'):
+        bpy.ops.physanim.bake()
