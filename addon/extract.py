@@ -2,6 +2,7 @@
 of every keyframable property sampled per frame (after ``scene.frame_set``)."""
 from __future__ import annotations
 
+import contextlib
 import math
 from dataclasses import dataclass, field
 
@@ -110,7 +111,8 @@ def curve_wire(ob, matrix: np.ndarray, depsgraph, frame) -> tuple[np.ndarray, bo
     resolution, modifiers applied) as (P, 3) world points in order, and whether it is closed
     (Cyclic); neighbours at one place (a Bezier point's zero-length segment) are merged. An
     error naming the object when it is not one spline."""
-    mesh = evaluated_mesh(ob, depsgraph, topology=True)
+    with _centreline(ob.data, depsgraph):
+        mesh = evaluated_mesh(ob, depsgraph, topology=True)
     line = polyline(mesh.edges, len(mesh.co)) if mesh.edges is not None else None
     if line is None:
         raise PhysanimError("On Wire runs particles along one spline: this curve has "
@@ -228,6 +230,29 @@ def _check_finite(ob, frame: int, kind: str, values: dict) -> None:
         if isinstance(value, float) and not math.isfinite(value):
             raise PhysanimError(f"{key} is {value} — check its keyframes and drivers",
                                 obj=ob.name, frame=frame, kind=kind)
+
+
+@contextlib.contextmanager
+def _centreline(curve, depsgraph):
+    """Within: ``curve`` evaluates to its centre line only — no bevel, extrusion or fill (what
+    a wire shows is not what it is); its settings come back after, whatever happens."""
+    keep = {key: getattr(curve, key) for key in ("extrude", "bevel_depth", "bevel_mode",
+                                                  "fill_mode")}
+    bare = {"extrude": 0.0, "bevel_depth": 0.0, "bevel_mode": 'ROUND'}
+    if curve.dimensions == '2D':
+        bare["fill_mode"] = 'NONE'
+    changed = {key: value for key, value in bare.items() if keep[key] != value}
+    try:
+        for key, value in changed.items():
+            setattr(curve, key, value)
+        if changed:
+            depsgraph.update()
+        yield
+    finally:
+        for key in changed:
+            setattr(curve, key, keep[key])
+        if changed:
+            depsgraph.update()
 
 
 def _wire_ends(start, end) -> tuple:

@@ -469,22 +469,29 @@ def _off_polyline(x, pts, closed):
                   axis=1)
 
 
-def test_an_emitters_particles_run_along_a_curve_object_at_the_defaults(physanim_ext, tmp_path):
+@pytest.mark.parametrize("bevel", [0.0, 0.05])
+def test_an_emitters_particles_run_along_a_curve_object_at_the_defaults(physanim_ext, tmp_path,
+                                                                        bevel):
     """On Wire on a Curve object, nothing else set: a default plane emitter under Blender's
     default Bezier circle (radius 1) stood up vertical about (0, 0, 1). Every particle is on the
     curve as Blender evaluates it (its 48-point polyline at the default resolution), in every
-    frame, and they run round it (they are not pinned where they were born)."""
+    frame, and they run round it (they are not pinned where they were born). A bevel (the wire
+    shown as a tube) changes nothing: the wire is the curve's centre line, and the bevel is
+    back as it was after the bake."""
     _scene(tmp_path)
     bpy.ops.mesh.primitive_plane_add()
     emitter = bpy.context.object
     emitter.physanim.emitter.enabled = True
     wire = _curve_wire("Loop", location=(0.0, 0.0, 1.0), rotation=(math.pi / 2, 0.0, 0.0))
+    wire.data.bevel_depth = bevel
     c = wire.physanim.constraint
     c.enabled, c.object1, c.type = True, emitter, 'ON_CIRCLE'
     assert bpy.ops.physanim.bake() == {'FINISHED'}
+    assert wire.data.bevel_depth == pytest.approx(bevel)
     frames = [a for a in _particle_frames(physanim_ext, emitter) if len(a["id"])]
     assert len(frames) > 40
     x = np.concatenate([a["position"] for a in frames])
+    wire.data.bevel_depth = 0.0  # the centre line, read through Blender's API
     pts, closed = _evaluated_polyline(wire)
     assert closed and len(pts) >= 16
     assert _off_polyline(x, pts, closed).max() < 1e-5
