@@ -22,6 +22,10 @@ Each run is checked afterwards (particle count, nobody below the ground, particl
 Part 2, "steady" — core solver only: N particles pre-filled high above a ground with long lives,
 one warm-up frame, then ``--steady-frames`` frames of one sub-step each, per integrator.
 
+Part 3, "memory" (``--parts memory``; not run by default: it writes gigabytes) — the peak memory
+of a ``--memory-count`` particle bake at the defaults for each of ``--memory-frames`` frame
+counts, each in its own process (``bench/particles_memory.py``).
+
 ``--profile`` runs one more physanim bake under cProfile (after the timed runs) and prints the
 hottest core and add-on functions.
 """
@@ -38,7 +42,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from bench import blender_side, common, particles_compare  # blender_side: before any bpy
+from bench import blender_side, common, particles_compare, particles_memory  # blender_side: before any bpy
 from bench.particles_compare import FPS, FRICTION, RESTITUTION
 
 
@@ -101,10 +105,12 @@ class Options:
     sizes: tuple[int, ...]
     steady_frames: int
     integrators: tuple[str, ...]
-    parts: frozenset[str]  # of compare, steady, profile
+    parts: frozenset[str]  # of compare, steady, memory, profile
     blender_method: str
     no_blender: bool
     top: int
+    memory_count: int = 1_000_000
+    memory_frames: tuple[int, ...] = (50, 125, 250)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -121,7 +127,11 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--blender-method", choices=("frames", "bake"), default="frames",
                     help="frame_set(1..F) from an empty cache (default) or ptcache.bake")
     ap.add_argument("--parts", default="compare,steady",
-                    help="comma list of: compare, steady (add profile with --profile)")
+                    help="comma list of: compare, steady, memory (add profile with --profile)")
+    ap.add_argument("--memory-count", type=int, default=1_000_000,
+                    help="memory: particles of the bakes (default 1000000)")
+    ap.add_argument("--memory-frames", default="50,125,250",
+                    help="memory: the frame counts baked, each in its own process")
     ap.add_argument("--no-blender", action="store_true",
                     help="compare: skip Blender's built-in run")
     ap.add_argument("--profile", action="store_true",
@@ -149,7 +159,8 @@ def parse_args(argv: list[str]) -> Options:
         steady_frames=args.steady_frames or (3 if args.quick else 5),
         integrators=tuple(i.strip() for i in args.integrators.split(",")),
         parts=frozenset(parts), blender_method=args.blender_method, no_blender=args.no_blender,
-        top=args.top)
+        top=args.top, memory_count=args.memory_count,
+        memory_frames=tuple(common.int_list(args.memory_frames)))
 
 
 def compare(opts: Options, folder: str) -> list[str]:
@@ -187,12 +198,19 @@ def steady_states(opts: Options) -> list[str]:
 
 
 def run_parts(opts: Options, folder: str) -> list[str]:
-    """The parts asked for, in order: compare, steady, profile; returns their problems."""
+    """The parts asked for, in order: compare, steady, memory, profile; returns their
+    problems."""
     problems: list[str] = []
     if "compare" in opts.parts:
         problems += compare(opts, folder)
     if "steady" in opts.parts:
         problems += steady_states(opts)
+    if "memory" in opts.parts:
+        rows = particles_memory.measure(opts.memory_count, list(opts.memory_frames))
+        print(particles_memory.table(opts.memory_count, rows) + "\n", flush=True)
+        problems += [f"memory: {r['alive']:,} alive at the end of {r['frames']} frames, "
+                     f"expected {opts.memory_count:,}" for r in rows
+                     if r["alive"] != opts.memory_count]
     if "profile" in opts.parts:
         print(particles_compare.profile_physanim_bake(opts.scene, folder, opts.top), flush=True)
     return problems
