@@ -3,10 +3,13 @@
 Two joints couple when they share a body that impulses move; when no such body has more than
 two joints and the joints close no loop, every group of coupled joints is a path — a rope, a
 chain, a pendulum of pendulums, a bridge held at both ends — and the system is block
-tridiagonal along each path. It is then solved exactly in one sweep down each path and one
-back (block Thomas: Baraff's linear-time elimination of Lagrange multipliers for the simplest
-tree), all paths together, position by position. Iterative solves need more and more
-iterations as a chain gets longer; this stays one sweep.
+tridiagonal along each path. It is then solved exactly (Baraff's linear-time elimination of
+Lagrange multipliers for the simplest tree) by block cyclic reduction: all paths and positions
+together, in log2(L) vectorised levels for paths of L joints. (Block Thomas, one sweep down
+each path and one back, cost a small inverse per joint in a Python loop along the path: most
+of the chain benchmark's time. Parallel cyclic reduction, every position at every level, took
+log2(L) times the inverses, which cost more than the loop saved.) Iterative solves need more and more iterations as a chain gets
+longer; this stays exact.
 
 The system is the one conjugate gradients would solve (:class:`.joint_solver._Rows`): each
 joint's rows in use, springs' softness on the diagonal, and, for position projections, 3 rows
@@ -15,14 +18,25 @@ taken in through their Schur complement.
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 
 def chains(ab: np.ndarray, moved: np.ndarray) -> list[np.ndarray] | None:
     """The joints (sides ``ab`` (J, 2); ``moved`` (J, 2): impulses move that side's body)
     ordered along paths, or None when a moved body has three or more joints or the joints
-    close a loop."""
-    n = len(ab)
+    close a loop. Read-only results, remembered for the last few joint sets (every sub-step
+    asks again for the same joints: finding the paths is a Python walk along them)."""
+    ab = np.ascontiguousarray(ab, np.int64)
+    moved = np.ascontiguousarray(moved, bool)
+    return _chains(ab.tobytes(), moved.tobytes(), len(ab))
+
+
+@functools.lru_cache(maxsize=8)
+def _chains(ab_bytes: bytes, moved_bytes: bytes, n: int) -> list[np.ndarray] | None:
+    ab = np.frombuffer(ab_bytes, np.int64).reshape(n, 2)
+    moved = np.frombuffer(moved_bytes, bool).reshape(n, 2)
     if not n:
         return []
     joints_of: dict[int, list[int]] = {}
@@ -55,6 +69,8 @@ def chains(ab: np.ndarray, moved: np.ndarray) -> list[np.ndarray] | None:
         out.append(np.array(path, np.int64))
     if not seen.all():  # what is left has two neighbours all round: loops
         return None
+    for path in out:
+        path.setflags(write=False)
     return out
 
 
@@ -100,31 +116,15 @@ class ChainSolver:
             self.a_inv_b = inner
 
     def _factor(self) -> None:
-        """Forward elimination of the block-tridiagonal matrices, all paths at once: the
-        inverses of the eliminated diagonal blocks (small inverses and products: numpy's
-        batched solve with a matrix right-hand side is ten times slower)."""
-        d = self.d.copy()
-        inv = np.empty_like(d)
-        inv[:, 0] = np.linalg.inv(d[:, 0])
-        for k in range(1, d.shape[1]):
-            lower = np.swapaxes(self.u[:, k - 1], 1, 2)
-            d[:, k] -= lower @ inv[:, k - 1] @ self.u[:, k - 1]
-            inv[:, k] = np.linalg.inv(d[:, k])
-        self.inv = inv
+        self.levels, self.inv = reduce(self.d, self.u)
 
     def _joint_solve(self, b: np.ndarray) -> np.ndarray:
         """A^-1 b for packed joint parts b (J * R, m)."""
         r, rows = self.op.r, self.rows
         m = b.shape[1]
         idx, pad = np.maximum(self.index, 0), self.index < 0
-        y = b.reshape(len(r), rows, m)[idx] * ~pad[..., None, None]
-        for k in range(1, y.shape[1]):
-            y[:, k] -= np.swapaxes(self.u[:, k - 1], 1, 2) @ (self.inv[:, k - 1] @ y[:, k - 1])
-        x = np.empty_like(y)
-        last = y.shape[1] - 1
-        x[:, last] = self.inv[:, last] @ y[:, last]
-        for k in range(last - 1, -1, -1):
-            x[:, k] = self.inv[:, k] @ (y[:, k] - self.u[:, k] @ x[:, k + 1])
+        x = reduced_solve(self.levels, self.inv, b.reshape(len(r), rows, m)[idx]
+                          * ~pad[..., None, None])
         out = np.zeros((len(r), rows, m))
         out[self.index[~pad]] = x[~pad]
         return (out * self.op.use[..., None]).reshape(len(r) * rows, m)
@@ -137,3 +137,61 @@ class ChainSolver:
         inner = self._joint_solve(bj)[:, 0]
         y = np.linalg.lstsq(self.schur, bg - self.b_.T @ inner, rcond=None)[0]
         return np.concatenate([inner - self.a_inv_b @ y, y])
+
+
+def reduce(d: np.ndarray, u: np.ndarray) -> tuple[list, np.ndarray]:
+    """Block cyclic reduction of C block-tridiagonal matrices: diagonal blocks d (C, L, R, R),
+    blocks above the diagonal u (C, L - 1, R, R) (below it: their transposes). Each level
+    eliminates the odd positions, folding them into their even neighbours, which leaves a
+    block-tridiagonal system on the even positions, half as long; after log2(L) levels one
+    position is left. About L small inverses in all, in log2(L) vectorised steps. Returns the
+    levels — (alpha, gamma, the odd positions' inverses, their blocks below and above), alpha
+    and gamma folding a right-hand side's odd positions into the even ones, from the left and
+    the right — and the inverse of the last block; :func:`reduced_solve` uses them."""
+    up = np.zeros_like(d)  # U_i: position i's coupling to the one after it
+    up[:, :-1] = u
+    low = np.zeros_like(d)  # L_i = U_(i-1)^T: to the one before
+    low[:, 1:] = np.swapaxes(u, 2, 3)
+    levels = []
+    while d.shape[1] > 1:
+        even_d, odd_d = d[:, 0::2], d[:, 1::2]
+        even_low, odd_low = low[:, 0::2], low[:, 1::2]
+        even_up, odd_up = up[:, 0::2], up[:, 1::2]
+        evens, odds = even_d.shape[1], odd_d.shape[1]
+        inv = np.linalg.inv(odd_d)
+        # even position 2t: odd t - 1 on its left, odd t on its right
+        alpha, gamma = np.zeros_like(even_d), np.zeros_like(even_d)
+        alpha[:, 1:] = -even_low[:, 1:] @ inv[:, :evens - 1]
+        gamma[:, :odds] = -even_up[:, :odds] @ inv
+        d = even_d.copy()
+        d[:, 1:] += alpha[:, 1:] @ odd_up[:, :evens - 1]
+        d[:, :odds] += gamma[:, :odds] @ odd_low
+        low, up = np.zeros_like(d), np.zeros_like(d)
+        low[:, 1:] = alpha[:, 1:] @ odd_low[:, :evens - 1]
+        up[:, :odds] = gamma[:, :odds] @ odd_up
+        levels.append((alpha, gamma, inv, odd_low, odd_up))
+    return levels, np.linalg.inv(d)
+
+
+def reduced_solve(levels: list, inv: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """x (C, L, R, m) solving the systems :func:`reduce` reduced, for right-hand sides b of
+    the same shape: the right-hand side folded level by level, the last position solved, then
+    the odd positions of each level back from their even neighbours."""
+    odd_parts = []
+    for alpha, gamma, _, _, _ in levels:
+        even, odd = b[:, 0::2], b[:, 1::2]
+        evens, odds = even.shape[1], odd.shape[1]
+        b = even.copy()
+        b[:, 1:] += alpha[:, 1:] @ odd[:, :evens - 1]
+        b[:, :odds] += gamma[:, :odds] @ odd
+        odd_parts.append(odd)
+    x = inv @ b
+    for (_, _, odd_inv, odd_low, odd_up), odd in zip(reversed(levels), reversed(odd_parts)):
+        evens, odds = x.shape[1], odd.shape[1]
+        rhs = odd - odd_low @ x[:, :odds]
+        right = min(odds, evens - 1)  # odd t has even t + 1 on its right
+        rhs[:, :right] -= odd_up[:, :right] @ x[:, 1:right + 1]
+        out = np.empty((x.shape[0], evens + odds) + x.shape[2:])
+        out[:, 0::2], out[:, 1::2] = x, odd_inv @ rhs
+        x = out
+    return x

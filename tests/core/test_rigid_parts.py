@@ -158,3 +158,27 @@ def test_a_symmetric_load_on_four_coplanar_points_is_shared_equally():
     assert solved.all()
     assert np.allclose(x, x.mean(), rtol=1e-9) and x.min() > 0.0
     assert x.sum() == pytest.approx(1.0 / inv_mass, rel=1e-9)  # stops the fall, exactly
+
+
+@pytest.mark.parametrize("paths, length, rows", [(1, 100, 6), (3, 37, 5), (2, 65, 6), (2, 1, 4),
+                                                  (4, 2, 3), (1, 3, 2)])
+def test_block_cyclic_reduction_solves_block_tridiagonal_systems(paths, length, rows):
+    # The joints' chain solve against a dense solve of the same symmetric positive definite
+    # block-tridiagonal systems (one per path, several right-hand sides), to rounding.
+    from physanim.core.rigid.joint_chains import reduce, reduced_solve
+    rng = np.random.default_rng(length)
+    d = rng.normal(size=(paths, length, rows, rows))
+    d = d @ np.swapaxes(d, 2, 3) + 6 * rows * np.eye(rows)
+    u = rng.normal(size=(paths, length - 1, rows, rows))
+    b = rng.normal(size=(paths, length, rows, 2))
+    x = reduced_solve(*reduce(d, u), b)
+    for c in range(paths):
+        dense = np.zeros((length * rows, length * rows))
+        for i in range(length):
+            dense[i * rows:(i + 1) * rows, i * rows:(i + 1) * rows] = d[c, i]
+            if i < length - 1:
+                dense[i * rows:(i + 1) * rows, (i + 1) * rows:(i + 2) * rows] = u[c, i]
+                dense[(i + 1) * rows:(i + 2) * rows, i * rows:(i + 1) * rows] = u[c, i].T
+        expected = np.linalg.solve(dense, b[c].reshape(-1, 2))
+        np.testing.assert_allclose(x[c].reshape(-1, 2), expected, rtol=0,
+                                   atol=1e-12 * np.abs(expected).max())
