@@ -35,7 +35,9 @@ PACKAGE = __name__.rsplit(".addon.", 1)[0]
 #: Seconds of baking between checkpoints: the work a cut-off bake can lose (each checkpoint costs
 #: a pickle of the state). PHYSANIM_CHECKPOINT_SECONDS overrides it (:func:`interval`).
 EVERY_SECONDS = 10.0
-FORMAT = 1
+#: Bumped when what a checkpoint holds changes shape (2: an emitter's particle constraints carry
+#: their wire), so an older checkpoint is not resumed but baked afresh.
+FORMAT = 2
 
 
 def folder(scene) -> Path:
