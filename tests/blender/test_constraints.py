@@ -511,3 +511,34 @@ def test_a_curve_wire_that_is_not_one_spline_says_why(physanim_ext, tmp_path):
     c.enabled, c.object1, c.type = True, emitter, 'ON_CIRCLE'
     with pytest.raises(RuntimeError, match=r'"Rails".*one spline: this curve has 2 splines'):
         bpy.ops.physanim.bake()
+
+
+def test_particles_ride_a_curve_wire_that_moves_and_bends(physanim_ext, tmp_path):
+    """The curve wire keyed to slide 1 m along x over the bake and one of its control points
+    keyed to move (the wire bends): at every frame every particle is on the curve as Blender
+    evaluates it at that frame."""
+    scene = _scene(tmp_path)
+    bpy.ops.mesh.primitive_plane_add()
+    emitter = bpy.context.object
+    emitter.physanim.emitter.enabled = True
+    wire = _curve_wire("Loop", location=(0.0, 0.0, 1.0), rotation=(math.pi / 2, 0.0, 0.0))
+    c = wire.physanim.constraint
+    c.enabled, c.object1, c.type = True, emitter, 'ON_CIRCLE'
+    point = wire.data.splines[0].bezier_points[0]
+    for frame, dx in ((FRAME_START, 0.0), (FRAME_END, 1.0)):
+        wire.location.x = dx
+        wire.keyframe_insert("location", index=0, frame=frame)
+        point.co.x = -1.0 - 0.5 * dx  # pulled out: the loop bends
+        point.keyframe_insert("co", frame=frame)
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "constraints.blend"))
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    frames = _particle_frames(physanim_ext, emitter)
+    worst, seen = 0.0, 0
+    for frame, data in zip(range(FRAME_START, FRAME_END + 1), frames):
+        if not len(data["id"]):
+            continue
+        scene.frame_set(frame)
+        pts, closed = _evaluated_polyline(wire)
+        worst = max(worst, float(_off_polyline(data["position"], pts, closed).max()))
+        seen += 1
+    assert seen > 40 and worst < 1e-4
