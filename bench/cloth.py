@@ -1,15 +1,19 @@
 """Cloth benchmark: physanim's spring mesh (implicit) against Blender's cloth, same scene, same
 process. Prints a markdown table; nothing here asserts a timing.
 
-    tools/bench.sh cloth [--frames 250] [--grid 64] [--scenes dropped,pinned]
+    tools/bench.sh cloth [--frames 250] [--grid 64] [--scenes dropped,suzanne,pinned]
 
-Two scenes, 250 frames at 24 fps each:
+Three scenes, 250 frames at 24 fps each:
 
 * **dropped** (the headline: the common case at both simulators' defaults): a 2 x 2 m grid of
   64 x 64 vertices 1 m above a 40 x 40 m ground plane falls onto it. Blender: a Cloth modifier
   and a Collision modifier on the ground, both at their defaults. physanim: the grid a spring
   mesh and the ground a collider, nothing else set. Checked: no vertex below the ground, the
   cloth lying on it at the end.
+* **suzanne** (defaults too): the same grid from 2.5 m onto Suzanne (Blender's monkey, 2 m,
+  face up, on the ground). Blender: Collision modifiers on Suzanne and the ground. physanim:
+  both colliders, Suzanne's shape Mesh. Checked: no vertex below the ground, the cloth draped
+  over her.
 * **pinned**: the same grid at z = 2 m, pinned at the two corners of one edge, hanging under
   gravity (no collision), with the tuned settings below.
 
@@ -46,6 +50,8 @@ DROP_HEIGHT = 1.0  # [m] the dropped cloth's start
 GROUND_TOLERANCE = 1e-3  # [m] a vertex lower than this went through the ground
 LYING = 0.1  # [m] at the end every vertex of the dropped cloth is this low or lower
 DROPPED_TARGET = 0.8  # physanim / Blender time (issue 12)
+SUZANNE_DROP = 2.5  # [m] the cloth's start over Suzanne
+SUZANNE_TARGET = 1.0  # physanim / Blender time (issue 12)
 
 
 def build(grid: int, frames: int):
@@ -76,43 +82,70 @@ def check(label: str, x: np.ndarray, rest: np.ndarray, corners: list[int]) -> li
     return problems
 
 
-def build_dropped(grid: int, frames: int):
+def build_dropped(grid: int, frames: int, suzanne: bool = False):
+    """The cloth over a ground plane; with ``suzanne``, over Suzanne (Blender's monkey, 2 m,
+    face up, resting on the ground) from higher up. Returns the scene, the cloth and the
+    colliders."""
     scene = blender_side.empty_scene(FPS, frames)
-    ob = blender_side.grid_object(scene, "Cloth", grid - 1, 1.0, DROP_HEIGHT)
-    ground = blender_side.grid_object(scene, "Ground", 1, 20.0, 0.0)
-    return scene, ob, ground
+    height = SUZANNE_DROP if suzanne else DROP_HEIGHT
+    ob = blender_side.grid_object(scene, "Cloth", grid - 1, 1.0, height)
+    colliders = [blender_side.grid_object(scene, "Ground", 1, 20.0, 0.0)]
+    if suzanne:
+        import bmesh
+        me = bpy.data.meshes.new("Suzanne")
+        bm = bmesh.new()
+        bmesh.ops.create_monkey(bm)
+        bm.to_mesh(me)
+        bm.free()
+        monkey = bpy.data.objects.new("Suzanne", me)
+        scene.collection.objects.link(monkey)
+        monkey.rotation_euler = (-1.5708, 0.0, 0.0)  # face up
+        monkey.location = (0.0, 0.0, 0.85)
+        colliders.append(monkey)
+    return scene, ob, colliders
 
 
-def check_dropped(label: str, x: np.ndarray) -> list[str]:
+def check_dropped(label: str, x: np.ndarray, suzanne: bool = False) -> list[str]:
+    """No vertex below the ground; on the ground alone, the cloth lying flat at the end; on
+    Suzanne, draped over her (its highest vertex on her, its edges hanging half a metre and
+    more below it)."""
     problems = []
     if not np.all(np.isfinite(x)):
         problems.append(f"{label}: non-finite vertices")
     elif x[:, 2].min() < -GROUND_TOLERANCE:
         problems.append(f"{label}: {int((x[:, 2] < -GROUND_TOLERANCE).sum())} vertices below "
                         f"the ground (lowest {x[:, 2].min():.3f} m)")
+    elif suzanne:
+        if not 1.0 < x[:, 2].max() < SUZANNE_DROP - 0.2 or np.ptp(x[:, 2]) < 0.5:
+            problems.append(f"{label}: the cloth is not draped over Suzanne (z from "
+                            f"{x[:, 2].min():.3f} to {x[:, 2].max():.3f} m)")
     elif x[:, 2].max() > LYING:
         problems.append(f"{label}: the cloth is not lying on the ground at the end (highest "
                         f"vertex {x[:, 2].max():.3f} m)")
     return problems
 
 
-def run_blender_dropped(grid: int, frames: int):
-    scene, ob, ground = build_dropped(grid, frames)
+def run_blender_dropped(grid: int, frames: int, suzanne: bool = False):
+    scene, ob, colliders = build_dropped(grid, frames, suzanne)
     mod = ob.modifiers.new("Cloth", 'CLOTH')
     mod.point_cache.frame_start, mod.point_cache.frame_end = 1, frames
-    ground.modifiers.new("Collision", 'COLLISION')
+    for collider in colliders:
+        collider.modifiers.new("Collision", 'COLLISION')
     start = time.perf_counter()
     for frame in range(1, frames + 1):
         scene.frame_set(frame)
     took = time.perf_counter() - start
     x = world_vertices(ob)
-    return took, x, check_dropped("Blender cloth", x)
+    return took, x, check_dropped("Blender cloth", x, suzanne)
 
 
-def run_physanim_dropped(grid: int, frames: int, folder: str):
-    scene, ob, ground = build_dropped(grid, frames)
+def run_physanim_dropped(grid: int, frames: int, folder: str, suzanne: bool = False):
+    scene, ob, colliders = build_dropped(grid, frames, suzanne)
     ob.physanim.spring_mesh.enabled = True
-    ground.physanim.collider.enabled = True
+    for collider in colliders:
+        collider.physanim.collider.enabled = True
+    if suzanne:
+        colliders[1].physanim.collider.shape = 'MESH'  # (Automatic would choose it too)
     scene.physanim.frame_start, scene.physanim.frame_end = 1, frames
     bpy.ops.wm.save_as_mainfile(filepath=str(Path(folder) / "dropped.blend"))
     start = time.perf_counter()
@@ -124,13 +157,17 @@ def run_physanim_dropped(grid: int, frames: int, folder: str):
     scene.frame_set(frames)
     x = world_vertices(ob)
     problems = [] if result == {'FINISHED'} else ["physanim: bake failed"]
-    return took, x, problems + check_dropped("physanim", x), settings
+    return took, x, problems + check_dropped("physanim", x, suzanne), settings
 
 
-def dropped_table(grid: int, frames: int, blender: tuple, physanim: tuple) -> str:
+def dropped_table(grid: int, frames: int, blender: tuple, physanim: tuple,
+                  suzanne: bool = False) -> str:
     """The dropped scene's heading, table and target line; each run is ``(seconds, final
     world vertices (n, 3) [m])``, physanim's with its settings last."""
     (b_time, b_x), (p_time, p_x, settings) = blender, physanim
+    target, onto = ((SUZANNE_TARGET, f"Suzanne (a Mesh collider) on a ground plane from "
+                     f"{SUZANNE_DROP} m") if suzanne else
+                    (DROPPED_TARGET, f"a ground plane from {DROP_HEIGHT} m"))
     rows = [("Blender cloth + Collision (defaults)", f"{b_time:.2f}",
              f"{1000 * b_time / frames:.1f}", f"{b_x[:, 2].min():.3f}",
              f"{b_x[:, 2].max():.3f}", "1.00"),
@@ -138,13 +175,13 @@ def dropped_table(grid: int, frames: int, blender: tuple, physanim: tuple) -> st
              f"{p_time:.2f}", f"{1000 * p_time / frames:.1f}", f"{p_x[:, 2].min():.3f}",
              f"{p_x[:, 2].max():.3f}", f"{p_time / b_time:.2f}")]
     return "\n".join([
-        "", f"### {grid} x {grid} grid ({grid * grid:,} vertices) dropped from {DROP_HEIGHT} m "
-        f"onto a ground plane, {frames} frames at {FPS} fps, Blender {bpy.app.version_string}",
+        "", f"### {grid} x {grid} grid ({grid * grid:,} vertices) dropped onto {onto}, "
+        f"{frames} frames at {FPS} fps, Blender {bpy.app.version_string}",
         "", *common.markdown_table(("simulator", "time (s)", "ms / frame", "lowest z at end (m)",
                                     "highest z at end (m)", "ratio vs Blender"), "lrrrrr",
                                    rows), "",
-        f"- target (issue 12): physanim <= {DROPPED_TARGET} x Blender's cloth: "
-        f"{'met' if p_time <= DROPPED_TARGET * b_time else 'NOT met'} "
+        f"- target (issue 12): physanim <= {target} x Blender's cloth: "
+        f"{'met' if p_time <= target * b_time else 'NOT met'} "
         f"({p_time / b_time:.2f} x)"])
 
 
@@ -208,22 +245,23 @@ def main(argv: list[str]) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=250)
     ap.add_argument("--grid", type=int, default=64)
-    ap.add_argument("--scenes", default="dropped,pinned",
-                    help="comma list of: dropped (the defaults), pinned (tuned)")
+    ap.add_argument("--scenes", default="dropped,suzanne,pinned",
+                    help="comma list of: dropped, suzanne (the defaults), pinned (tuned)")
     args = ap.parse_args(argv)
     scenes = {k.strip() for k in args.scenes.split(",") if k.strip()}
-    if scenes - {"dropped", "pinned"}:
-        ap.error(f"unknown scenes {sorted(scenes - {'dropped', 'pinned'})}")
+    known = {"dropped", "suzanne", "pinned"}
+    if scenes - known:
+        ap.error(f"unknown scenes {sorted(scenes - known)}")
     problems = []
     with (tempfile.TemporaryDirectory(prefix="physanim_bench_") as folder,
           blender_side.extension_enabled()):
-        if "dropped" in scenes:
-            b_time, b_x, b_problems = run_blender_dropped(args.grid, args.frames)
+        for suzanne in [s == "suzanne" for s in ("dropped", "suzanne") if s in scenes]:
+            b_time, b_x, b_problems = run_blender_dropped(args.grid, args.frames, suzanne)
             p_time, p_x, p_problems, settings = run_physanim_dropped(args.grid, args.frames,
-                                                                     folder)
+                                                                     folder, suzanne)
             problems += b_problems + p_problems
-            print(dropped_table(args.grid, args.frames, (b_time, b_x), (p_time, p_x, settings)),
-                  flush=True)
+            print(dropped_table(args.grid, args.frames, (b_time, b_x), (p_time, p_x, settings),
+                                suzanne), flush=True)
         if "pinned" in scenes:
             b_time, b_x, b_problems, quality = run_blender(args.grid, args.frames)
             p_time, p_x, p_problems = run_physanim(args.grid, args.frames, folder)
