@@ -23,7 +23,8 @@ from typing import NamedTuple
 import numpy as np
 
 from ..transforms import dot_rows, norm_rows
-from .broadphase_grid import UniformGrid
+from .broadphase_base import keep_overlapping, transposed
+from .broadphase_grid import UniformGrid, _auto_cell_size, _cell_ranges, _entries, _keys
 from .distance import closest_on_triangles
 
 PARALLEL = 1e-3  # sin of the angle below which two segments have no reliable common normal
@@ -235,13 +236,50 @@ def box_pairs(lo_a: np.ndarray, hi_a: np.ndarray, lo_b: np.ndarray,
               hi_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Every overlapping (closed) pair of a box of A (n, 3) and a box of B (m, 3): indices
     (i into A, j into B), sorted by i. Few pairs to try (n m <= BRUTE_FORCE): all of them;
-    else the library's uniform grid over both sets, keeping the pairs across them."""
+    else a uniform grid of B's boxes looked up by A's (:func:`_across_cells`)."""
     if not len(lo_a) or not len(lo_b):
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
     if len(lo_a) * len(lo_b) <= BRUTE_FORCE:
         i, j = np.nonzero(np.all((lo_a[:, None] <= hi_b[None]) & (lo_b[None] <= hi_a[:, None]),
                                  axis=2))
         return i, j
-    pairs = UniformGrid().pairs(np.concatenate([lo_a, lo_b]), np.concatenate([hi_a, hi_b]))
-    across = pairs[(pairs[:, 0] < len(lo_a)) & (pairs[:, 1] >= len(lo_a))]
-    return across[:, 0], across[:, 1] - len(lo_a)
+    lo, hi = np.concatenate([lo_a, lo_b]), np.concatenate([hi_a, hi_b])
+    cell_lo, cell_hi = _cell_ranges(lo, hi, _auto_cell_size(lo, hi))
+    return _across_cells(lo, hi, len(lo_a), cell_lo, cell_hi - cell_lo + 1,
+                         cell_hi.max(axis=0) + 1)
+
+
+def _across_cells(lo, hi, count_a: int, cell_lo, extent, dims) -> tuple[np.ndarray, np.ndarray]:
+    """Box pairs across the sets A (the first ``count_a`` boxes of lo, hi) and B (the rest)
+    through one uniform grid of B's boxes, looked up by A's: no pair within a set is ever
+    formed (a cloth's neighbouring triangles all overlap). Each pair is kept from one cell,
+    the first both boxes share (max of their first cells), then tested exactly; a box spanning
+    more than the grid's max_cells_per_box cells is tried against the whole other set."""
+    large = extent.prod(axis=1, dtype=np.float64) > UniformGrid().max_cells_per_box
+    box_b, cell_b = _entries(count_a + np.flatnonzero(~large[count_a:]), cell_lo, extent)
+    box_a, cell_a = _entries(np.flatnonzero(~large[:count_a]), cell_lo, extent)
+    key_b, hashed = _keys(cell_b, dims)
+    key_a, _ = _keys(cell_a, dims)
+    order = np.argsort(key_b, kind="stable")
+    key_b, box_b, cell_b = key_b[order], box_b[order], cell_b[:, order]
+    first = np.searchsorted(key_b, key_a, side="left")
+    count = np.searchsorted(key_b, key_a, side="right") - first
+    entry = np.repeat(np.arange(len(key_a)), count)
+    at = np.repeat(first - np.cumsum(count) + count, count) + np.arange(int(count.sum()))
+    i, j = box_a[entry], box_b[at]
+    keep = np.ones(len(i), bool)
+    for a in range(3):
+        keep &= np.maximum(cell_lo[i, a], cell_lo[j, a]) == cell_a[a, entry]
+        if hashed:  # one hash bucket may hold several cells
+            keep &= cell_b[a, at] == cell_a[a, entry]
+    # a box spanning many cells (rare) is tried against every box of the other set
+    big_a, big_b = np.flatnonzero(large[:count_a]), count_a + np.flatnonzero(large[count_a:])
+    small_a = np.flatnonzero(~large[:count_a])
+    every_b = np.arange(count_a, len(lo))
+    i = np.concatenate([i[keep], np.repeat(big_a, len(every_b)),
+                        np.tile(small_a, len(big_b))])
+    j = np.concatenate([j[keep], np.tile(every_b, len(big_a)), np.repeat(big_b, len(small_a))])
+    lo_t, hi_t = transposed(lo, hi)
+    i, j = keep_overlapping(lo_t, hi_t, i, j)
+    order = np.lexsort((j, i))
+    return i[order], j[order] - count_a

@@ -159,3 +159,27 @@ def test_colouring_never_puts_a_moving_point_twice_in_a_group():
     for g in groups:
         used = np.concatenate([np.unique(row[moving[row]]) for row in members[g]])
         assert len(np.unique(used)) == len(used)
+
+
+@pytest.mark.parametrize("case", ["dense", "touching", "large", "hashed"])
+def test_box_pairs_across_two_sets_are_every_overlapping_pair(case):
+    # Against all pairs tried: a dense set A (a cloth's neighbouring triangles overlap each
+    # other) and a sparser B; boxes meeting only at a face (closed: they overlap); a few boxes
+    # spanning many cells (the large-box pass); tiny boxes far apart (a hashed grid).
+    from physanim.core.collision.crossing import box_pairs
+    rng = np.random.default_rng(len(case))
+    n, m, spread, size = {"dense": (8000, 600, 2.0, 0.05), "touching": (3000, 900, 1.0, 0.0),
+                          "large": (3000, 400, 2.0, 0.05), "hashed": (3000, 900, 1e6, 0.01)}[case]
+    ca, cb = rng.uniform(-spread, spread, (n, 3)), rng.uniform(-spread, spread, (m, 3))
+    if case == "touching":  # unit cubes on a lattice: neighbours share faces
+        ca, cb = rng.integers(0, 12, (n, 3)).astype(float), rng.integers(0, 12, (m, 3)) + 0.5
+    ea = np.full((n, 3), 0.5) if case == "touching" else rng.uniform(0, size, (n, 3))
+    eb = np.full((m, 3), 0.5) if case == "touching" else rng.uniform(0, size, (m, 3))
+    if case == "large":
+        eb[:5] = 1.5
+    lo_a, hi_a, lo_b, hi_b = ca - ea, ca + ea, cb - eb, cb + eb
+    i, j = box_pairs(lo_a, hi_a, lo_b, hi_b)
+    every = np.all((lo_a[:, None] <= hi_b[None]) & (lo_b[None] <= hi_a[:, None]), axis=2)
+    expected_i, expected_j = np.nonzero(every)
+    assert len(expected_i) > 0 or case == "hashed"
+    assert np.array_equal(i, expected_i) and np.array_equal(j, expected_j)
