@@ -33,6 +33,7 @@ from .bake_failures import Failures
 from .bake_resume import Resumable
 from .cache_paths import relative_path
 from .particles_bake import STREAM, ParticleBake
+from .roles import Roles, gather
 
 class BakeJob(Resumable, Failures):
     """Bake every (or the chosen) emitter and spring mesh of a scene, one frame per :meth:`step`.
@@ -103,8 +104,8 @@ class BakeJob(Resumable, Failures):
             raise
 
     # -- set-up ---------------------------------------------------------------------------------
-    def _roles(self, only: set[str] | None) -> extract.Roles:
-        roles = extract.gather(self.scene, only)
+    def _roles(self, only: set[str] | None) -> Roles:
+        roles = gather(self.scene, only)
         if not roles:
             raise PhysanimError("nothing to bake: no object has a PhysAnim emitter, spring "
                                 "mesh or rigid body enabled", obj=self.scene.name, kind="scene")
@@ -117,7 +118,7 @@ class BakeJob(Resumable, Failures):
 
     def _prepare(self, context) -> None:
         """Open the caches, build each system at the first frame and write that frame."""
-        all_roles = extract.gather(self.scene)
+        all_roles = gather(self.scene)
         self.hashes = {ob.name: inputs_hash.emitter_hash(self.scene, ob, all_roles)
                        for ob in self.roles.emitters}
         self.mesh_hashes = {ob.name: inputs_hash.inputs_hash(self.scene, ob, "spring_mesh",
@@ -368,7 +369,7 @@ class BakeJob(Resumable, Failures):
         # last: followers trail parents that may have just been baked
         follow.bake(self.scene, self.roles.followers, self.frame_start, self.frame_end,
                     self.clock)
-        all_roles = extract.gather(self.scene)
+        all_roles = gather(self.scene)
         follow_hashes = [inputs_hash.follow_hash(self.scene, ob, all_roles)
                          for ob in self.roles.followers]
         for ob, digest in zip(self.roles.followers, follow_hashes):

@@ -8,8 +8,9 @@ import pickle
 import re
 
 from ..core.errors import PhysanimError
-from . import extract, inputs_hash, native_points, springs
+from . import inputs_hash, native_points, springs
 from . import resume as checkpoint
+from .roles import gather
 
 #: What each system's bake wrapper carries from frame to frame, saved in a checkpoint (the core
 #: objects among them are shared with the world and pickled together with it).
@@ -36,7 +37,7 @@ class Resumable:
         end = settings.frame_end
         try:  # the hashes include the frame range: compare at the checkpoint's own
             settings.frame_end = data["frame_end"]
-            hashes = self._hash_record(extract.gather(scene, data["only"]))
+            hashes = self._hash_record(gather(scene, data["only"]))
         finally:
             settings.frame_end = end
         checkpoint.check(scene, data, hashes)
@@ -44,7 +45,7 @@ class Resumable:
 
     def _hash_record(self, roles, all_roles=None) -> dict[str, str]:
         """Every system's inputs hash, keyed as :meth:`partial_folders` keys its folder."""
-        all_roles = all_roles or extract.gather(self.scene)
+        all_roles = all_roles or gather(self.scene)
         record = {f"emitter {ob.name}": inputs_hash.emitter_hash(self.scene, ob, all_roles)
                   for ob in roles.emitters}
         record.update({f"spring_mesh {ob.name}": inputs_hash.inputs_hash(

@@ -9,7 +9,7 @@ import shutil
 from ..core.errors import PhysanimError
 from ..core.integrators import make_integrator
 from .cache_paths import cache_root
-from .extract import Roles, emitter_chain
+from .roles import Roles, emitter_chain
 
 BYTES_PER_PARTICLE_FRAME = 4 * (1 + 3 + 3 + 1 + 1 + 1 + 4 + 3 + 3)  # cache arrays of output.py
 BYTES_PER_PARTICLE_STATE = 8 * 16  # float64 state + integrator stages, per particle

@@ -2,9 +2,8 @@
 of every keyframable property sampled per frame (after ``scene.frame_set``)."""
 from __future__ import annotations
 
-import contextlib
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -19,68 +18,13 @@ from ..core.particles.pair_collisions import ParticleCollisions
 from ..core.particles import (EmitterFrame, EmitterSettings, FrameInputs, ParticleModel,
                               ParticleModelBuilder, PointConstraint, SpringLink)
 from . import convert, limits
-from .mesh_read import evaluated_mesh, mesh_polygons, polyline
+from .curve_wire import curve_wire, wire_ends
+from .mesh_read import evaluated_mesh, mesh_polygons
 from .props import INTERACTION_TYPES
-from .rigid_props import CONSTRAINT_TYPE_ITEMS, POINT_TYPES
+from .rigid_props import POINT_TYPES
+from .roles import Roles, attachments, made_by_bake, type_name
 
 MESH_SOURCES = ("VERTS", "FACES", "VOLUME")
-
-
-@dataclass
-class Roles:
-    """Objects taking part in a bake, in a stable (name) order."""
-
-    emitters: list = field(default_factory=list)
-    colliders: list = field(default_factory=list)
-    forces: list = field(default_factory=list)
-    spring_meshes: list = field(default_factory=list)
-    rigid_bodies: list = field(default_factory=list)
-    constraints: list = field(default_factory=list)  # every enabled constraint object
-    followers: list = field(default_factory=list)  # Follow-Through objects
-
-    def __bool__(self) -> bool:
-        """Whether anything bakes."""
-        return bool(self.emitters or self.spring_meshes or self.rigid_bodies or self.followers)
-
-    @property
-    def joints(self) -> list:
-        """The constraints joining rigid bodies (baked with them): not those holding a spring
-        mesh's vertices or an emitter's particles."""
-        return [c for c in self.constraints if holds(c) == "joint"] if self.rigid_bodies else []
-
-
-def holds(constraint) -> str:
-    """What a constraint object holds, so which bake takes it: "particles" (its First's
-    particles: the On Plane / On Sphere / On Wire types, or any type on a plain emitter, which
-    that bake then refuses), "attachment" (its First spring mesh's vertices) or "joint" (a
-    rigid body). An object in two roles is held as its type says."""
-    p = constraint.physanim.constraint
-    first = p.object1
-    if first is None:
-        return "joint"
-    roles = first.physanim
-    if roles.emitter.enabled and (p.type in POINT_TYPES or not (
-            roles.spring_mesh.enabled or roles.rigid_body.enabled)):
-        return "particles"
-    return "attachment" if roles.spring_mesh.enabled else "joint"
-
-
-def is_attachment(constraint) -> bool:
-    """Whether a constraint object holds a spring mesh's vertices (baked with the mesh)."""
-    return holds(constraint) == "attachment"
-
-
-def attachments(scene, ob, what: str = "attachment") -> list:
-    """The constraint objects of ``scene`` holding ``ob`` as ``what`` (:func:`holds`), by
-    name."""
-    return sorted((c for c in scene.objects if c.physanim.constraint.enabled
-                   and c.physanim.constraint.object1 == ob and holds(c) == what),
-                  key=lambda c: c.name)
-
-
-def type_name(identifier: str) -> str:
-    """A constraint type as the panel names it (``ON_CIRCLE`` -> "On Wire")."""
-    return next(name for key, name, _ in CONSTRAINT_TYPE_ITEMS if key == identifier)
 
 
 def point_constraints(scene, ob, frame: int, depsgraph) -> list:
@@ -104,76 +48,6 @@ def point_constraints(scene, ob, frame: int, depsgraph) -> list:
         else:
             out.append((c.name, p.type, m, float(p.radius), None))
     return out
-
-
-def curve_wire(ob, matrix: np.ndarray, depsgraph, frame) -> tuple[np.ndarray, bool]:
-    """A Curve object's wire at the depsgraph's frame: its evaluated spline (at the curve's
-    resolution, modifiers applied) as (P, 3) world points in order, and whether it is closed
-    (Cyclic); neighbours at one place (a Bezier point's zero-length segment) are merged. An
-    error naming the object when it is not one spline."""
-    with _centreline(ob.data, depsgraph):
-        mesh = evaluated_mesh(ob, depsgraph, topology=True)
-    line = polyline(mesh.edges, len(mesh.co)) if mesh.edges is not None else None
-    if line is None:
-        raise PhysanimError("On Wire runs particles along one spline: this curve has "
-                            f"{len(ob.data.splines)} splines (or one that branches) — keep one "
-                            "spline, or separate the others into their own objects",
-                            obj=ob.name, frame=frame, kind="constraint")
-    order, closed = line
-    pts = mesh.co[order] @ matrix[:3, :3].T + matrix[:3, 3]
-    keep = np.ones(len(pts), bool)
-    keep[1:] = np.any(pts[1:] != pts[:-1], axis=1)
-    if closed and len(pts) > 1 and not np.any(pts[-1] != pts[0]):
-        keep[-1] = False
-    return pts[keep], closed
-
-
-def gather(scene, only: set[str] | None = None) -> Roles:
-    """Objects of ``scene`` with a physanim role enabled.
-
-    Args:
-        only: names of emitters and spring meshes to bake (None = all). The parents of selected
-            sub-emitters are added, since their particles' deaths drive the sub-emitter.
-    """
-    objects = sorted(scene.objects, key=lambda o: o.name)
-    emitters = [o for o in objects if o.physanim.emitter.enabled]
-    meshes = [o for o in objects if o.physanim.spring_mesh.enabled]
-    rigid = [o for o in objects if o.physanim.rigid_body.enabled]
-    followers = [o for o in objects if o.physanim.follow.enabled]
-    if only is not None:
-        unknown = only - {o.name for o in emitters + meshes + rigid + followers}
-        if unknown:
-            raise PhysanimError(f"not an emitter, spring mesh, rigid body or follower in scene "
-                                f"\"{scene.name}\": {', '.join(sorted(unknown))}")
-        meshes = [o for o in meshes if o.name in only]
-        chosen = {a.name for o in emitters if o.name in only for a in emitter_chain(o)}
-        emitters = [o for o in emitters if o.name in chosen]
-        # rigid bodies push each other: choosing one bakes them all
-        rigid = rigid if any(o.name in only for o in rigid) else []
-        followers = [o for o in followers if o.name in only]
-    return Roles(emitters,
-                 [o for o in objects if o.physanim.collider.enabled],
-                 [o for o in objects if o.physanim.force.enabled], meshes, rigid,
-                 [o for o in objects if o.physanim.constraint.enabled], followers)
-
-
-def emitter_chain(ob) -> list:
-    """``ob`` and the emitters above it: a sub-emitter (source Particle Deaths) bursts where its
-    parent's particles die, so it depends on its parent, and on its parent's parent... The one
-    walk up the chain (stops at the top or where the chain would loop)."""
-    chain, names, current = [], set(), ob
-    while current is not None and current.name not in names:
-        chain.append(current)
-        names.add(current.name)
-        p = current.physanim.emitter
-        current = p.parent if p.source == 'DEATHS' else None
-    return chain
-
-
-def made_by_bake(modifier) -> bool:
-    """The bake's own output modifiers are not inputs of the bake."""
-    return ((modifier.type == 'NODES' and modifier.name == "physanim_instances")
-            or (modifier.type == 'MESH_CACHE' and modifier.name == "physanim"))
 
 
 def _curve(stops, kind: str) -> LifeCurve:
@@ -230,37 +104,6 @@ def _check_finite(ob, frame: int, kind: str, values: dict) -> None:
         if isinstance(value, float) and not math.isfinite(value):
             raise PhysanimError(f"{key} is {value} — check its keyframes and drivers",
                                 obj=ob.name, frame=frame, kind=kind)
-
-
-@contextlib.contextmanager
-def _centreline(curve, depsgraph):
-    """Within: ``curve`` evaluates to its centre line only — no bevel, extrusion or fill (what
-    a wire shows is not what it is); its settings come back after, whatever happens."""
-    keep = {key: getattr(curve, key) for key in ("extrude", "bevel_depth", "bevel_mode",
-                                                  "fill_mode")}
-    bare = {"extrude": 0.0, "bevel_depth": 0.0, "bevel_mode": 'ROUND'}
-    if curve.dimensions == '2D':
-        bare["fill_mode"] = 'NONE'
-    changed = {key: value for key, value in bare.items() if keep[key] != value}
-    try:
-        for key, value in changed.items():
-            setattr(curve, key, value)
-        if changed:
-            depsgraph.update()
-        yield
-    finally:
-        for key in changed:
-            setattr(curve, key, keep[key])
-        if changed:
-            depsgraph.update()
-
-
-def _wire_ends(start, end) -> tuple:
-    """PointConstraint's (points0, points1, cyclic) from two :func:`curve_wire` results (or
-    None, None, False for no wire)."""
-    if start is None or end is None:
-        return None, None, False
-    return start[0], end[0], start[1]
 
 
 def _framed(name: str, frame: int, kind: str, make, *args):
@@ -487,7 +330,7 @@ class Extractor:
         # the interval's births are frame b's: they use the emitter's values at b
         for i, ((m0, v0, start), (m1, v1, val)) in enumerate(zip(a.emitters, b.emitters)):
             held = tuple(_framed(name, a.frame, "constraint", PointConstraint, name, kind, ma, mb,
-                                 radius, *_wire_ends(wa, wb))
+                                 radius, *wire_ends(wa, wb))
                          for (name, kind, ma, _, wa), (_, _, mb, radius, wb)
                          in zip(start["constraints"], val["constraints"]))
             emitters.append(EmitterFrame(

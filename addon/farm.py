@@ -23,7 +23,8 @@ import bpy
 import numpy as np
 
 from ..core.cache import read_meta
-from . import extract, inputs_hash, native_points
+from . import inputs_hash, native_points
+from .roles import gather
 
 SCENE_TARGET = "@scene"
 
@@ -35,7 +36,7 @@ def bake_state(scene) -> tuple[object, list[str], list[str]]:
     and those whose bake no longer matches the scene (inputs hash)."""
     from . import springs
 
-    roles = extract.gather(scene)
+    roles = gather(scene)
     missing, outdated = [], []
     for ob in roles.emitters:
         res = ob.physanim.emitter.result

@@ -10,7 +10,7 @@ import bpy
 import numpy as np
 
 from . import compat, convert
-from .extract import Roles, attachments, emitter_chain, gather, is_attachment, made_by_bake
+from .roles import Roles, attachments, emitter_chain, gather, is_attachment, made_by_bake
 
 def _animated_paths(id_data) -> set[str]:
     ad = getattr(id_data, "animation_data", None)

@@ -83,30 +83,3 @@ def evaluated_mesh(ob, depsgraph, triangles: bool = False, topology: bool = Fals
                           _weights(ob, me))
     finally:
         ob_eval.to_mesh_clear()
-
-
-def polyline(edges: np.ndarray, count: int) -> tuple[np.ndarray, bool] | None:
-    """The vertex order of ``count`` vertices joined by ``edges`` (e, 2) into one line — an open
-    chain (two ends) or a closed loop — and whether it is closed; None when the edges make
-    anything else (several pieces, a branch, a loose vertex)."""
-    if count < 2 or len(edges) not in (count - 1, count):
-        return None
-    degree = np.bincount(edges.ravel(), minlength=count)
-    ends = np.nonzero(degree == 1)[0]
-    closed = len(edges) == count
-    if np.any(degree > 2) or np.any(degree == 0) or len(ends) != (0 if closed else 2):
-        return None
-    neighbours = [[] for _ in range(count)]
-    for a, b in edges.tolist():
-        neighbours[a].append(b)
-        neighbours[b].append(a)
-    order = [int(ends[0]) if len(ends) else 0]
-    previous = -1
-    for _ in range(count - 1):
-        here = order[-1]
-        step = next((n for n in neighbours[here] if n != previous), None)
-        if step is None or (len(order) > 1 and step == order[0]):
-            return None
-        previous = here
-        order.append(step)
-    return (np.array(order), closed) if len(set(order)) == count else None

@@ -24,7 +24,8 @@ from ..core.rigid.solver import RigidBodySolver, RigidBodySystem
 from ..core.transforms import decompose
 from . import limits
 from .cache_paths import rigid_cache_dir
-from .extract import type_name, world_matrix
+from .extract import world_matrix
+from .roles import type_name
 from .mesh_read import evaluated_mesh
 
 STREAM = "bodies"

@@ -22,7 +22,8 @@ from ..core.springs import (Attachment, SpringDrive, SpringMeshBuilder, SpringMe
 from ..core.transforms import inverse_affine, transform_points
 from . import convert, limits
 from .cache_paths import spring_cache_dir
-from .extract import attachments, type_name, world_matrix
+from .extract import world_matrix
+from .roles import attachments, type_name
 from .mesh_read import evaluated_mesh
 
 MODIFIER = "physanim"
