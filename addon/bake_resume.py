@@ -101,6 +101,10 @@ class Resumable:
             return
         if not self._owns_checkpoint and self._resume_from is None:
             checkpoint.discard(self.scene)  # an earlier cut-off bake's partial folders go
+        # A checkpoint names only frames whose files are whole on disk: a process killed right
+        # after it must not leave a frame half written that a resume would keep.
+        for writer in self._writers().values():
+            writer.flush()
         try:
             self.checkpoints.save(self, finished, folders, state, frame)
         except (pickle.PicklingError, TypeError, AttributeError) as exc:

@@ -159,6 +159,32 @@ def test_a_killed_bake_resumes_bit_identical(physanim_ext, tmp_path):
     assert _partials(cache) == []
 
 
+def test_a_checkpoint_names_only_frames_already_on_disk(physanim_ext, tmp_path, monkeypatch):
+    """Frames go to disk on a writer thread: a checkpoint waits for them, so a process killed
+    just after it leaves every frame it names whole (a resume keeps those files as they are)."""
+    _shot(tmp_path / "shot")
+    bake, resume = _module(physanim_ext, "bake"), _module(physanim_ext, "resume")
+    cache_module = sys.modules[f"{physanim_ext.__name__}.core.cache"]
+    save = cache_module._save
+
+    def slow_save(path, arrays):  # a slow disk
+        time.sleep(0.2)
+        save(path, arrays)
+
+    monkeypatch.setattr(cache_module, "_save", slow_save)
+    job = bake.BakeJob(bpy.context, checkpoint_every=0)
+    try:
+        for _ in range(3):
+            job.step(bpy.context)
+            data = resume.load(bpy.context.scene)
+            for key, folder in data["folders"].items():
+                if key.startswith("emitter") or key == "rigid_bodies":
+                    names = {p.name for p in Path(folder).rglob("frame_*.npz")}
+                    assert f"frame_{data['frame']:06d}.npz" in names, (key, data["frame"])
+    finally:
+        job.abort()
+
+
 def test_a_finished_bake_extends_to_a_later_frame_end(physanim_ext, tmp_path):
     path = _shot(tmp_path / "shot", frame_end=16)
     bake, resume = _module(physanim_ext, "bake"), _module(physanim_ext, "resume")
