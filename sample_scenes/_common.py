@@ -210,3 +210,12 @@ def fcurves(ob) -> list:
         return [fc for layer in action.layers for strip in layer.strips
                 for bag in strip.channelbags for fc in bag.fcurves]
     return list(action.fcurves)
+
+
+def crossings(x: np.ndarray, tris: list) -> int:
+    """Overlapping triangle pairs that share no vertex (Blender's BVH overlap test): a mesh
+    passing through itself."""
+    from mathutils.bvhtree import BVHTree
+
+    tree = BVHTree.FromPolygons([Vector(p) for p in x.tolist()], tris)
+    return sum(1 for a, b in tree.overlap(tree) if a < b and not set(tris[a]) & set(tris[b]))

@@ -86,7 +86,7 @@ def check(scene) -> list[str]:
         if np.percentile(strain, 99) > 0.2 or strain.max() > 1.0:
             problems.append(f"frame {frame}: the cloth stretched by {strain.max():.0%} "
                             f"(99th percentile {np.percentile(strain, 99):.0%})")
-        crossed = _crossings(x, tris)
+        crossed = _common.crossings(x, tris)
         if crossed:
             problems.append(f"frame {frame}: the flag passes through itself ({crossed} "
                             "triangle pairs overlap)")
@@ -99,11 +99,3 @@ def check(scene) -> list[str]:
         problems.append("the flag does not flap: it hardly moves between frames")
     return problems
 
-
-def _crossings(x: np.ndarray, tris: list) -> int:
-    """Overlapping triangle pairs that share no vertex (Blender's BVH overlap test)."""
-    from mathutils import Vector
-    from mathutils.bvhtree import BVHTree
-
-    tree = BVHTree.FromPolygons([Vector(p) for p in x.tolist()], tris)
-    return sum(1 for a, b in tree.overlap(tree) if a < b and not set(tris[a]) & set(tris[b]))

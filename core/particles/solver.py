@@ -126,6 +126,12 @@ def point_rows(c: PointConstraint, held: np.ndarray, s0: float, t: float, h: flo
     return on_circles(held, origin, axis, c.radius, velocity, t)
 
 
+def _up(g: np.ndarray) -> np.ndarray | None:
+    """The unit vector against gravity ``g`` (None when there is none)."""
+    length = float(np.linalg.norm(g))
+    return -g / length if length > 0.0 else None
+
+
 @contextlib.contextmanager
 def _at_frame(frame):
     """A PhysanimError raised inside without a frame gains ``frame``."""
@@ -253,7 +259,7 @@ class ParticleSolver:
                 state.particle_mass, state.particle_emitter, h, step.rest_speed,
                 (resting.index, resting.normal, resting.friction,
                  resting.surface_velocity), state.particle_id,
-                state.pair_warm.get(spec.name))
+                state.pair_warm.get(spec.name), _up(step.g))
             state.pair_warm[spec.name] = warm
             if not count:
                 continue

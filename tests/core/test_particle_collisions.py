@@ -134,16 +134,18 @@ def _repose_angle(x: np.ndarray) -> float:
 def test_a_poured_heap_comes_to_rest_without_overlap_and_is_steeper_with_friction():
     """2,000 grains poured onto the ground: once the pour is over the heap comes to rest
     (median speed under 2 mm/s, 3 s after the pour began), no two grains overlap by more than
-    2 % of a radius (99 % of touching pairs by less than 1 %), none sinks into the ground,
-    and its angle of repose grows with friction (grains that cannot roll: steep heaps)."""
+    1 % of a radius (99 % of touching pairs by less than 0.75 %: the slop is 0.5 %), none
+    sinks into the ground, and its angle of repose grows with friction (grains that cannot
+    roll: steep heaps). Measured: deepest 0.73 % at mu 0.2, 0.74 % at mu 0.6 (1.3 % before
+    the position passes lifted the upper grain of a pair more than the lower one)."""
     angles = {}
     for mu in (0.2, 0.6):
         state = _pour(mu)
         x = state.particle_x
         i, j = neighbour_pairs(x, 0.02)
         overlap = (0.02 - np.linalg.norm(x[i] - x[j], axis=1)) / 0.01
-        assert overlap.max() < 0.02, (mu, overlap.max())
-        assert np.percentile(overlap, 99) < 0.01, (mu, np.percentile(overlap, 99))
+        assert overlap.max() < 0.01, (mu, overlap.max())
+        assert np.percentile(overlap, 99) < 0.0075, (mu, np.percentile(overlap, 99))
         assert x[:, 2].min() >= 0.01 - 1e-9
         assert np.median(np.linalg.norm(state.particle_v, axis=1)) < 0.002
         angles[mu] = _repose_angle(x)
