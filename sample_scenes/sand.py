@@ -4,8 +4,9 @@ object makes them collide as spheres of their size, with friction 0.6 among them
 ground, and they build a steep cone that stays where it is once the pour stops.
 
 Self-check: at the end the heap is at rest (median grain speed under 5 mm/s), no grain is
-inside another by more than 3 % of its radius (99 % of touching pairs by less than 1.5 %),
-none is below the ground, and the heap's flank stands at 25 degrees or steeper.
+inside another by more than 3 % of its radius (99 % of overlapping pairs by less than 1.5 %,
+where there are 100 or more), none is below the ground, and the heap's flank stands at 25
+degrees or steeper.
 """
 from __future__ import annotations
 
@@ -80,7 +81,9 @@ def check(scene) -> list[str]:
     depth = _overlaps(x, size)
     if len(depth) and depth.max() > 0.03:
         problems.append(f"two grains overlap by {100 * depth.max():.1f} % of a radius")
-    if len(depth) and np.percentile(depth, 99) > 0.015:
+    # (a percentile of a handful says nothing: grains rest on speculative contacts, touching
+    # without overlap, so often only a few pairs overlap at all; the 3 % bound holds for them)
+    if len(depth) >= 100 and np.percentile(depth, 99) > 0.015:
         problems.append(f"1 % of touching grains overlap by more than "
                         f"{100 * np.percentile(depth, 99):.1f} % of a radius")
     low = (x[:, 2] - size).min()

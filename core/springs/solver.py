@@ -37,6 +37,7 @@ from .wind import FaceWind
 
 TEAR_FACTOR = 50.0  # a spring stretched past this many rest lengths means the solve blew up
 LANDING_ROUNDS = 3  # re-solves of a sub-step whose vertices hit colliders (implicit only)
+GROUND_ROUNDS = 3  # self-collision passes alternating with the colliders' in a sub-step
 
 
 @dataclass
@@ -265,15 +266,26 @@ class SpringMeshSolver:
     def _keep_apart(self, step: _FrameStep, start: np.ndarray, touched: list, s1: float) -> None:
         """The mesh kept off itself (:mod:`.self_collision`); the colliders then stop whatever
         its pushes drove at them (a layer on a two-sided plane pushed through it would stay
-        beneath)."""
+        beneath). A layer pushed down onto the ground under another one, and lifted back
+        by it, could come up through the other: the points a collider moved count as on it
+        (they hardly move in the mesh's own pushes) and the mesh is kept off itself again,
+        up to GROUND_ROUNDS times."""
         state = step.state
         grounded = np.unique(np.concatenate([c.index for c in touched]))
         before = state.x.copy()
-        step.hits += self.itself.keep_apart(start, state.x, state.v, step.rest_speed, grounded)
-        if step.paths:
-            x, v, count, _ = respond(step.paths, before, state.x, state.v, state.v, s1, s1,
+        for _ in range(GROUND_ROUNDS):
+            step.hits += self.itself.keep_apart(start, state.x, state.v, step.rest_speed,
+                                                grounded)
+            if not step.paths:
+                return
+            pushed = state.x
+            x, v, count, _ = respond(step.paths, before, pushed, state.v, state.v, s1, s1,
                                      step.h, step.rest_speed)
             state.x, state.v, step.hits = x, v, step.hits + count
+            moved = np.flatnonzero(np.any(x != pushed, axis=1))
+            if not len(moved):
+                return
+            grounded = np.union1d(grounded, moved)
 
     def _react(self, step: _FrameStep, touched: list, outside: np.ndarray, s1: float) -> None:
         """Two-way coupling with the bodies stepped first this frame: the attached ones move
