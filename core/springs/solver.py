@@ -38,6 +38,7 @@ from .wind import FaceWind
 TEAR_FACTOR = 50.0  # a spring stretched past this many rest lengths means the solve blew up
 LANDING_ROUNDS = 3  # re-solves of a sub-step whose vertices hit colliders (implicit only)
 GROUND_ROUNDS = 3  # self-collision passes alternating with the colliders' in a sub-step
+LIFT_SHARE = 0.25  # of the self-collision distance: a collider's lift that needs another pass
 
 
 @dataclass
@@ -267,9 +268,10 @@ class SpringMeshSolver:
         """The mesh kept off itself (:mod:`.self_collision`); the colliders then stop whatever
         its pushes drove at them (a layer on a two-sided plane pushed through it would stay
         beneath). A layer pushed down onto the ground under another one, and lifted back
-        by it, could come up through the other: the points a collider moved count as on it
-        (they hardly move in the mesh's own pushes) and the mesh is kept off itself again,
-        up to GROUND_ROUNDS times."""
+        by it, could come up through the other: when a collider moved points by a quarter of
+        the distance or more, the points it moved count as on it (they hardly move in the
+        mesh's own pushes) and the mesh is kept off itself again, up to GROUND_ROUNDS
+        times."""
         state = step.state
         grounded = np.unique(np.concatenate([c.index for c in touched]))
         before = state.x.copy()
@@ -282,10 +284,10 @@ class SpringMeshSolver:
             x, v, count, _ = respond(step.paths, before, pushed, state.v, state.v, s1, s1,
                                      step.h, step.rest_speed)
             state.x, state.v, step.hits = x, v, step.hits + count
-            moved = np.flatnonzero(np.any(x != pushed, axis=1))
-            if not len(moved):
-                return
-            grounded = np.union1d(grounded, moved)
+            lift = np.linalg.norm(x - pushed, axis=1)
+            if lift.max(initial=0.0) < LIFT_SHARE * self.itself.distance:
+                return  # too little to carry a layer through another kept a distance off
+            grounded = np.union1d(grounded, np.flatnonzero(lift > 0.0))
 
     def _react(self, step: _FrameStep, touched: list, outside: np.ndarray, s1: float) -> None:
         """Two-way coupling with the bodies stepped first this frame: the attached ones move
