@@ -8,6 +8,7 @@
 #        tools/bench.sh chain [--links N] [--frames F]
 #        tools/bench.sh interactions [--quick] [--sizes N,N] [--theta T]
 #        tools/bench.sh sph [--count N] [--frames F] [--emit F]
+#        tools/bench.sh heap [--grains N] [--frames F] [--friction MU,MU]
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 venv="$("$here/tools/venv.sh" "${PHYSANIM_BLENDER:-4.5}")"
@@ -21,6 +22,7 @@ case "${1:-}" in
   chain) shift; exec "$venv/bin/python" bench/chain.py "$@" ;;
   interactions) shift; exec "$venv/bin/python" bench/interactions.py "$@" ;;
   sph) shift; exec "$venv/bin/python" bench/particle_pairs.py "$@" ;;
+  heap) shift; exec "$venv/bin/python" bench/heap.py "$@" ;;
   particles) shift; exec "$venv/bin/python" bench/particles.py "$@" ;;
   *) exec "$venv/bin/python" bench/particles.py "$@" ;;
 esac
