@@ -50,7 +50,7 @@ SLOP = 0.0025  # of the sum of radii: the overlap resting pairs keep (0.5 % of a
 #               their contact, and its warm start, lasts from one sub-step to the next
 STACK = 0.5  # per radius of height between a pair's particles: how much heavier the lower one
 # is in the position passes (e^-1 for one right under the other; at 1 the sand sample
-# scene's heap was still moving a second and a half after its pour)
+# scene's heap was still moving 2.5 s after its pour ended)
 BETA = 0.5  # of an overlap beyond the slop each position pass takes out (Baumgarte's factor)
 
 
