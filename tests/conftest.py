@@ -14,7 +14,12 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 # Blender writes its config, extensions and preferences under this folder instead of $HOME.
-os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp(prefix="physanim_bl_user_"))
+# Each pytest-xdist worker is its own Blender and installs the extension: it gets its own folder
+# (the workers inherit the controller's environment, so the controller's folder would be shared).
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    os.environ["BLENDER_USER_RESOURCES"] = tempfile.mkdtemp(prefix="physanim_bl_user_")
+else:
+    os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp(prefix="physanim_bl_user_"))
 
 
 def _register_package_by_path() -> None:

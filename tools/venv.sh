@@ -17,7 +17,7 @@ esac
 root="${PHYSANIM_VENVS:-$HOME/.cache/physanim/venvs}"
 case "$ver" in
   lint|farm) venv="$root/$ver"; want="$pins" ;;
-  *) venv="$root/bpy-$ver"; want="$pins pytest==8.3.3" ;;
+  *) venv="$root/bpy-$ver"; want="$pins pytest==8.3.3 pytest-xdist==3.8.0" ;;
 esac
 stamp="$venv/.physanim-ready"
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
