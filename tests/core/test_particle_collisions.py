@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from physanim.bench import heap
 from physanim.core.collision.neighbours import neighbour_pairs
-from physanim.core.contact import ColliderFrame
 from physanim.core.particles import EmitterFrame, EmitterSettings, FrameInputs, ParticleSolver
 from physanim.core.particles.pair_collisions import ParticleCollisions
 from physanim.tests.core.helpers import particle_model, place
@@ -92,55 +92,16 @@ def test_no_pair_passes_through_another(speed):
     assert (state.particle_v[:20, 0] < 0.0).all() and (state.particle_v[20:, 0] > 0.0).all()
 
 
-def _pour(friction: float, n: int = 2000, pour: int = 40, frames: int = 120, r: float = 0.01):
-    """n particles of radius r poured over ``pour`` frames from a 6 cm hopper 30 cm up onto
-    the ground (the friction between particles and with the ground), settling until
-    ``frames``: the final state."""
-    rng = np.random.default_rng(0)
-    model = particle_model(EmitterSettings("Sand"))
-    state = model.state()
-    ground = ColliderFrame("Ground", "HALF_SPACE", np.eye(4), np.eye(4), restitution=0.0,
-                           friction=friction, thickness=r)
-    solver = ParticleSolver(model, "SYMPLECTIC_EULER", 4)
-    collisions = [ParticleCollisions("Sand", restitution=0.0, friction=friction)]
-    idle = [EmitterFrame(active=False)]
-    dt, per = 1 / 24, n // pour
-    for f in range(frames):
-        if f < pour:  # a loose batch each frame, overlapping one another as they come
-            angle, far = rng.uniform(0, 2 * np.pi, per), 0.06 * np.sqrt(rng.uniform(0, 1, per))
-            x = np.stack([far * np.cos(angle), far * np.sin(angle),
-                          0.3 + rng.uniform(0.0, 0.15, per)], axis=1)
-            place(state, x, np.tile([0.0, 0.0, -0.5], (per, 1)), mass=0.001)
-            state.particle_size[-per:] = r
-        solver.advance(state, FrameInputs(frame=f, t0=f * dt, frame_dt=dt,
-                                          gravity=(0.0, 0.0, -9.81), emitters=idle,
-                                          colliders=[ground], collisions=collisions))
-    return state
-
-
-def _repose_angle(x: np.ndarray) -> float:
-    """The heap's slope [deg]: the highest particle in each of 15 rings about its centre, a
-    line through those between 20 and 80 % of the top height."""
-    far = np.linalg.norm(x[:, :2] - np.median(x[:, :2], axis=0), axis=1)
-    edges = np.linspace(0.0, far.max(), 16)
-    ring = np.clip(np.searchsorted(edges, far, side="right") - 1, 0, 14)
-    top = np.full(15, -np.inf)
-    np.maximum.at(top, ring, x[:, 2])
-    centre = 0.5 * (edges[1:] + edges[:-1])
-    flank = (top > 0.2 * top.max()) & (top < 0.8 * top.max())
-    return float(np.degrees(np.arctan(-np.polyfit(centre[flank], top[flank], 1)[0])))
-
-
 def test_a_poured_heap_comes_to_rest_without_overlap_and_is_steeper_with_friction():
     """2,000 grains poured onto the ground: once the pour is over the heap comes to rest
     (median speed under 2 mm/s, 3 s after the pour began), no two grains overlap by more than
     1 % of a radius (99 % of touching pairs by less than 0.75 %: the slop is 0.5 %), none
     sinks into the ground, and its angle of repose grows with friction (grains that cannot
-    roll: steep heaps). Measured: deepest 0.73 % at mu 0.2, 0.74 % at mu 0.6 (1.3 % before
+    roll: steep heaps). Measured: deepest 0.73 % at mu 0.2 and at mu 0.6 (1.3 % before
     the position passes lifted the upper grain of a pair more than the lower one)."""
     angles = {}
     for mu in (0.2, 0.6):
-        state = _pour(mu)
+        state = heap.pour(2000, mu, 120)  # the heap benchmark's scene, at 2,000 grains
         x = state.particle_x
         i, j = neighbour_pairs(x, 0.02)
         overlap = (0.02 - np.linalg.norm(x[i] - x[j], axis=1)) / 0.01
@@ -148,7 +109,7 @@ def test_a_poured_heap_comes_to_rest_without_overlap_and_is_steeper_with_frictio
         assert np.percentile(overlap, 99) < 0.0075, (mu, np.percentile(overlap, 99))
         assert x[:, 2].min() >= 0.01 - 1e-9
         assert np.median(np.linalg.norm(state.particle_v, axis=1)) < 0.002
-        angles[mu] = _repose_angle(x)
+        angles[mu] = heap.repose_angle(x)
     assert angles[0.2] > 5.0 and angles[0.6] > angles[0.2] + 20.0, angles
 
 
