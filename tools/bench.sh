@@ -8,7 +8,7 @@
 #        tools/bench.sh chain [--links N] [--frames F]
 #        tools/bench.sh interactions [--quick] [--sizes N,N] [--theta T]
 #        tools/bench.sh sph [--count N] [--frames F] [--emit F]
-#        tools/bench.sh heap [--grains N] [--frames F] [--friction MU,MU]
+#        tools/bench.sh heap [--grains N] [--frames F] [--friction MU,MU] [--seeds S,S]
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 venv="$("$here/tools/venv.sh" "${PHYSANIM_BLENDER:-4.5}")"
