@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..transforms import inverse_affine, rows_at
+from ..transforms import rows_at
 from .frame import ColliderFrame
 from .path import CONTACT_DISTANCE, ColliderPath, Features, Hits, SurfacePoints
 
@@ -87,7 +87,7 @@ class AnalyticPath(ColliderPath):
         flat, so a point's world distance to the plane z = c (local) is (z - c) / |grad z|
         with grad z the inverse matrix's third row, and its closest point lies along that
         gradient: one row of the inverse for every point, the rest only for the near ones."""
-        inv = inverse_affine(self._at(s))
+        inv = self._inverse(s)
         if inv.ndim == 3:  # per-point times: the general route
             return self._near_closest(x, s)
         grad = inv[2, :3]
@@ -123,7 +123,7 @@ class AnalyticPath(ColliderPath):
 
     def _local_z(self, x: np.ndarray, s) -> np.ndarray:
         """Local z of points (the only coordinate planes need): one row of the inverse matrix."""
-        inv = inverse_affine(self._at(s))
+        inv = self._inverse(s)
         if inv.ndim == 2:
             return _affine_row(x, inv[2])
         return np.einsum("nj,nj->n", inv[:, 2, :3], x) + inv[:, 2, 3]

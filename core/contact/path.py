@@ -141,7 +141,10 @@ class ColliderPath:
         self.frame = frame
         self.frame_dt = frame_dt
         self.path = TransformPath(frame.matrix0, frame.matrix1, frame.matrices)
-        self.per_metre = np.linalg.norm(inverse_affine(self.path.m0)[:3, :3], axis=1)
+        self._inverse0 = inverse_affine(self.path.m0)
+        # a collider that stands still: its inverse and inverse-transpose, once per frame
+        self._normals0 = np.swapaxes(self._inverse0[:3, :3], -1, -2)
+        self.per_metre = np.linalg.norm(self._inverse0[:3, :3], axis=1)
 
     @classmethod
     def build(cls, frame: ColliderFrame, frame_dt: float, owner) -> ColliderPath:
@@ -160,15 +163,20 @@ class ColliderPath:
             return self.path.matrices(float(s.flat[0]) if s.size else 0.0)
         return self.path.matrices(s)
 
+    def _inverse(self, s) -> np.ndarray:
+        """The inverse of :meth:`_at` (of a collider standing still: worked out once)."""
+        return self._inverse0 if self.path.static else inverse_affine(self._at(s))
+
     def to_local(self, x: np.ndarray, s) -> np.ndarray:
-        return transform_points(inverse_affine(self._at(s)), x)
+        return transform_points(self._inverse(s), x)
 
     def to_world(self, l: np.ndarray, n_local: np.ndarray, s):
         """World points and unit normals of local points/normals at parameters s."""
         m = self._at(s)
-        lin = m[..., :3, :3]
         p = transform_points(m, l)
-        n = transform_vectors(np.swapaxes(inverse3(lin), -1, -2), n_local)  # inverse-transpose
+        normals = (self._normals0 if self.path.static  # the inverse-transpose
+                   else np.swapaxes(inverse3(m[..., :3, :3]), -1, -2))
+        n = transform_vectors(normals, n_local)
         n /= norm_rows(n)[:, None]
         return p, n
 
