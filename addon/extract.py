@@ -29,25 +29,41 @@ MESH_SOURCES = ("VERTS", "FACES", "VOLUME")
 
 def point_constraints(scene, ob, frame: int, depsgraph) -> list:
     """Emitter ``ob``'s particle constraints at ``frame`` (the scene is there): (constraint
-    object's name, core kind, world matrix, radius, wire) each — plain data, as a bake's
-    checkpoint keeps it — or an error naming the constraint. On Wire on a Curve object is a
-    wire of the curve's shape (core kind ON_CURVE; ``wire``: its world points and whether it
-    is closed, :func:`curve_wire`), else None."""
+    object's name, core kind, world matrix, radius, wire, target) each — plain data, as a
+    bake's checkpoint keeps it — or an error naming the constraint. On Wire on a Curve object
+    is a wire of the curve's shape (core kind ON_CURVE; ``wire``: its world points and
+    whether it is closed, :func:`curve_wire`), else None. A Tie's radius is its Reach and its
+    target the Second object's name and world matrix (("", identity): the world); the
+    others' target is None."""
     out = []
     for c in attachments(scene, ob, "particles"):
         p = c.physanim.constraint
         if p.type not in POINT_TYPES:
-            raise PhysanimError(f"an emitter's particles are held On Plane, On Sphere or On "
-                                f"Wire, not by a {type_name(p.type)} joint — choose one of "
-                                "those", obj=c.name, frame=frame, kind="constraint")
-        _check_finite(c, frame, "constraint", {"radius": float(p.radius)})
+            raise PhysanimError(f"an emitter's particles are held On Plane, On Sphere, On "
+                                f"Wire or by a Tie, not by a {type_name(p.type)} joint — "
+                                "choose one of those", obj=c.name, frame=frame,
+                                kind="constraint")
+        radius = float(p.reach if p.type == 'TIE' else p.radius)
+        _check_finite(c, frame, "constraint", {"radius": radius})
         m = world_matrix(c, frame, "constraint")
         if p.type == 'ON_CIRCLE' and c.type == 'CURVE':
-            out.append((c.name, "ON_CURVE", m, float(p.radius), curve_wire(c, m, depsgraph,
-                                                                          frame)))
+            out.append((c.name, "ON_CURVE", m, radius, curve_wire(c, m, depsgraph, frame), None))
+        elif p.type == 'TIE':
+            second = p.object2
+            target = ("", np.eye(4)) if second is None else (
+                second.name, world_matrix(second, frame, "constraint's Second object"))
+            out.append((c.name, "TIE", m, radius, None, target))
         else:
-            out.append((c.name, p.type, m, float(p.radius), None))
+            out.append((c.name, p.type, m, radius, None, None))
     return out
+
+
+def tie_ends(start, end) -> tuple:
+    """PointConstraint's (target, target0, target1) from two :func:`point_constraints`
+    targets (None: no tie)."""
+    if start is None or end is None:
+        return "", np.eye(4), np.eye(4)
+    return start[0], start[1], end[1]
 
 
 def _curve(stops, kind: str) -> LifeCurve:
@@ -227,7 +243,8 @@ class Extractor:
                 name=ob.name, source=p.source, direction=p.direction,
                 axis=convert.AXES[p.axis], seed=p.seed, parent=parent, triangles=tris,
                 vertex_count=nverts, color=_curve(p.color_stops, "color"),
-                size=_curve(p.size_stops, "size"), stretch=p.stretch, link=link))
+                size=_curve(p.size_stops, "size"), stretch=p.stretch, link=link,
+                even=p.even_timing))
         return builder.finalize(frame)
 
     def sample(self, depsgraph, frame: float, emitters: bool = True,
@@ -330,8 +347,8 @@ class Extractor:
         # the interval's births are frame b's: they use the emitter's values at b
         for i, ((m0, v0, start), (m1, v1, val)) in enumerate(zip(a.emitters, b.emitters)):
             held = tuple(_framed(name, a.frame, "constraint", PointConstraint, name, kind, ma, mb,
-                                 radius, *wire_ends(wa, wb))
-                         for (name, kind, ma, _, wa), (_, _, mb, radius, wb)
+                                 radius, *wire_ends(wa, wb), *tie_ends(ta, tb))
+                         for (name, kind, ma, _, wa, ta), (_, _, mb, radius, wb, tb)
                          in zip(start["constraints"], val["constraints"]))
             emitters.append(EmitterFrame(
                 rate=val["rate"], rate_random=val["rate_random"], speed=val["speed"],

@@ -174,8 +174,11 @@ def inputs_hash(scene, ob, role: str, roles: Roles | None = None) -> str:
     records = []
     if role == "emitter":
         records += [_object_record(o, "emitter") for o in emitter_chain(ob)]
-        records += [_object_record(c, "constraint") for o in emitter_chain(ob)
-                    for c in attachments(scene, o, "particles")]  # what holds its particles
+        held = [c for o in emitter_chain(ob) for c in attachments(scene, o, "particles")]
+        records += [_object_record(c, "constraint") for c in held]  # what holds its particles
+        targets = {c.physanim.constraint.object2.name: c.physanim.constraint.object2
+                   for c in held if c.physanim.constraint.object2 is not None}  # ties' objects
+        records += [_object_record(targets[name], None) for name in sorted(targets)]
     else:
         records.append(_object_record(ob, role))
         targets = {v.target.name: v.target for v in ob.physanim.spring_mesh.virtual_springs

@@ -110,6 +110,7 @@ class PHYSANIM_PT_emitter(_PhysicsPanel, bpy.types.Panel):
         col = layout.column(align=True)
         col.prop(p, "rate")
         col.prop(p, "rate_random", text="Random")
+        col.prop(p, "even_timing")
         col = layout.column(align=True)
         col.prop(p, "frame_start", text="Frame Start")
         col.prop(p, "frame_end", text="End")

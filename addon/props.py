@@ -127,6 +127,10 @@ class PHYSANIM_PG_emitter(bpy.types.PropertyGroup):
                         description="Mean births per frame (per death for sub-emitters)")
     rate_random: FloatProperty(name="Rate Random", min=0.0, max=1.0e6, soft_max=1000.0,
                                description="Births per frame = rate + Rand()*this, Rand in [-1, 1]")
+    even_timing: BoolProperty(name="Even Timing", options=STATIC,
+                              description="Births evenly spaced in time within each frame, not "
+                                          "at random times: a moving emitter lays them out "
+                                          "evenly (a rope of particles)")
     frame_start: IntProperty(name="Start", default=1, min=-1_000_000, max=1_000_000,
                              description="First frame whose births show (births of frame f happen "
                                          "during the frame before it)")

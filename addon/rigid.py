@@ -25,6 +25,7 @@ from ..core.transforms import decompose
 from . import limits
 from .cache_paths import rigid_cache_dir
 from .extract import world_matrix
+from .rigid_props import POINT_TYPES
 from .roles import type_name
 from .mesh_read import evaluated_mesh
 
@@ -169,7 +170,7 @@ def joint_settings(ob, index: dict, frame: int) -> JointSettings:
 
     if p.object1 is None or p.object1.name not in index:
         fail("its First object must be a rigid body — choose one in the Constraint panel")
-    if p.type in ('ON_PLANE', 'ON_SPHERE', 'ON_CIRCLE'):
+    if p.type in POINT_TYPES:
         fail(f"{type_name(p.type)} holds an emitter's particles, not a rigid body — choose a "
              "joint type, or an emitter as First")
     if p.object2 is not None and p.object2 == p.object1:

@@ -7,6 +7,7 @@ import numpy as np
 
 from ..core.errors import PhysanimError
 from .panels import AUTO_SHAPE_PREVIEW_LIMIT, _PhysicsPanel, draw_target
+from .rigid_props import POINT_TYPES
 
 SHAPE_NAMES = {"BOX": "Box", "SPHERE": "Sphere", "CAPSULE": "Capsule", "HULL": "Convex Hull",
                "MESH": "Mesh (concave)"}
@@ -122,9 +123,23 @@ class PHYSANIM_PT_constraint(_PhysicsPanel, bpy.types.Panel):
         col.prop(p, "object1")
         mesh = p.object1 is not None and p.object1.physanim.spring_mesh.enabled
         particles = p.object1 is not None and p.object1.physanim.emitter.enabled
-        points = p.type in ('ON_PLANE', 'ON_SPHERE', 'ON_CIRCLE')
+        points = p.type in POINT_TYPES
         if mesh and p.object1.type == 'MESH':
             col.prop_search(p, "group1", p.object1, "vertex_groups")
+        if p.type == 'TIE':
+            col.prop(p, "reach")
+            col.prop(p, "object2")
+            if not particles:
+                layout.label(text="A Tie holds an emitter's particles (First)", icon='ERROR')
+            elif p.object2 is None:
+                layout.label(text="Tied to the world", icon='INFO')
+            elif p.object2.physanim.rigid_body.enabled:
+                layout.label(text=f"\"{p.object2.name}\" swings on the particles and pulls "
+                             "them", icon='INFO')
+            else:
+                layout.label(text=f"Tied to \"{p.object2.name}\" where it is animated",
+                             icon='INFO')
+            return
         if points:
             if p.type == 'ON_CIRCLE' and context.object.type == 'CURVE':
                 col.label(text="The wire is this curve", icon='CURVE_DATA')
@@ -139,8 +154,8 @@ class PHYSANIM_PT_constraint(_PhysicsPanel, bpy.types.Panel):
             layout.label(text="Choose the rigid body or spring mesh it holds (First)",
                          icon='ERROR')
         elif particles:
-            layout.label(text="An emitter's particles are held On Plane, On Sphere or On Wire",
-                         icon='ERROR')
+            layout.label(text="An emitter's particles are held On Plane, On Sphere, On Wire "
+                         "or by a Tie", icon='ERROR')
         elif mesh and p.type not in ('FIXED', 'BALL'):
             layout.label(text="A spring mesh's vertices are held by Fixed or Ball", icon='ERROR')
         elif p.object2 is None:

@@ -116,8 +116,13 @@ CONSTRAINT_TYPE_ITEMS = [
     ('ON_CIRCLE', "On Wire", "An emitter's particles run along a wire (beads on it): this "
      "object's curve when it is a Curve object, else the circle of Radius about its origin, "
      "in its XY plane"),
+    ('TIE', "Tie", "An emitter's particles within Reach of this object's origin are tied where "
+     "they are to the Second object (a rope's end to a hook; a rigid body swings on the rope "
+     "and pulls it), or to the world"),
 ]
-POINT_TYPES = ('ON_PLANE', 'ON_SPHERE', 'ON_CIRCLE')  # for an emitter's particles
+
+
+POINT_TYPES = ('ON_PLANE', 'ON_SPHERE', 'ON_CIRCLE', 'TIE')  # for an emitter's particles
 
 
 def _is_rigid_body_or_spring_mesh(self, ob) -> bool:
@@ -188,6 +193,10 @@ class PHYSANIM_PG_constraint(bpy.types.PropertyGroup):
     radius: FloatProperty(name="Radius", min=1e-6, max=1.0e5, default=1.0, unit='LENGTH',
                           description="The sphere's or the circular wire's radius (On Sphere, "
                                       "On Wire on an object that is not a curve)")
+    reach: FloatProperty(name="Reach", min=1e-6, max=1.0e5, default=0.05, unit='LENGTH',
+                         description="Tie: the emitter's particles this close to this object's "
+                                     "origin when first seen are tied (a rope's end: the "
+                                     "particle born there)")
     disable_collisions: BoolProperty(name="Disable Collisions", default=True, options=STATIC,
                                      description="The two objects do not collide with each "
                                                  "other")

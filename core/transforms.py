@@ -7,6 +7,8 @@ into translation, rotation (quaternion, slerped) and scale (lerped).
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
@@ -58,6 +60,15 @@ def quaternion_to_matrix(q: np.ndarray) -> np.ndarray:
         [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
         [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
     ])
+
+
+def rotation_vector_matrix(theta: np.ndarray) -> np.ndarray:
+    """(3, 3) rotation by the rotation vector ``theta`` (axis times angle [rad])."""
+    angle = float(np.linalg.norm(theta))
+    if angle < 1e-15:
+        return np.eye(3)
+    half = 0.5 * angle
+    return quaternion_to_matrix(np.array([math.cos(half), *(math.sin(half) / angle * theta)]))
 
 
 def slerp(q0: np.ndarray, q1: np.ndarray, s: np.ndarray | float) -> np.ndarray:

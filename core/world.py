@@ -105,12 +105,15 @@ class BodyInertia:
     """A leader's body as a follower coupled to it sees it at the frame's end.
 
     Attributes: mass [kg]; inertia: (3, 3) world inertia tensor about the centre of mass
-    [kg m^2]; centre: (3,) centre of mass [m].
+    [kg m^2]; centre: (3,) centre of mass [m]; velocity: (6,) linear [m/s] and angular
+    [rad/s] velocity; velocity0: (3,) linear velocity at the frame's start [m/s].
     """
 
     mass: float
     inertia: np.ndarray
     centre: np.ndarray
+    velocity: np.ndarray = field(default_factory=lambda: np.zeros(6))
+    velocity0: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
 @dataclass(frozen=True)

@@ -219,3 +219,13 @@ def crossings(x: np.ndarray, tris: list) -> int:
 
     tree = BVHTree.FromPolygons([Vector(p) for p in x.tolist()], tris)
     return sum(1 for a, b in tree.overlap(tree) if a < b and not set(tris[a]) & set(tris[b]))
+
+
+def track(scene, names, frames) -> np.ndarray:
+    """(frames, objects, 4, 4) world matrices of the objects ``names`` at ``frames``."""
+    obs = [bpy.data.objects[n] for n in names]
+    out = []
+    for f in frames:
+        scene.frame_set(f)
+        out.append([np.array(ob.matrix_world) for ob in obs])
+    return np.array(out)

@@ -96,22 +96,12 @@ def gripper(scene, frame: float) -> np.ndarray:
     return np.array(fore.matrix_world @ Vector((0.0, 0.0, SEGMENTS[-1][1] + GRIP)))
 
 
-def _track(scene, names, frames) -> np.ndarray:
-    """(frames, bodies, 4, 4) world matrices."""
-    obs = [bpy.data.objects[n] for n in names]
-    out = []
-    for f in frames:
-        scene.frame_set(f)
-        out.append([np.array(ob.matrix_world) for ob in obs])
-    return np.array(out)
-
-
 def check(scene) -> list[str]:
     problems = []
     fps = scene.render.fps / scene.render.fps_base
     frames = list(range(1, FRAMES + 1))
     names = ["Crate"] + [n for n, _ in pyramid()]
-    m = _track(scene, names, frames)
+    m = _common.track(scene, names, frames)
     crate = m[:, 0, :3, 3]
     held = [gripper(scene, f) for f in range(1, RELEASE + 1)]
     off = np.linalg.norm(crate[:RELEASE] - np.array(held), axis=1)

@@ -101,19 +101,9 @@ def build(scene) -> None:
             p.enabled, p.use_density, p.density = True, True, BLOCK_DENSITY
 
 
-def _track(scene, names) -> np.ndarray:
-    """(frames, objects, 4, 4) world matrices over the bake."""
-    obs = [bpy.data.objects[n] for n in names]
-    out = []
-    for f in range(1, FRAMES + 1):
-        scene.frame_set(f)
-        out.append([np.array(ob.matrix_world) for ob in obs])
-    return np.array(out)
-
-
 def check(scene) -> list[str]:
     problems = []
-    m = _track(scene, _links() + ["Ball"] + _blocks())
+    m = _common.track(scene, _links() + ["Ball"] + _blocks(), range(1, FRAMES + 1))
     links, ball, blocks = m[:, :LINKS], m[:, LINKS], m[:, LINKS + 1:]
     axis = links[:, :, :3, 2]  # each link's Z: along the chain
     top = links[:, :, :3, 3] + axis * LINK * 0.5  # the end towards the hook (-d at the start)

@@ -134,6 +134,13 @@ class _System:
             s *= 2
         return d / b
 
+    def dense(self) -> np.ndarray:
+        """The (m, m) matrix (regularised)."""
+        a = np.zeros((self.m, self.m))
+        np.add.at(a, (self.i, self.j), self.v)
+        a[np.diag_indices(self.m)] += self.shift
+        return a
+
     def matvec(self, y: np.ndarray) -> np.ndarray:
         return np.bincount(self.i, weights=self.v * y[self.j], minlength=self.m) + self.shift * y
 
@@ -144,10 +151,7 @@ class _System:
             return self._cyclic_reduction(b)
         if self.m <= DENSE_ROWS:
             if self._inverse is None:
-                a = np.zeros((self.m, self.m))
-                np.add.at(a, (self.i, self.j), self.v)
-                a[np.diag_indices(self.m)] += self.shift
-                self._inverse = np.linalg.inv(a)
+                self._inverse = np.linalg.inv(self.dense())
             return self._inverse @ b
         if not self.symmetric:
             return bicgstab(self.matvec, b, CG_TOLERANCE, CG_ITERATIONS)[0]
@@ -211,27 +215,37 @@ class HardConstraints:
         feedback: :class:`Feedback`. tolerance: |C| [m] the projection stops at.
     """
 
-    def __init__(self, kinds: list, feedback: Feedback = Feedback(), tolerance: float = 1e-10):
+    def __init__(self, kinds: list, feedback: Feedback = Feedback(), tolerance: float = 1e-10,
+                 bodies=None):
         self.kinds = list(kinds)
         self.ks, self.kd = feedback.stiffness, feedback.damping
         self.tolerance = tolerance
+        self.bodies = bodies
 
-    def rows(self, x: np.ndarray, v: np.ndarray, t: float) -> Rows:
-        return gather([k.rows(x, v, t) for k in self.kinds])
+    def rows(self, x: np.ndarray, v: np.ndarray, t: float, bodies: bool = False) -> Rows:
+        """The kinds' rows (and, with ``bodies``, the rows to the bodies after them)."""
+        extra = [self.bodies] if bodies and self.bodies is not None else []
+        return gather([k.rows(x, v, t) for k in self.kinds + extra])
 
     # -- constraint forces ----------------------------------------------------------------------
     def force(self, x: np.ndarray, v: np.ndarray, t: float, inverse_mass: np.ndarray,
               f: np.ndarray) -> np.ndarray:
         """Add the constraint force J^T lambda to the accumulated forces ``f`` (n, 3) [N];
-        returns lambda (m,)."""
-        rows = self.rows(x, v, t)
+        returns lambda (m,). The bodies' rows join (their bodies accelerate with their own
+        forces and the rows', :meth:`_solve`), and the bodies are told their part."""
+        rows = self.rows(x, v, t, bodies=True)
         if rows.count == 0:
             return np.zeros(0)
         system = _System(rows, inverse_mass)
         b = (-rows.jdot_v - system.apply_j(inverse_mass[:, None] * f)
              - self.ks * rows.c - self.kd * rows.cdot)
-        lam = system.solve(b)
+        if self.bodies is not None:  # C'' = J a + U (bodies' accelerations) + J' v
+            b[rows.count - self.bodies.count:] -= \
+                self.bodies.columns() @ self.bodies.free_acceleration()
+        lam, accel = self._solve(system, b)
         f += system.apply_jt(lam, len(x))
+        if accel is not None:
+            self.bodies.forces(lam[rows.count - self.bodies.count:], accel)
         return lam
 
     def constrain(self, view, f: np.ndarray) -> None:
@@ -245,37 +259,68 @@ class HardConstraints:
         """Move ``x`` and ``v`` (n, 3) in place onto the constraints at time ``t`` (mass-weighted
         least change: impulses along J^T). With ``start`` (the positions at the step's start, a
         first-order step of length ``h``) the positions move along its J and the velocities
-        with them (RATTLE); without, along their own J (post-stabilisation)."""
+        with them (RATTLE); without, along their own J (post-stabilisation). The ``bodies``
+        move with the points (:meth:`_solve`)."""
         n = len(x)
-        rows = self.rows(x, v, t)
+        rows = self.rows(x, v, t, bodies=True)
         if rows.count == 0:
             return Projection(0.0, 0)
-        first = None if start is None else self.rows(start, v, t)
+        first = None if start is None else self.rows(start, v, t, bodies=True)
         residual = float(np.max(np.abs(rows.c)))
         for _ in range(PROJECTIONS + (0 if first is None else FALLBACK_PROJECTIONS)):
             if residual <= self.tolerance:
                 break
             if first is None:  # Newton along the current gradients
                 system = _System(rows, inverse_mass)
-                dx = inverse_mass[:, None] * system.apply_jt(system.solve(-rows.c), n)
+                delta, dq = self._solve(system, -rows.c)
+                dx = inverse_mass[:, None] * system.apply_jt(delta, n)
             else:  # Newton for the multipliers along the start's gradients: J W J0^T
-                delta = _System(rows, inverse_mass, first).solve(-rows.c)
+                delta, dq = self._solve(_System(rows, inverse_mass, first), -rows.c)
                 dx = inverse_mass[:, None] * _scatter(first, delta, n)
             x += dx
-            moved = self.rows(x, v, t)
+            if dq is not None:
+                self.bodies.move(dq)
+            moved = self.rows(x, v, t, bodies=True)
             worse = float(np.max(np.abs(moved.c)))
             if first is not None and not worse < RATTLE_CONTRACTION * residual:
                 # the start's gradients cannot reach the constraints (points turned far in one
                 # step): undo, and go on along the current ones (dissipative, but converges)
                 x -= dx
+                if dq is not None:
+                    self.bodies.move(-dq)
                 first = None
                 continue
             if start is not None:
                 v += dx / h
+                if dq is not None:
+                    self.bodies.push(dq / h, delta[rows.count - self.bodies.count:] / h)
             rows, residual = moved, worse
+        if self.bodies is not None:  # the velocities (points' and bodies') as they are now
+            rows = self.rows(x, v, t, bodies=True)
         system = _System(rows, inverse_mass)
-        v += inverse_mass[:, None] * system.apply_jt(system.solve(-rows.cdot), n)
+        lam, du = self._solve(system, -rows.cdot)
+        v += inverse_mass[:, None] * system.apply_jt(lam, n)
+        if du is not None:
+            self.bodies.push(du, lam[rows.count - self.bodies.count:])
         return Projection(float(np.max(np.abs(rows.c))), rows.count)
+
+    def _solve(self, system: _System, b: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """The multipliers of ``system`` with right-hand side b, and the bodies' motion
+        M^-1 U^T lambda (None without bodies). The bodies' rows come last; U, their gradient
+        in the bodies' motions, adds U M^-1 U^T to J W J^T (the bodies' give: a point tied
+        to a body has more rows than it has freedoms, so the points' part alone is singular
+        and the sum is solved whole)."""
+        if self.bodies is None:
+            return system.solve(b), None
+        u = np.zeros((system.m, len(self.bodies.mass)))
+        u[system.m - self.bodies.count:] = self.bodies.columns()
+        give = np.linalg.solve(self.bodies.mass, u.T)  # M^-1 U^T
+        if system.m <= DENSE_ROWS:
+            lam = np.linalg.solve(system.dense() + u @ give, b)
+        else:
+            lam = bicgstab(lambda y: system.matvec(y) + u @ (give @ y), b, CG_TOLERANCE,
+                           CG_ITERATIONS)[0]
+        return lam, give @ lam
 
 
 def _inverse(mass: np.ndarray) -> np.ndarray:

@@ -70,7 +70,9 @@ def sample_births(rng: np.random.Generator, settings: EmitterSettings, frame: Em
     count = int(birth_count(rng, frame.rate, frame.rate_random)[0])
     if count == 0:
         return Births.empty()
-    u = np.sort(rng.random(count))
+    u = np.sort(rng.random(count))  # drawn also when even: the other draws stay the same
+    if settings.even:
+        u = (np.arange(count) + 0.5) / count
     path = TransformPath(frame.matrix0, frame.matrix1, frame.matrices)
     local_vel = None
     if settings.source == "ORIGIN":

@@ -2,12 +2,12 @@
 :class:`ParticleDrive`) and reports of it (:class:`FrameReport`)."""
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 from ..contact import ColliderFrame
 from ..forces import Force
-from ..world import WorldFrame
+from ..world import BodyInertia, WorldFrame
 from .pair_collisions import ParticleCollisions
 from .settings import EmitterFrame
 
@@ -27,6 +27,8 @@ class FrameInputs:
         interactions: forces among the particles (:mod:`..forces.interactions`: mutual
             gravity, Lennard-Jones, Coulomb), bound to the particles each sub-step.
         collisions: collisions among the particles (:mod:`.pair_collisions`).
+        bodies: the rigid bodies of the world stepped first, by name (:class:`~..world.
+            BodyInertia`): particles tied to one pull it (:mod:`.ties`).
     """
 
     frame: int
@@ -38,13 +40,15 @@ class FrameInputs:
     forces: Sequence[Force] = ()
     interactions: Sequence = ()
     collisions: Sequence[ParticleCollisions] = ()
+    bodies: Mapping[str, BodyInertia] = field(default_factory=dict)
 
     @classmethod
     def of(cls, frame: WorldFrame, drive: ParticleDrive) -> FrameInputs:
         """The particles' inputs: the world's interval, the emitters' values and the
         interactions."""
         return cls(frame.frame, frame.t0, frame.frame_dt, frame.gravity, drive.emitters,
-                   frame.colliders, frame.forces, drive.interactions, drive.collisions)
+                   frame.colliders, frame.forces, drive.interactions, drive.collisions,
+                   frame.bodies)
 
     @property
     def drive(self) -> ParticleDrive:
@@ -55,7 +59,7 @@ class FrameInputs:
     def world(self) -> WorldFrame:
         """What every system shares of this interval."""
         return WorldFrame(self.frame, self.t0, self.frame_dt, self.gravity, self.colliders,
-                          self.forces)
+                          self.forces, self.bodies)
 
 
 @dataclass(frozen=True)

@@ -125,6 +125,8 @@ class ParticleState:
         next_id: the id the next birth gets. last_born: per emitter, id of its latest birth.
         rngs: per emitter random generators (their state is part of the simulation state).
         pair_warm: particle-collision impulses kept from sub-step to sub-step.
+        ties: per TIE constraint (its name), the particles it holds: (ids, positions in its
+            target's frame, which frame) (:mod:`.ties`).
     """
 
     t: float
@@ -146,6 +148,11 @@ class ParticleState:
     #: per particle-collision setting (its name): the pairs in contact after the last sub-step
     #: (keys from the pair's ids) and their normal impulses, which warm-start the next one
     pair_warm: dict = field(default_factory=dict, repr=False)
+    ties: dict = field(default_factory=dict, repr=False)
+
+    def __setstate__(self, saved: dict) -> None:
+        """A checkpoint from before a field was added gets its default."""
+        self.__dict__.update({"pair_warm": {}, "ties": {}, **saved})
 
     @classmethod
     def empty(cls, t: float, rngs: list[np.random.Generator]) -> ParticleState:

@@ -61,6 +61,8 @@ class EmitterSettings:
         stretch: shape from velocity: instances scale along their velocity by 1 + stretch*|v|
             [s/m]; 0 keeps them round and unrotated.
         link: optional springs joining consecutive particles (a chain).
+        even: births evenly spaced in time within each frame interval instead of at random
+            times (a moving emitter lays them out evenly: a rope's particles).
     """
 
     name: str
@@ -75,6 +77,7 @@ class EmitterSettings:
     size: LifeCurve = field(default_factory=lambda: LifeCurve.constant(1.0))
     stretch: float = 0.0
     link: SpringLink | None = None
+    even: bool = False
 
     def __post_init__(self):
         owner = f'emitter "{self.name}"'
@@ -99,7 +102,7 @@ class EmitterSettings:
         non_negative(owner, stretch=self.stretch)
 
 
-POINT_CONSTRAINTS = ("ON_PLANE", "ON_SPHERE", "ON_CIRCLE", "ON_CURVE")
+POINT_CONSTRAINTS = ("ON_PLANE", "ON_SPHERE", "ON_CIRCLE", "ON_CURVE", "TIE")
 
 
 @dataclass(frozen=True)
@@ -113,10 +116,18 @@ class PointConstraint:
         ON_CURVE   on the polyline through ``points0`` at the start, ``points1`` at the end
                    (world positions, vertex by vertex; closed when ``cyclic``): a bead on a
                    wire of any shape (:class:`~..forces.OnCurves`)
+        TIE        the particles within ``radius`` of o when first seen stay where they are
+                   on the ``target`` object (its frames ``target0`` .. ``target1``; the world
+                   when it has no name): a rope's end tied to a hook. A target that is a
+                   rigid body simulated in the same world is pulled by the particles and
+                   swings them (two-way: :mod:`.ties`)
 
     Args: name: what messages call it (the constraint's object). kind: one of
     :data:`POINT_CONSTRAINTS`. matrix0, matrix1: (4, 4) world matrices. radius [m].
-    points0, points1: (P, 3) [m], ON_CURVE only. cyclic: ON_CURVE only.
+    points0, points1: (P, 3) [m], ON_CURVE only. cyclic: ON_CURVE only. target: the
+    object a TIE holds its particles on ("": the world); target0, target1: its (4, 4) world
+    matrices at the interval's ends (unused for a rigid body of the same world, whose path
+    the world gives).
     """
 
     name: str
@@ -127,6 +138,9 @@ class PointConstraint:
     points0: np.ndarray | None = None
     points1: np.ndarray | None = None
     cyclic: bool = False
+    target: str = ""
+    target0: np.ndarray = field(default_factory=lambda: np.eye(4))
+    target1: np.ndarray = field(default_factory=lambda: np.eye(4))
 
     def __post_init__(self):
         owner = f'constraint "{self.name}"'
@@ -134,13 +148,17 @@ class PointConstraint:
             self._check_curve(owner)
         if self.kind not in POINT_CONSTRAINTS:
             raise ValueError(f"{owner}: kind must be one of {POINT_CONSTRAINTS} (got {self.kind!r})")
-        for key in ("matrix0", "matrix1"):
+        for key in ("matrix0", "matrix1", "target0", "target1"):
             object.__setattr__(self, key, matrix(owner, key, getattr(self, key)))
             if np.linalg.norm(getattr(self, key)[:3, 2]) < 1e-12:
                 raise ValueError(f"{owner}: its Z axis has zero length (a zero scale)")
         finite(owner, radius=self.radius)
-        if self.kind in ("ON_SPHERE", "ON_CIRCLE") and not self.radius > 0.0:
+        if self.kind in ("ON_SPHERE", "ON_CIRCLE", "TIE") and not self.radius > 0.0:
             raise ValueError(f"{owner}: the radius must be > 0 (got {self.radius})")
+        if self.kind == "TIE" and min(abs(np.linalg.det(m[:3, :3]))
+                                      for m in (self.target0, self.target1)) < 1e-12:
+            raise ValueError(f'{owner}: the object it ties to ("{self.target}") has a zero '
+                             "scale — give it a scale")
 
     def _check_curve(self, owner: str) -> None:
         """A wire's points: two (P, 3) finite arrays of the same shape, P >= 2, no two

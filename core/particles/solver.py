@@ -35,6 +35,7 @@ from .emit import Births, sample_births, sample_bursts
 from .frame_inputs import FrameInputs, FrameReport, ParticleDrive
 from .model import ParticleModel, ParticleState
 from .settings import PointConstraint
+from .ties import TIE, TieFrame
 
 FIRST_ORDER = ("EULER", "SYMPLECTIC_EULER", "IMPLICIT")  # integrators whose rods take RATTLE
 MAX_PARTICLES = 50_000_000  # hard limit that keeps a bake inside memory (~5 GB of state)
@@ -52,6 +53,12 @@ class _FrameStep:
     rest_speed: float  # [m/s] a bounce slower than this ends in contact
     births: list  # per emitter, this frame's Births (sub-emitters burst during the sub-steps)
     report: FrameReport
+    ties: TieFrame | None = None  # particles tied to objects (None: no tie this frame)
+
+    @property
+    def reactions(self) -> list:
+        """What the ties did to rigid bodies this frame (:class:`~..world.Reaction`)."""
+        return self.ties.frame_reactions() if self.ties is not None else []
 
 
 class ParticleSystem(SolverSystem):
@@ -189,9 +196,17 @@ class ParticleSolver:
         h = inputs.frame_dt / self.substeps
         self._check_stiffness(state, inputs, h)
         g = np.asarray(inputs.gravity, dtype=np.float64)
+        tied = any(c.kind == TIE for ef in inputs.emitters for c in ef.constraints)
+        ties = TieFrame(inputs, h) if tied else None
+        if ties is not None and ties.coupled and self.settings.integrator != "SYMPLECTIC_EULER":
+            name, body = next(iter(ties.coupled.items()))
+            raise PhysanimError(
+                f'ties the particles to the rigid body "{body}", which needs the Symplectic '
+                f"Euler integrator (the scene's is {self.settings.integrator}) — choose it in "
+                "the scene's PhysAnim settings", obj=name, frame=inputs.frame, kind="constraint")
         return _FrameStep(state, inputs, paths, h, g, 2.0 * float(np.linalg.norm(g)) * h + 1e-4,
                           [self._sample(state, inputs, i) for i in range(model.emitter_count)],
-                          FrameReport(per_emitter_births=[0] * model.emitter_count))
+                          FrameReport(per_emitter_births=[0] * model.emitter_count), ties)
 
     @staticmethod
     def _check_stiffness(state: ParticleState, inputs: FrameInputs, h: float) -> None:
@@ -220,15 +235,25 @@ class ParticleSolver:
         state, inputs, h = step.state, step.inputs, step.h
         s0, s1 = k / self.substeps, (k + 1) / self.substeps
         t = inputs.t0 + k * h
-        contact = ContactForce(resting_contacts(step.paths, state.particle_x, state.particle_v,
-                                                s0, step.rest_speed), h)
+        tied = ([], None) if step.ties is None else step.ties.substep(
+            state, inputs.emitters, s0, s1, t, h)
+        still = np.concatenate([p.i for p in tied[0]] + [np.zeros(0, np.int64)] + (
+            [] if tied[1] is None else [tied[1].i]))  # tied: no collider moves them
+        resting = resting_contacts(step.paths, state.particle_x, state.particle_v, s0,
+                                   step.rest_speed)
+        contact = ContactForce(resting.take(~np.isin(resting.index, still)) if len(still)
+                               else resting, h)
         x0, v0 = state.particle_x, state.particle_v
-        held = self._constraints(state, inputs, s0, t, h)
+        held = self._constraints(state, inputs, s0, t, h, tied)
         with _at_frame(inputs.frame):  # an interaction's failure knows no frame
             step.report.integrator_steps += self._integrate(
                 state, self._forces(state, inputs, step.g), contact, held, t, h, inputs)
+        if tied[1] is not None:  # the bodies take what the step's tie forces gave them
+            tied[1].commit(h)
         done = respond(step.paths, x0, state.particle_x, v0, state.particle_v, s0, s1, h,
                        step.rest_speed)
+        if len(still):
+            done.x[still], done.v[still] = state.particle_x[still], state.particle_v[still]
         state.particle_x, state.particle_v = done.x, done.v
         step.report.collisions += done.count
         if inputs.collisions:
@@ -242,8 +267,9 @@ class ParticleSolver:
         alive = state.particle_count
         self._emit(state, inputs, step.births, deaths, s0, s1, step.g, step.report)
         if state.particle_count > alive and any(ef.constraints for ef in inputs.emitters):
-            born = self._constraints(state, inputs, s1, t + h, h)  # the newborn onto them
-            self._constrain(state, born, None, t + h, h)
+            born = self._constraints(state, inputs, s1, t + h, h, tied)  # the newborn onto them
+            if born is not None:
+                self._constrain(state, born, None, t + h, h)
         self._check_bounds(state, inputs)
         state.t = t + h
 
@@ -295,10 +321,12 @@ class ParticleSolver:
                                             settings.link.damping))
         return forces
 
-    def _constraints(self, state, inputs, s0: float, t: float, h: float
-                     ) -> HardConstraints | None:
-        """The sub-step's hard constraints: the hard links (rods) between living particles and
-        the emitters' point constraints (planes, spheres, wires), or None."""
+    def _constraints(self, state, inputs, s0: float, t: float, h: float,
+                     tied: tuple = ([], None)) -> HardConstraints | None:
+        """The sub-step's hard constraints: the hard links (rods) between living particles,
+        the emitters' point constraints (planes, spheres, wires) and the ties (``tied``: pins
+        and the ties to rigid bodies, solved with the particles: :meth:`TieFrame.substep`),
+        or None."""
         kinds = []
         if len(state.link_a):
             hard = np.array([e.link is not None and e.link.hard for e in self.model.emitters])
@@ -312,8 +340,10 @@ class ParticleSolver:
         for e, ef in enumerate(inputs.emitters):
             held = np.nonzero(state.particle_emitter == e)[0] if ef.constraints else ()
             for c in ef.constraints if len(held) else ():
-                kinds.extend(point_rows(c, held, s0, t, h, inputs.frame_dt))
-        return HardConstraints(kinds) if kinds else None
+                if c.kind != TIE:
+                    kinds.extend(point_rows(c, held, s0, t, h, inputs.frame_dt))
+        kinds.extend(tied[0])
+        return HardConstraints(kinds, bodies=tied[1]) if kinds or tied[1] else None
 
     def _constrain(self, state, held: HardConstraints, x0, t, h) -> None:
         """The particles back on their constraints: after a first-order step along the
@@ -324,6 +354,8 @@ class ParticleSolver:
         rattle = first_order and x0 is not None and len(x0) == len(x)
         held.project(x, v, t, 1.0 / state.particle_mass, start=x0 if rattle else None, h=h)
         state.particle_x, state.particle_v = x, v
+        if held.bodies is not None:
+            held.bodies.finish(x)
 
     def _integrate(self, state, forces, contact, rods, t, h, inputs) -> int:
         if state.particle_count == 0:

@@ -9,13 +9,21 @@ from . import quaternion as quat
 from .model import RigidBodyModel, RigidBodyState
 
 
-def bodies(model: RigidBodyModel, state: RigidBodyState) -> dict[str, BodyInertia]:
-    """Each dynamic body's mass, world inertia tensor and centre of mass now, by name."""
+def bodies(model: RigidBodyModel, state: RigidBodyState, momentum0: np.ndarray | None = None
+           ) -> dict[str, BodyInertia]:
+    """Each dynamic body's mass, world inertia tensor, centre of mass and velocity now, by
+    name, and its velocity at the frame's start from its momentum then (``momentum0``, (n, 3);
+    None: now's)."""
+    p0 = state.body_P if momentum0 is None else momentum0
     d = np.nonzero(~model.body_kinematic)[0]
     rot = quat.to_matrix(state.body_q[d])
     inertia = rot @ model.body_inertia[d] @ rot.transpose(0, 2, 1)
-    return {model.body_name[i]: BodyInertia(float(model.body_mass[i]), inertia[k],
-                                            state.body_x[i].copy()) for k, i in enumerate(d)}
+    spin = np.linalg.solve(inertia, state.body_L[d][..., None])[..., 0] if len(d) else \
+        np.zeros((0, 3))
+    return {model.body_name[i]: BodyInertia(
+        float(model.body_mass[i]), inertia[k], state.body_x[i].copy(),
+        np.concatenate([state.body_P[i] / model.body_mass[i], spin[k]]),
+        p0[i] / model.body_mass[i]) for k, i in enumerate(d)}
 
 
 def absorb(model: RigidBodyModel, state: RigidBodyState, reactions) -> None:

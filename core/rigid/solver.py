@@ -433,6 +433,7 @@ class RigidBodySystem(SolverSystem):
 
     def begin_frame(self, frame: WorldFrame, paths, own) -> None:
         self._start = (self.state.body_x.copy(), self.state.body_q.copy())
+        self._momentum0 = self.state.body_P.copy()
         super().begin_frame(frame, paths, own)
 
     def frame_colliders(self) -> list:
@@ -442,8 +443,10 @@ class RigidBodySystem(SolverSystem):
                                    (self.state.body_x, self.state.body_q))
 
     def frame_bodies(self) -> dict:
-        """Each dynamic body's mass, world inertia and centre of mass now."""
-        return reactions_.bodies(self.solver.model, self.state)
+        """Each dynamic body's mass, world inertia, centre of mass and velocity now (and its
+        velocity at the frame's start)."""
+        return reactions_.bodies(self.solver.model, self.state,
+                                 getattr(self, "_momentum0", None))
 
     def inputs(self, frame: WorldFrame, paths: RigidPaths | None) -> RigidFrameInputs:
         return RigidFrameInputs.of(frame, paths)

@@ -32,13 +32,12 @@ the collider's push, which goes back to the collider when it is a body).
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..errors import PhysanimError
-from ..transforms import TransformPath, inverse_affine, quaternion_to_matrix, transform_points
+from ..transforms import TransformPath, inverse_affine, rotation_vector_matrix, transform_points
 from ..world import Reaction
 from .model import SpringMeshModel, SpringMeshState
 
@@ -187,20 +186,11 @@ def couple(model: SpringMeshModel, held: Held, integrator, pressed: dict,
         held.du[b] += step
         held.move[b] += h * step
         centre = _centre(held, b, s1)
-        turn = _rotation(h * step[3:])
+        turn = rotation_vector_matrix(h * step[3:])
         for k, (a, body) in enumerate(zip(model.attachments, held.coupled)):
             if body == b:
                 x1[a.index] = centre + h * step[:3] + (before[a.index] - centre) @ turn.T
                 held.shift[k] += x1[a.index] - before[a.index]
-
-
-def _rotation(theta: np.ndarray) -> np.ndarray:
-    """(3, 3) rotation by the rotation vector ``theta`` [rad]."""
-    angle = float(np.linalg.norm(theta))
-    if angle < 1e-15:
-        return np.eye(3)
-    half = 0.5 * angle
-    return quaternion_to_matrix(np.array([math.cos(half), *(math.sin(half) / angle * theta)]))
 
 
 def _along(u: np.ndarray, normal: np.ndarray) -> np.ndarray:

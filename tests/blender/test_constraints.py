@@ -395,9 +395,89 @@ def test_an_emitter_held_by_a_joint_type_says_why(physanim_ext, tmp_path):
     emitter = bpy.context.object
     emitter.physanim.emitter.enabled = True
     _constraint("Rail", (0.0, 0.0, 0.0), emitter, kind='HINGE')
-    with pytest.raises(RuntimeError, match="held On Plane, On Sphere or On Wire, not by a "
-                                           "Hinge joint"):
+    with pytest.raises(RuntimeError, match="held On Plane, On Sphere, On Wire or by a Tie, "
+                                           "not by a Hinge joint"):
         bpy.ops.physanim.bake()
+
+
+def _still_after(frames: list, reach_of, centre) -> tuple[int, int]:
+    """(particles within ``reach_of`` of ``centre`` at some frame, those of them that never
+    moved after it by more than 1e-9 m)."""
+    first, moved = {}, set()
+    for a in frames:
+        for pid, x in zip(a["id"].tolist(), a["position"]):
+            if pid in first:
+                if np.linalg.norm(x - first[pid]) > 1e-9:
+                    moved.add(pid)
+            elif np.linalg.norm(x - centre) <= reach_of:
+                first[pid] = x
+    return len(first), len(set(first) - moved)
+
+
+def test_a_tie_at_its_defaults_holds_the_particles_born_at_it(physanim_ext, tmp_path):
+    """An emitter giving its particles from its origin (at the default 5 m/s) and a
+    constraint on it with only its type set to Tie: every particle within the Tie's Reach
+    (5 cm) of its origin at a frame stays exactly there from then on (tied to the world), and
+    there are many of them; the others fly off."""
+    _scene(tmp_path)
+    bpy.ops.mesh.primitive_plane_add(location=(0.0, 0.0, 1.0))
+    emitter = bpy.context.object
+    emitter.physanim.emitter.enabled = True
+    emitter.physanim.emitter.source = 'ORIGIN'
+    _constraint("Hook", (0.0, 0.0, 1.0), emitter, kind='TIE')
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    frames = _particle_frames(physanim_ext, emitter)
+    near, still = _still_after(frames, 0.05, np.array([0.0, 0.0, 1.0]))
+    assert near > 100 and still == near
+    assert np.ptp(frames[-1]["position"][:, 2]) > 1.0  # the others flew
+
+
+def _rope(top=3.0, bottom=2.0):
+    """A rope emitter: 20 particles of 0.1 kg born for the first frame (in the interval
+    before it) while it moves from ``top`` down to ``bottom``, each joined to the one before
+    by a rigid link."""
+    bpy.ops.mesh.primitive_plane_add(size=0.05, location=(0.0, 0.0, top))
+    ob = bpy.context.object
+    e = ob.physanim.emitter
+    e.enabled = True
+    e.source = 'ORIGIN'
+    e.frame_start, e.frame_end = 1, 1
+    e.speed, e.spread, e.lifetime = 0.0, 0.0, 1000.0
+    e.link, e.link_hard = True, True
+    ob.keyframe_insert("location", frame=0)
+    ob.location.z = bottom
+    ob.keyframe_insert("location", frame=1)
+    return ob
+
+
+def test_a_rigid_body_tied_to_a_particle_rope_hangs_from_it_and_pulls_it(physanim_ext,
+                                                                          tmp_path):
+    """A particle rope tied to the world at its top and to a 1 kg cube at its bottom (Tie with
+    the cube as Second): the rope holds the cube — within 25 cm of where it started after 2 s,
+    where without the tie it falls over 2 m — its tied particle stays on the cube (its
+    distance from the cube's centre changes by under 1e-4 m), and the cube pulls the rope
+    taut: the rope's particles end up spanning more than 0.9 m."""
+    scene = _scene(tmp_path)
+    rope = _rope()
+    cube = _cube(location=(0.0, 0.0, 1.9))
+    cube.scale = (0.1, 0.1, 0.1)
+    _constraint("Hook", (0.0, 0.0, 3.0), rope, kind='TIE')
+    tie = _constraint("Crate", (0.0, 0.0, 2.0), rope, cube, kind='TIE')
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    frames = _particle_frames(physanim_ext, rope)
+    centres = _pivot_track(scene, cube, (0.0, 0.0, 0.0), range(FRAME_START, FRAME_END + 1))
+    assert np.max(np.abs(centres[:, 2] - 1.9)) < 0.25
+    ids = frames[-1]["id"]
+    tied = int(ids[np.argmin(frames[-1]["position"][:, 2])])  # the lowest: on the cube
+    gaps = [np.linalg.norm(a["position"][list(a["id"]).index(tied)] - c)
+            for a, c in zip(frames, centres)]
+    assert np.ptp(gaps) < 1e-4
+    assert np.ptp(frames[-1]["position"][:, 2]) > 0.9
+
+    tie.physanim.constraint.enabled = False
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    fallen = _pivot_track(scene, cube, (0.0, 0.0, 0.0), [FRAME_END])
+    assert fallen[0, 2] < 1.9 - 2.0
 
 
 def test_a_spring_constraint_at_its_defaults_bounces_a_cube_on_it(physanim_ext, tmp_path):

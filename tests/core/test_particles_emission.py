@@ -107,6 +107,31 @@ def test_fast_emitter_leaves_an_even_trail_not_puffs():
     assert np.all(np.abs(hist - 200) <= 5 * math.sqrt(200))
 
 
+def test_even_timing_lays_a_moving_emitters_births_out_evenly():
+    # The same moving emitter with Even Timing and 10 births a frame: births at u = (k + 1/2)
+    # / 10 of each frame, so the trail's particles are exactly 1 m apart (1e-9), and the
+    # births' other draws are those of random timing (the same generator stream: the same
+    # random life spans).
+    frames = 3
+    trails = []
+    for even in (True, False):
+        model = _model(EmitterSettings("Rope", seed=11, even=even))
+        state = model.state()
+        solver = ParticleSolver(model, substeps=2)
+        for f in range(frames):
+            solver.advance(state, _inputs(f, [EmitterFrame(
+                rate=10, speed=0.0, lifetime=100.0, lifetime_random=50.0,
+                matrix0=_translate(10.0 * f),
+                matrix1=_translate(10.0 * (f + 1)))]))
+        trails.append(state)
+    x = np.sort(trails[0].particle_x[:, 0])
+    np.testing.assert_allclose(np.diff(x), 1.0, atol=1e-9)
+    assert x[0] == pytest.approx(0.5)
+    assert not np.allclose(np.diff(np.sort(trails[1].particle_x[:, 0])), 1.0, atol=0.05)
+    np.testing.assert_array_equal(trails[0].particle_life, trails[1].particle_life)
+    assert np.ptp(trails[0].particle_life) > 1.0
+
+
 def test_robot_arm_throw_inherits_tangential_velocity():
     # The arm turns at w about z (90 degrees per frame) and throws from a vertex at radius R with
     # speed 0, inherit 1: each particle leaves at w R along the circle's tangent at its birth
