@@ -11,14 +11,19 @@ target's path: rows of Witkin's constraint forces and of the projection, as any 
 constraint.
 
 A rigid body simulated in the same world (a leader, stepped first) is moved by its ties: their
-rows are solved in the projection only, together with the body (:class:`BodyTies`, the
-``bodies`` of :class:`~..forces.HardConstraints`: the body's mass and inertia join the
-particles' system, so a light rope holds a heavy body as firmly as a pin would). What that
-gives the body — impulses at the ties and a velocity change du — moves the anchors for the
-frame's later sub-steps (the body's path plus h du per sub-step, as a spring mesh's
-attachment) and goes back to the body at the frame's end as a
-:class:`~..world.Reaction` with the move it made meanwhile. The impulses the body takes are
-exactly those the particles lose, so the rope and the body together keep their momentum.
+rows join the particles' constraint forces and projection together with the body
+(:class:`BodyTies`, the ``bodies`` of :class:`~..forces.HardConstraints`: the body's mass and
+inertia join the particles' system, and its own step's acceleration the forces' right-hand
+side, so a rope holds the body as a pin would). What that gives the body — impulses at the
+ties and a velocity change du — moves the anchors for the frame's later sub-steps (the body's
+own motion plus h du per sub-step, as a spring mesh's attachment) and goes back to the body
+at the frame's end as a :class:`~..world.Reaction` with the move it made meanwhile. The
+impulses the body takes are exactly those the particles lose, so the rope and the body
+together keep their momentum. The body's own motion within the frame is taken as its step
+made it, from its velocity at the start to that at the end at a constant acceleration, in the
+particles' sub-steps (:class:`_Body`): where its anchors are and how fast they move agree,
+which a light rope needs (a mismatch kicks it). The forces' share of the body is taken once
+per step: a tie to a body needs the symplectic Euler integrator.
 """
 from __future__ import annotations
 
