@@ -14,7 +14,11 @@ changes and r0 the holding impulses of the step,
 
 the body's mass and inertia plus what the mesh adds to them (its attached mass, and the
 stiffness and damping with which it resists being moved within the step): the Schur complement
-of the mesh's system, so a light body on a stiff cloth is as stable as the cloth itself. (Handing
+of the mesh's system, so a light body on a stiff cloth is as stable as the cloth itself. The
+body's own part of that linearisation joins it: turning the body by h w turns the arms r at
+which it takes the holding impulses J, so their moments change by -h sum(r J^T - (J.r) 1) w — a
+stiffness of about T h^2 for a rope's tension T running through a plank, without which a rope
+bridge's light planks pitched ever harder and blew up within 15 frames. (Handing
 the holding impulses to the body one frame late instead blew up within 30 frames: a 1 kg box
 on a default cloth, the sway mode growing fourfold per frame.) The mesh's velocities take their
 response to du at once; the body takes the impulses.
@@ -57,6 +61,7 @@ class Held:
         move: coupled body name -> (6,) how far that moved the body since the last reaction
             (centre [m], rotation vector [rad]).
         shift: per attachment, (k, 3) how far that moved its vertices this frame [m].
+        travel: coupled body name -> (3,) how far that moved its centre this frame [m].
     """
 
     paths: list
@@ -65,6 +70,7 @@ class Held:
     du: dict = field(default_factory=dict)
     move: dict = field(default_factory=dict)
     shift: list = field(default_factory=list)
+    travel: dict = field(default_factory=dict)
 
 
 def frame_paths(model: SpringMeshModel, state: SpringMeshState, colliders, targets: dict,
@@ -96,7 +102,8 @@ def frame_paths(model: SpringMeshModel, state: SpringMeshState, colliders, targe
         coupled.append(a.target if a.target in bodies else None)
     return Held(paths, coupled, moving, {b: np.zeros(6) for b in moving},
                 {b: np.zeros(6) for b in moving},
-                [np.zeros((len(a.index), 3)) for a in model.attachments])
+                [np.zeros((len(a.index), 3)) for a in model.attachments],
+                {b: np.zeros(3) for b in moving})
 
 
 def hold(model: SpringMeshModel, state: SpringMeshState, held: Held, s0: float, s1: float,
@@ -106,6 +113,7 @@ def hold(model: SpringMeshModel, state: SpringMeshState, held: Held, s0: float, 
     velocity the mesh gave it in earlier sub-steps)."""
     for body, du in held.du.items():
         held.move[body] += h * du
+        held.travel[body] += h * du[:3]
     for k, a in enumerate(model.attachments):
         path = held.paths[k]
         if path is None:
@@ -116,17 +124,24 @@ def hold(model: SpringMeshModel, state: SpringMeshState, held: Held, s0: float, 
         v = (p1 - p0) / h
         body = held.coupled[k]
         if body is not None:
-            extra = _point_velocity(held.du[body], p1 - _centre(held, body, s1))
+            extra = _point_velocity(held.du[body], p1 - _path_centre(held, body, s1))
             held.shift[k] += h * extra
             p1, v = p1 + held.shift[k], v + extra
         pin_x1[a.index], pin_v[a.index] = p1, v
 
 
-def _centre(held: Held, body: str, s: float) -> np.ndarray:
-    """The body's centre of mass at ``s`` of the frame (carried on its path from the end)."""
+def _path_centre(held: Held, body: str, s: float) -> np.ndarray:
+    """The body's centre of mass at ``s`` of the frame on its own path (carried on it from
+    the end), before the mesh moved it."""
     inertia, path = held.bodies[body]
     local = transform_points(inverse_affine(path.m1), inertia.centre[None])
     return transform_points(path.matrices(s), local)[0]
+
+
+def _centre(held: Held, body: str, s: float) -> np.ndarray:
+    """The body's centre of mass at ``s`` of the frame: on its path, moved as far as the mesh
+    moved it so far (the lever arms of the vertices the mesh moved with it)."""
+    return _path_centre(held, body, s) + held.travel[body]
 
 
 def _point_velocity(du: np.ndarray, r: np.ndarray) -> np.ndarray:
@@ -151,20 +166,21 @@ def couple(model: SpringMeshModel, held: Held, integrator, pressed: dict,
     names = list(links)
     if not names:
         return
-    columns, g_rows = [], []
+    columns, g_rows, arms = [], [], []
     for b in names:  # G: each body's six unit motions at its vertices
         index = np.concatenate([i for i, _ in links[b]])
         normal = np.concatenate([n for _, n in links[b]])
-        g = _g_transpose(x1[index] - _centre(held, b, s1))
-        g = np.stack([_along(gj, normal) for gj in g])  # (6, k, 3)
+        r = x1[index] - _centre(held, b, s1)
+        g = np.stack([_along(gj, normal) for gj in _g_transpose(r)])  # (6, k, 3)
         g_rows.append((index, g))
+        arms.append(r)
         for j in range(6):
             given = np.zeros_like(v1)
             given[index] = g[j]
             columns.append(integrator.response(given))
     size = 6 * len(names)
     coupling, inertia, rhs = np.zeros((size, size)), np.zeros((size, size)), np.zeros(size)
-    for p, (b, (index, g)) in enumerate(zip(names, g_rows)):
+    for p, (b, (index, g), r) in enumerate(zip(names, g_rows, arms)):
         rows = slice(6 * p, 6 * p + 6)
         rhs[rows] = -np.einsum("jkc,kc->j", g, outside[index])
         for q, (_, change) in enumerate(columns):
@@ -172,6 +188,11 @@ def couple(model: SpringMeshModel, held: Held, integrator, pressed: dict,
         body = held.bodies[b][0]
         inertia[rows, rows] = np.block([[body.mass * np.eye(3), np.zeros((3, 3))],
                                         [np.zeros((3, 3)), body.inertia]])
+        # turning the body by h w turns the arms at which the mesh holds it: the moments of the
+        # impulses J it takes change by h sum((w x r) x J) = -h sum(r J^T - (J.r) 1) w
+        impulse = -outside[index]
+        coupling[6 * p + 3:6 * p + 6, 6 * p + 3:6 * p + 6] -= h * (
+            r.T @ impulse - np.einsum("ij,ij->", r, impulse) * np.eye(3))
     du = np.linalg.solve(inertia + coupling, rhs)
     # backward Euler: the mesh and the bodies move by h times the velocity change (the bodies'
     # attached vertices with them, turned exactly as the reactions' move turns the body); the
@@ -186,6 +207,7 @@ def couple(model: SpringMeshModel, held: Held, integrator, pressed: dict,
         held.du[b] += step
         held.move[b] += h * step
         centre = _centre(held, b, s1)
+        held.travel[b] += h * step[:3]
         turn = rotation_vector_matrix(h * step[3:])
         for k, (a, body) in enumerate(zip(model.attachments, held.coupled)):
             if body == b:
@@ -214,23 +236,30 @@ def _g_transpose(r: np.ndarray) -> np.ndarray:
 
 def react(model: SpringMeshModel, held: Held | None, mass: np.ndarray, free: np.ndarray,
           touched: np.ndarray, hits: dict, outside: np.ndarray, x1: np.ndarray,
-          v1: np.ndarray, h: float) -> list[Reaction]:
-    """The impulses the coupled attachments took this sub-step, and those with which bodies
-    pushed the vertices in ``hits`` (body name -> vertices), as reactions on the bodies
-    (``outside``: the step's impulses from outside the mesh's forces, per vertex). The free
-    vertices' share of them is the solve's error: it is taken out of their velocities
-    (``x1``, ``v1`` in place), so the momentum balance is exact. ``touched``: (n,) vertices a
-    collider pushed (their share is its push)."""
+          v1: np.ndarray, h: float, s1: float) -> list[Reaction]:
+    """The impulses the coupled attachments took this sub-step (ending at ``s1`` of the
+    frame), and those with which bodies pushed the vertices in ``hits`` (body name ->
+    vertices), as reactions on the bodies (``outside``: the step's impulses from outside the
+    mesh's forces, per vertex). Each acts where it does about the body's centre now; as a
+    reaction's point it is carried to the centre at the frame's end (before the move), about
+    which the body takes it. The free vertices' share of them is the solve's error: it is taken
+    out of their velocities (``x1``, ``v1`` in place), so the momentum balance is exact.
+    ``touched``: (n,) vertices a collider pushed (their share is its push)."""
     loose = free & ~touched
     if loose.any():
         shift = outside[loose].sum(axis=0) / mass[loose].sum()
         v1[loose] -= shift
         x1[loose] -= h * shift
-    out = [Reaction(body, x1[a.index].copy(), -outside[a.index])
-           for a, body in zip(model.attachments, held.coupled if held is not None else ())
-           if body is not None]
-    out.extend(Reaction(body, x1[i].copy(), -outside[i]) for body, i in hits.items() if len(i))
-    for body, move in (held.move.items() if held is not None else ()):
+    if held is None:
+        return []
+
+    def at(body: str, index: np.ndarray) -> np.ndarray:
+        return x1[index] - _centre(held, body, s1) + held.bodies[body][0].centre
+
+    out = [Reaction(body, at(body, a.index), -outside[a.index])
+           for a, body in zip(model.attachments, held.coupled) if body is not None]
+    out.extend(Reaction(body, at(body, i), -outside[i]) for body, i in hits.items() if len(i))
+    for body, move in held.move.items():
         if np.any(move):  # how far the implicit steps moved it, given once
             out.append(Reaction(body, np.zeros((0, 3)), np.zeros((0, 3)), move))
             held.move[body] = np.zeros(6)

@@ -314,7 +314,7 @@ class SpringMeshSolver:
             return
         step.reactions = attach.merged([*step.reactions, *attach.react(
             self.model, held, self.model.vertex_mass, self.free, pushed, hits, outside,
-            state.x, state.v, step.h)])
+            state.x, state.v, step.h, s1)])
 
     def _pressed_on(self, step: _FrameStep) -> dict:
         """The vertices the last implicit step held on the surfaces of bodies stepped first:
