@@ -71,6 +71,17 @@ def rotation_vector_matrix(theta: np.ndarray) -> np.ndarray:
     return quaternion_to_matrix(np.array([math.cos(half), *(math.sin(half) / angle * theta)]))
 
 
+def matrix_rotation_vector(r: np.ndarray) -> np.ndarray:
+    """(3,) the rotation vector (axis times angle [rad], angle in [0, pi]) of the rotation
+    matrix ``r`` (3, 3): the inverse of :func:`rotation_vector_matrix`."""
+    q = matrix_to_quaternion(r)
+    q = q if q[0] >= 0.0 else -q
+    sine = float(np.linalg.norm(q[1:]))
+    if sine < 1e-15:
+        return 2.0 * q[1:]
+    return q[1:] * (2.0 * math.atan2(sine, q[0]) / sine)
+
+
 def slerp(q0: np.ndarray, q1: np.ndarray, s: np.ndarray | float) -> np.ndarray:
     """Spherical interpolation of unit quaternions along the shorter arc.
 

@@ -134,6 +134,17 @@ class Reaction:
     move: np.ndarray = field(default_factory=lambda: np.zeros(6))
 
 
+def merged(reactions: Sequence[Reaction]) -> list[Reaction]:
+    """Reactions on the same bodies (a frame's sub-steps), one per body: impulses at their
+    points concatenated, moves added."""
+    out: dict[str, list] = {}
+    for r in reactions:
+        out.setdefault(r.body, []).append(r)
+    return [Reaction(body, np.concatenate([r.point for r in rs]),
+                     np.concatenate([r.impulse for r in rs]), sum(r.move for r in rs))
+            for body, rs in out.items()]
+
+
 class WorldSystem(Protocol):
     """A system the world steps (particles, a spring mesh, ...).
 

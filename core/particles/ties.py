@@ -27,16 +27,15 @@ per step: a tie to a body needs the symplectic Euler integrator.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..forces import Pins
 from ..transforms import (
-    TransformPath, inverse_affine, matrix_to_quaternion, rotation_vector_matrix, transform_points,
+    TransformPath, inverse_affine, matrix_rotation_vector, rotation_vector_matrix, transform_points,
 )
-from ..world import BodyInertia, Reaction
+from ..world import BodyInertia, Reaction, merged
 
 TIE = "TIE"
 
@@ -110,12 +109,8 @@ class _Body:
     def reaction_move(self) -> np.ndarray:
         """(6,) where the ties put it against where its own step left it: its centre (the
         shift, and the end of its parabola against its step's end) and a rotation vector."""
-        q = matrix_to_quaternion(self.turn)
-        q = q if q[0] >= 0.0 else -q
-        sine = float(np.linalg.norm(q[1:]))
-        angle = 2.0 * math.atan2(sine, q[0])
-        spin = q[1:] * (angle / sine) if sine > 1e-15 else 2.0 * q[1:]
-        return np.concatenate([self.shift + self.centre(1.0) - self.inertia.centre, spin])
+        return np.concatenate([self.shift + self.centre(1.0) - self.inertia.centre,
+                               matrix_rotation_vector(self.turn)])
 
 
 class TieFrame:
@@ -215,14 +210,9 @@ class TieFrame:
     def frame_reactions(self) -> list[Reaction]:
         """What the ties did to the bodies this frame: their impulses, one reaction per body,
         and the move the ties made it."""
-        out: dict[str, list[Reaction]] = {}
-        for r in self.reactions:
-            out.setdefault(r.body, []).append(r)
-        return [Reaction(name, np.concatenate([r.point for r in out.get(name, [])] or
-                                              [np.zeros((0, 3))]),
-                         np.concatenate([r.impulse for r in out.get(name, [])] or
-                                        [np.zeros((0, 3))]), body.reaction_move())
-                for name, body in self.bodies.items()]
+        none = np.zeros((0, 3))
+        return merged([*self.reactions, *(Reaction(name, none, none, body.reaction_move())
+                                          for name, body in self.bodies.items())])
 
 
 class BodyTies:

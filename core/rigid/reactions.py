@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..world import BodyInertia
+from . import dynamics
 from . import quaternion as quat
 from .model import RigidBodyModel, RigidBodyState
 
@@ -18,8 +19,7 @@ def bodies(model: RigidBodyModel, state: RigidBodyState, momentum0: np.ndarray |
     d = np.nonzero(~model.body_kinematic)[0]
     rot = quat.to_matrix(state.body_q[d])
     inertia = rot @ model.body_inertia[d] @ rot.transpose(0, 2, 1)
-    spin = np.linalg.solve(inertia, state.body_L[d][..., None])[..., 0] if len(d) else \
-        np.zeros((0, 3))
+    spin = dynamics.angular_velocity(state.body_q[d], model.body_inv_inertia[d], state.body_L[d])
     return {model.body_name[i]: BodyInertia(
         float(model.body_mass[i]), inertia[k], state.body_x[i].copy(),
         np.concatenate([state.body_P[i] / model.body_mass[i], spin[k]]),

@@ -430,6 +430,7 @@ class RigidBodySystem(SolverSystem):
         super().__init__(solver, state, name)
         self._shapes = as_colliders.shapes(solver.model)
         self._start = None
+        self._momentum0 = None  # the bodies' momenta at the frame's start
 
     def begin_frame(self, frame: WorldFrame, paths, own) -> None:
         self._start = (self.state.body_x.copy(), self.state.body_q.copy())
@@ -445,8 +446,7 @@ class RigidBodySystem(SolverSystem):
     def frame_bodies(self) -> dict:
         """Each dynamic body's mass, world inertia, centre of mass and velocity now (and its
         velocity at the frame's start)."""
-        return reactions_.bodies(self.solver.model, self.state,
-                                 getattr(self, "_momentum0", None))
+        return reactions_.bodies(self.solver.model, self.state, self._momentum0)
 
     def inputs(self, frame: WorldFrame, paths: RigidPaths | None) -> RigidFrameInputs:
         return RigidFrameInputs.of(frame, paths)

@@ -264,13 +264,3 @@ def react(model: SpringMeshModel, held: Held | None, mass: np.ndarray, free: np.
             out.append(Reaction(body, np.zeros((0, 3)), np.zeros((0, 3)), move))
             held.move[body] = np.zeros(6)
     return out
-
-
-def merged(reactions: list[Reaction]) -> list[Reaction]:
-    """A frame's sub-step reactions, one per body (impulses at their points, concatenated)."""
-    out: dict[str, list] = {}
-    for r in reactions:
-        out.setdefault(r.body, []).append(r)
-    return [Reaction(body, np.concatenate([r.point for r in rs]),
-                     np.concatenate([r.impulse for r in rs]), sum(r.move for r in rs))
-            for body, rs in out.items()]

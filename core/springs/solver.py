@@ -24,7 +24,7 @@ from ..errors import PhysanimError, SimulationError
 from ..forces import AnchorSprings, DampedSprings, Gravity, Wind
 from ..integrators import make_integrator
 from ..transforms import TransformPath, inverse_affine, transform_points
-from ..world import SolverSettings, SolverSystem, World, WorldFrame
+from ..world import SolverSettings, SolverSystem, World, WorldFrame, merged
 from .forces import AngularSprings, LinearDrag, MassShared
 from .implicit import BaraffWitkin
 from . import attach
@@ -312,7 +312,7 @@ class SpringMeshSolver:
                           state.v, step.h, s1)
         elif not any(len(i) for i in hits.values()):
             return
-        step.reactions = attach.merged([*step.reactions, *attach.react(
+        step.reactions = merged([*step.reactions, *attach.react(
             self.model, held, self.model.vertex_mass, self.free, pushed, hits, outside,
             state.x, state.v, step.h, s1)])
 

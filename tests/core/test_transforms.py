@@ -208,3 +208,17 @@ def test_sub_frame_keys_follow_an_arc_that_two_ends_cannot():
     assert np.all(np.abs(r_fine - radius) <= sagitta + 1e-12)
     assert np.max(radius - r_coarse) > 0.25 * radius
     assert np.allclose(fine.matrices(np.linspace(0, 1, 9)), keys)
+
+
+def test_matrix_rotation_vector_inverts_rotation_vector_matrix():
+    # Axis times angle back from the matrix, for angles from zero up to just below pi, and
+    # about the x axis through pi itself (the angle is taken in [0, pi]).
+    from physanim.core.transforms import matrix_rotation_vector, rotation_vector_matrix
+    rng = np.random.default_rng(3)
+    for angle in (0.0, 1e-9, 0.3, 2.0, 3.1):
+        axis = rng.normal(size=3)
+        theta = angle * axis / np.linalg.norm(axis)
+        np.testing.assert_allclose(matrix_rotation_vector(rotation_vector_matrix(theta)), theta,
+                                   atol=1e-12)
+    half_turn = matrix_rotation_vector(np.diag([1.0, -1.0, -1.0]))
+    np.testing.assert_allclose(np.abs(half_turn), [np.pi, 0.0, 0.0], atol=1e-12)
