@@ -39,8 +39,8 @@ from .springs import scatter_add
 DENSE_ROWS = 600  # up to this many rows the system is solved directly
 CG_ITERATIONS = 4000  # cap of the conjugate-gradient solve of larger systems
 CG_TOLERANCE = 1e-12  # relative residual of the conjugate-gradient solve
-PROJECTIONS = 4  # Newton steps of the position projection
-FALLBACK_PROJECTIONS = 8  # more when RATTLE's falls back to the current gradients
+PROJECTIONS = 8  # Newton steps of the position projection (at most; it stops at the tolerance)
+FALLBACK_PROJECTIONS = 16  # more when RATTLE's falls back to the current gradients
 RATTLE_CONTRACTION = 0.5  # RATTLE's Newton step must halve |C|, or it falls back
 REGULARISE = 1e-12  # relative diagonal shift: redundant rows (a rod between two pins) stay solvable
 
