@@ -38,9 +38,12 @@ def _rotation_z(angle: float, offset) -> np.ndarray:
     return m
 
 
-def particles_vs_mesh(module_name: str, particles: int, grid: int, frames: int) -> tuple:
+def particles_vs_mesh(module_name: str, particles: int, grid: int, frames: int,
+                      analytic: bool = False) -> tuple:
     """Core solver only: ``particles`` falling onto a wavy ``grid`` x ``grid`` mesh collider
-    (one sub-step per frame); returns (seconds, particle-steps per second, triangles)."""
+    (one sub-step per frame), or with ``analytic`` onto a flat ground (a HALF_SPACE at the
+    mesh's mean height) in the same way; returns (seconds, particle-steps per second,
+    triangles)."""
     shapes = import_module(module_name + ".core.collision.shapes")
     P = import_module(module_name + ".core.particles")
     contact = import_module(module_name + ".core.contact")
@@ -55,9 +58,13 @@ def particles_vs_mesh(module_name: str, particles: int, grid: int, frames: int) 
     x = np.column_stack([rng.uniform(-9.5, 9.5, (particles, 2)), rng.uniform(0.5, 3.0, particles)])
     state.append(0, x, np.zeros_like(x), np.ones(particles), np.zeros(particles),
                  np.full(particles, 1e9), np.full(particles, 0.02))
-    ground = contact.ColliderFrame("Ground", "MESH", np.eye(4), np.eye(4), restitution=0.3,
-                                   friction=0.4, vertices0=verts, vertices1=verts,
-                                   triangles=tris)
+    if analytic:
+        ground = contact.ColliderFrame("Ground", "HALF_SPACE", np.eye(4), np.eye(4),
+                                       restitution=0.3, friction=0.4)
+    else:
+        ground = contact.ColliderFrame("Ground", "MESH", np.eye(4), np.eye(4), restitution=0.3,
+                                       friction=0.4, vertices0=verts, vertices1=verts,
+                                       triangles=tris)
     solver = P.ParticleSolver(model, "SYMPLECTIC_EULER", 1)
     start = time.perf_counter()
     for f in range(frames):
@@ -65,7 +72,7 @@ def particles_vs_mesh(module_name: str, particles: int, grid: int, frames: int) 
                                             emitters=[P.EmitterFrame(active=False)],
                                             colliders=[ground]))
     took = time.perf_counter() - start
-    return took, particles * frames / took, len(tris)
+    return took, particles * frames / took, 0 if analytic else len(tris)
 
 
 def overlap_rows(module_name: str, grid: int, repeat: int) -> tuple[list[tuple], list[str], int]:
@@ -119,15 +126,18 @@ def overlap_table(rows: list[tuple], triangles: int) -> str:
                                 "n_p", "n_u", "x Blender"), "llrrrrrrr", cells)])
 
 
-def rain_table(particles: int, frames: int, rain: tuple) -> str:
-    """The particles-vs-mesh run: ``rain`` is :func:`particles_vs_mesh`'s result."""
-    took, rate, triangles = rain
+def rain_table(particles: int, frames: int, rain: tuple, flat: tuple) -> str:
+    """The particles-vs-mesh run ``rain`` and the same rain on the analytic ground ``flat``
+    (:func:`particles_vs_mesh`'s results), with the cost per particle-step of the mesh as a
+    multiple of the ground's."""
+    rows = [(name, f"{particles:,}", f"{tris:,}" if tris else "—", frames, f"{took:.2f}",
+             f"{rate:,.0f}", f"{flat[1] / rate:.1f}")
+            for name, (took, rate, tris) in (("wavy mesh collider", rain),
+                                             ("analytic ground (HALF_SPACE)", flat))]
     return "\n".join([
         "\n### Particles vs a mesh collider (core, 1 sub-step per frame)\n",
-        *common.markdown_table(("particles", "triangles", "frames", "time (s)",
-                                "particle-steps / s"), "rrrrr",
-                               [(f"{particles:,}", f"{triangles:,}", frames, f"{took:.2f}",
-                                 f"{rate:,.0f}")])])
+        *common.markdown_table(("collider", "particles", "triangles", "frames", "time (s)",
+                                "particle-steps / s", "x ground's cost"), "lrrrrrr", rows)])
 
 
 def main(argv: list[str]) -> int:
@@ -144,8 +154,10 @@ def main(argv: list[str]) -> int:
         rows, problems, triangles = overlap_rows(module.__name__, args.grid, args.repeat)
         rain = particles_vs_mesh(module.__name__, args.particles, args.particle_grid,
                                  args.particle_frames)
+        flat = particles_vs_mesh(module.__name__, args.particles, args.particle_grid,
+                                 args.particle_frames, analytic=True)
     print(overlap_table(rows, triangles))
-    print(rain_table(args.particles, args.particle_frames, rain))
+    print(rain_table(args.particles, args.particle_frames, rain, flat))
     return common.report(problems, "MISMATCH:")
 
 

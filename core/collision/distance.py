@@ -23,9 +23,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..transforms import transform_points, transform_vectors
+from ..transforms import take, transform_points, transform_vectors
 from .bounding import PAD_REL, similarity_scale, world_frame
 from .bvh import BVH
+from .cells import TriangleCells
 from .cost import QueryCost
 from .mesh import check_points
 
@@ -64,7 +65,7 @@ class ClosestPoints:
 
 
 def closest_points(bvh: BVH, points, *, max_distance: float = np.inf,
-                   matrix=None) -> ClosestPoints:
+                   matrix=None, cells: TriangleCells | None = None) -> ClosestPoints:
     """Closest surface point and signed distance of each query point.
 
     Args:
@@ -73,6 +74,8 @@ def closest_points(bvh: BVH, points, *, max_distance: float = np.inf,
         max_distance: ignore surface farther than this [m] (faster for contact queries).
         matrix: (4, 4) the mesh's local-to-world transform (rotation, translation, uniform
             scale); results are then in world space.
+        cells: the grid over ``bvh`` (:mod:`.cells`), used for points whose ball of radius
+            ``max_distance`` fits a cell; the answers are the same as without it.
     """
     p = check_points(bvh.mesh.name, "query point", points, kind="mesh")
     if not max_distance > 0:
@@ -82,15 +85,10 @@ def closest_points(bvh: BVH, points, *, max_distance: float = np.inf,
         scale = similarity_scale(matrix, bvh.mesh.name)
         matrix, inv = world_frame(matrix, bvh.mesh.name)
         p = transform_points(inv, p)
-    dist, tri_id, q, feature, n_v, n_p = _search(bvh, p, max_distance / scale)
+    dist, tri_id, q, feature, n_v, n_p = _search(bvh, p, max_distance / scale, cells)
     found = tri_id >= 0
     normal = np.zeros((len(p), 3))
-    face_n, edge_n, corner_n = bvh.mesh.pseudo_normals
-    t, f = tri_id[found], feature[found]
-    k = np.where(f >= CORNER, f - CORNER, f - EDGE)
-    normal[found] = np.where((f == FACE)[:, None], face_n[t],
-                             np.where((f >= CORNER)[:, None], corner_n[t, np.maximum(k, 0)],
-                                      edge_n[t, np.maximum(k, 0)]))
+    normal[found] = take(bvh.mesh.feature_normals, 7 * tri_id[found] + feature[found])
     side = np.einsum("ij,ij->i", p - q, normal)
     sign = np.where(side < 0.0, -1.0, 1.0)
     if matrix is not None:
@@ -138,7 +136,7 @@ def closest_on_triangles(p: np.ndarray, tri: np.ndarray):
     return best_q, best_d2, feature
 
 
-def _search(bvh: BVH, p: np.ndarray, max_distance: float):
+def _search(bvh: BVH, p: np.ndarray, max_distance: float, cells: TriangleCells | None = None):
     n = len(p)
     bound = np.full(n, float(max_distance))
     best_d = np.full(n, np.inf)
@@ -147,11 +145,19 @@ def _search(bvh: BVH, p: np.ndarray, max_distance: float):
     best_f = np.full(n, -1, dtype=np.int8)
     margin = PAD_REL * max(bvh.mesh.scale, float(np.abs(p).max(initial=0.0)), 1e-300)
     tri = bvh.ordered_triangles
-    pt, node = np.arange(n), np.zeros(n, dtype=np.int64)
+    pt = np.arange(n)
     n_v = n_p = 0
+    if cells is not None and cells.usable and n and np.isfinite(max_distance):
+        reach = max_distance + margin
+        q, pos, pt = cells.candidates(p - reach, p + reach)
+        n_v += n - len(pt)
+        near = cells.near(pos, take(p, q), reach)
+        n_p += _pair_tests(bvh, p, q[near], pos[near], tri, bound, best_d, best_tri, best_q,
+                           best_f, max_distance)
+    node = np.zeros(len(pt), dtype=np.int64)
     while len(pt):
-        lower = np.concatenate([bvh.kind.distance_bound(bvh.node_bv[node[s:s + CHUNK]],
-                                                        p[pt[s:s + CHUNK]])
+        lower = np.concatenate([bvh.kind.distance_bound(take(bvh.node_bv, node[s:s + CHUNK]),
+                                                        take(p, pt[s:s + CHUNK]))
                                 for s in range(0, len(pt), CHUNK)])
         n_v += len(pt)
         keep = lower <= bound[pt] + margin
@@ -175,10 +181,17 @@ def _leaf_tests(bvh, p, pt, node, tri, bound, best_d, best_tri, best_q, best_f,
     rep = np.repeat(np.arange(len(pt)), count)
     pos = bvh.node_first[node][rep] + np.arange(count.sum()) - np.repeat(np.cumsum(count) - count,
                                                                          count)
-    s = pt[rep]
+    return _pair_tests(bvh, p, pt[rep], pos, tri, bound, best_d, best_tri, best_q, best_f,
+                       max_distance)
+
+
+def _pair_tests(bvh, p, s, pos, tri, bound, best_d, best_tri, best_q, best_f,
+                max_distance) -> int:
+    """Points s (k,) against the triangles at leaf-order positions pos (k,): improves the
+    best arrays in place; returns k."""
     for c in range(0, len(s), CHUNK):
         sc, pc = s[c:c + CHUNK], pos[c:c + CHUNK]
-        q, d2, f = closest_on_triangles(p[sc], tri[pc])
+        q, d2, f = closest_on_triangles(take(p, sc), take(tri, pc))
         d = np.sqrt(d2)
         tri_id = bvh.tri_order[pc]
         o = np.lexsort((tri_id, d, sc))  # nearest per point, ties to the lowest triangle id

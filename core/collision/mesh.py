@@ -153,6 +153,14 @@ class TriangleMesh:
             out.setflags(write=False)
         return face, per_edge, per_vertex
 
+    @cached_property
+    def feature_normals(self) -> np.ndarray:
+        """(n_t * 7, 3) the pseudo-normals by feature: row 7 t + code is triangle t's face
+        (code 0), edge k (code 1 + k) or corner k (code 4 + k), the codes of
+        :mod:`.distance` — one gather per query."""
+        face, edge, corner = self.pseudo_normals
+        return _frozen(np.concatenate([face[:, None], edge, corner], axis=1).reshape(-1, 3))
+
 
     @cached_property
     def creases(self) -> tuple[np.ndarray, np.ndarray]:

@@ -12,6 +12,7 @@ Conventions:
 
 * a segment starting on the surface hits at t = 0 (a particle resting on it);
 * a segment lying in a triangle's plane does not hit that triangle (it grazes, never crosses);
+  hence a segment of zero length (a point at rest) hits nothing and is not tested;
 * zero-area triangles have no surface and are never hit;
 * the reported normal is the triangle's unit normal turned to face the segment's start, with
   ``front`` telling whether that is the winding's side: thin single-sided meshes bounce from
@@ -26,9 +27,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..transforms import norm_rows, transform_points, transform_vectors
+from ..transforms import norm_rows, take, transform_points, transform_vectors
 from .bounding import PAD_REL, world_frame
 from .bvh import BVH
+from .cells import TriangleCells
 from .cost import QueryCost
 from .mesh import check_points
 from .predicates import orient3d, orient3d_value
@@ -67,7 +69,8 @@ class SegmentHits:
         return QueryCost(self.n_v, self.n_p, self.n_u)
 
 
-def segment_hits(bvh: BVH, start, end, matrix=None) -> SegmentHits:
+def segment_hits(bvh: BVH, start, end, matrix=None, cells: TriangleCells | None = None
+                 ) -> SegmentHits:
     """First triangle each segment start -> end meets.
 
     Args:
@@ -76,6 +79,8 @@ def segment_hits(bvh: BVH, start, end, matrix=None) -> SegmentHits:
             else in the mesh's local frame.
         matrix: (4, 4) the mesh's local-to-world transform (any invertible affine map); results
             are then in world space too.
+        cells: the grid over ``bvh`` (:mod:`.cells`), for the segments whose box fits a cell;
+            the answers are the same as without it.
     """
     p0 = check_points(bvh.mesh.name, "segment start", start, kind="mesh")
     p1 = check_points(bvh.mesh.name, "segment end", end, kind="mesh")
@@ -84,7 +89,7 @@ def segment_hits(bvh: BVH, start, end, matrix=None) -> SegmentHits:
     if matrix is not None:
         matrix, inv = world_frame(matrix, bvh.mesh.name)
         p0, p1 = transform_points(inv, p0), transform_points(inv, p1)
-    t, tri_id, n_v, n_p = _first_hits(bvh, p0, p1)
+    t, tri_id, n_v, n_p = _first_hits(bvh, p0, p1, cells)
     return _report(bvh, p0, p1, t, tri_id, n_v, n_p, matrix, 1.0)
 
 
@@ -142,7 +147,7 @@ def segment_triangle(p0: np.ndarray, p1: np.ndarray, tri: np.ndarray):
     return hit, t
 
 
-def _first_hits(bvh: BVH, p0: np.ndarray, p1: np.ndarray):
+def _first_hits(bvh: BVH, p0: np.ndarray, p1: np.ndarray, cells: TriangleCells | None = None):
     n = len(p0)
     best_t = np.full(n, np.inf)
     best_tri = np.full(n, -1, dtype=np.int64)
@@ -151,8 +156,16 @@ def _first_hits(bvh: BVH, p0: np.ndarray, p1: np.ndarray):
                            float(np.abs(p1).max(initial=0.0)), 1e-300)
     tri = bvh.ordered_triangles
     flat = bvh.mesh.degenerate[bvh.tri_order]
-    seg, node = np.arange(n), np.zeros(n, dtype=np.int64)
+    seg = np.nonzero(np.any(p0 != p1, axis=1))[0]  # a point never crosses a plane: no hit
     n_v = n_p = 0
+    if cells is not None and cells.usable and n:
+        a, b = take(p0, seg), take(p1, seg)
+        q, pos, rest = cells.candidates(np.minimum(a, b) - margin, np.maximum(a, b) + margin)
+        n_v += len(seg) - len(rest)
+        q, seg = seg[q], seg[rest]
+        cross = cells.straddling(pos, take(p0, q), take(p1, q)) & ~flat[pos]
+        n_p += _pair_tests(bvh, q[cross], pos[cross], p0, p1, tri, best_t, best_tri)
+    node = np.zeros(len(seg), dtype=np.int64)
     # axis-aligned boxes: a segment's own box culls with comparisons only; for a short one it
     # is nearly as selective as the exact slab test, which only long segments add
     boxes = bvh.kind.is_box
@@ -164,9 +177,9 @@ def _first_hits(bvh: BVH, p0: np.ndarray, p1: np.ndarray):
         for s in range(0, len(seg), CHUNK):
             sl = slice(s, s + CHUNK)
             ss, nn = seg[sl], node[sl]
-            bv = bvh.node_bv[nn]
+            bv = take(bvh.node_bv, nn)
             if boxes:
-                k = np.all((lo[ss] <= bv[:, 3:]) & (bv[:, :3] <= hi[ss]), axis=1)
+                k = np.all((take(lo, ss) <= bv[:, 3:]) & (bv[:, :3] <= take(hi, ss)), axis=1)
                 slab = np.nonzero(k & ~short[ss])[0]
             else:
                 k, slab = np.ones(len(ss), dtype=bool), np.arange(len(ss))
@@ -193,10 +206,15 @@ def _leaf_tests(bvh, seg, node, p0, p1, tri, flat, best_t, best_tri) -> int:
                                                                          count)
     s = seg[rep]
     live = ~flat[pos]
-    s, pos = s[live], pos[live]
+    return _pair_tests(bvh, s[live], pos[live], p0, p1, tri, best_t, best_tri)
+
+
+def _pair_tests(bvh, s, pos, p0, p1, tri, best_t, best_tri) -> int:
+    """Segments s (k,) against the triangles at leaf-order positions pos (k,): improves
+    best_t and best_tri in place; returns k."""
     for c in range(0, len(s), CHUNK):
         sc, pc = s[c:c + CHUNK], pos[c:c + CHUNK]
-        hit, t = segment_triangle(p0[sc], p1[sc], tri[pc])
+        hit, t = segment_triangle(take(p0, sc), take(p1, sc), take(tri, pc))
         sc, pc, t = sc[hit], pc[hit], t[hit]
         tri_id = bvh.tri_order[pc]
         # earliest hit per segment (ties: lowest triangle id), then keep it if it is better

@@ -33,11 +33,12 @@ import numpy as np
 
 from ..collision.build import build_bvh
 from ..collision.bvh import BVH
+from ..collision.cells import TriangleCells
 from ..collision.crossing import barycentric
 from ..collision.distance import CORNER, EDGE, closest_on_triangles, closest_points
 from ..collision.mesh import TriangleMesh
 from ..collision.raycast import segment_hits
-from ..transforms import inverse_affine, norm_rows, transform_vectors
+from ..transforms import inverse_affine, norm_rows, take, transform_vectors
 from .frame import ColliderFrame
 from .path import CONTACT_DISTANCE, ColliderPath, Features, Hits, SurfacePoints
 
@@ -66,6 +67,8 @@ class MeshPath(ColliderPath):
         self.hits_end_surface = self.deforming
         self.max_step = float(norm_rows(self.vertex_step).max())
         self._bvh0, self._boundary = hierarchies.of(frame)
+        # a grid for the many short queries of particles on a mesh that keeps its shape
+        self._cells = None if self.deforming else hierarchies.cells(frame.name, self._bvh0)
         self._welded = self._bvh0.mesh.welded[frame.triangles]  # corners, duplicates merged
         self._bvhs: dict[float, BVH] = {}
         both = np.concatenate([frame.vertices0, frame.vertices1])
@@ -115,7 +118,7 @@ class MeshPath(ColliderPath):
         """
         values = np.unique(s)
         bvh = self.bvh_at(values[-1])
-        cp = closest_points(bvh, l, max_distance=max(reach, 1e-300))
+        cp = closest_points(bvh, l, max_distance=max(reach, 1e-300), cells=self._cells)
         found = cp.triangle >= 0
         tri = np.where(found, cp.triangle, 0)
         q, feature = cp.point, cp.feature
@@ -125,7 +128,7 @@ class MeshPath(ColliderPath):
             corners = self._corners(tri, s)
             q, _, feature = closest_on_triangles(l, corners)
         else:
-            corners = bvh.mesh.triangle_vertices[tri]
+            corners = take(bvh.mesh.triangle_vertices, tri)
         face = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
         face /= np.maximum(norm_rows(face), 1e-300)[:, None]
         diff = l - q
@@ -191,7 +194,7 @@ class MeshPath(ColliderPath):
                          np.full(k, -1, np.int64), np.zeros(k, bool))
         for s in np.unique(sb):
             g = np.nonzero(sb == s)[0]
-            sh = segment_hits(self.bvh_at(s), l0[g], l1[g])
+            sh = segment_hits(self.bvh_at(s), l0[g], l1[g], cells=self._cells)
             # a segment starting on the surface has no side to come from: it counts as coming
             # from the front (as contacts do), so only moving into the back is a hit
             found.hit[g] = sh.hit & ~((sh.t == 0.0) & ~sh.front)
@@ -325,12 +328,23 @@ class MeshHierarchies:
     def __init__(self, capacity: int = HIERARCHY_CACHE):
         self.capacity = capacity
         self._known: dict = {}  # collider name -> (triangles, vertices, BVH, boundary, refits)
+        self._cells: dict = {}  # collider name -> (BVH, its grid)
 
     def __len__(self) -> int:
         return len(self._known)
 
     def clear(self) -> None:
         self._known.clear()
+        self._cells.clear()
+
+    def cells(self, name: str, bvh: BVH) -> TriangleCells:
+        """The grid over ``bvh``'s triangles (built on first use, kept while the hierarchy is)."""
+        known = self._cells.get(name)
+        if known is None or known[0] is not bvh:
+            if len(self._cells) >= self.capacity:
+                self._cells.clear()
+            known = self._cells[name] = (bvh, TriangleCells(bvh))
+        return known[1]
 
     def of(self, frame: ColliderFrame) -> tuple[BVH, np.ndarray]:
         """The hierarchy and open-boundary features of a collider mesh at the interval's start."""
