@@ -16,16 +16,14 @@ would hold more than ``MAX_ENTRIES`` entries per triangle. Triangles spanning mo
 ``LARGE_CELLS`` cells (a floor under a detailed mesh) are not entered; every query tests them
 instead, which is cheap while they are few (at most ``MAX_LARGE``; a mesh with more gets no grid).
 
-Before the exact tests the candidates are culled by their planes in floating point, with a
-tolerance that covers the rounding of each plane (larger for skinny triangles, whose normals
-round worse): a segment whose two ends lie clearly on one side of a triangle's plane cannot
-meet the triangle, nor can a point clearly farther from the plane than the query distance.
+A cell is larger than a resting particle's region, so the candidates are the listed triangles
+whose boxes meet the query's box.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from ..transforms import norm_rows, take
+from ..transforms import take
 from .bvh import BVH
 
 CELL = 1 / 3  # cell edge, in median triangle box sides
@@ -33,7 +31,6 @@ QUERY_CELLS = 27  # a query over more cells than this is left to the hierarchy
 LARGE_CELLS = 64  # triangles overlapping more cells than this are tested by every query
 MAX_LARGE = 64  # more large triangles than this: no grid
 MAX_ENTRIES = 48  # (triangle, cell) entries per triangle on average; more: larger cells
-PLANE_TOL = 1e-9  # relative rounding allowance of the float plane cull (see _planes)
 
 
 class TriangleCells:
@@ -59,10 +56,10 @@ class TriangleCells:
             size = float(extent.max())
         if not size > 0.0:
             return
-        origin = lo.min(axis=0) - size
         while True:
-            first = np.floor((lo - origin) / size).astype(np.int64)
-            last = np.floor((hi - origin) / size).astype(np.int64)
+            origin = lo.min(axis=0) - 2.0 * size  # cell 0 (and dims - 1) stays empty
+            first = np.floor((lo - origin) * (1.0 / size)).astype(np.int64)
+            last = np.floor((hi - origin) * (1.0 / size)).astype(np.int64)
             span = last - first + 1
             count = span.prod(axis=1)
             large = count > LARGE_CELLS
@@ -88,16 +85,14 @@ class TriangleCells:
         self._slots = _hash_table(self.keys)
         self.large = np.nonzero(large)[0]
         self._box = np.concatenate([lo, -hi], axis=1)  # [lo, -hi]: one gather, one compare
-        # planes for the cull: unit normals, offsets and per-triangle rounding allowances
-        a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
-        n = np.cross(b - a, c - a)
-        length = norm_rows(n)
-        self.normal = n / np.where(length > 0.0, length, 1.0)[:, None]
-        self.offset = np.einsum("ij,ij->i", self.normal, a)
-        skinny = norm_rows(b - a) * norm_rows(c - a) / np.where(length > 0.0, length, 1.0)
-        self.allowance = PLANE_TOL * np.maximum(skinny, 1.0)
-        self.magnitude = np.abs(tri).max(axis=(1, 2))
         self.usable = True
+
+    def _cell(self, x: np.ndarray) -> np.ndarray:
+        """Cell coordinates of points x (n, 3) as the triangles' were computed, clamped to the
+        grid's border cells, which hold no triangle (the grid has one empty cell on each side),
+        so that a query reaching outside looks up empty cells there."""
+        u = np.clip((x - self.origin) * (1.0 / self.cell_size), 0.0, self.dims - 1.0)
+        return u.astype(np.int64)  # truncation is floor for u >= 0
 
     def _key(self, cell: np.ndarray) -> np.ndarray:
         return (cell[:, 0] * self.dims[1] + cell[:, 1]) * self.dims[2] + cell[:, 2]
@@ -109,11 +104,10 @@ class TriangleCells:
         the hierarchy's leaf order for the queries over at most ``QUERY_CELLS`` cells, and the
         indices of the other queries (for the hierarchy).
         """
-        first, last = (np.floor(np.clip((x - self.origin) / self.cell_size, -1.0, self.dims))
-                       .astype(np.int64) for x in (lo, hi))
+        first, last = self._cell(lo), self._cell(hi)
         span = last - first + 1
         count = span.prod(axis=1)
-        use = (count <= QUERY_CELLS) & np.all((first >= 0) & (last < self.dims), axis=1)
+        use = count <= QUERY_CELLS
         ok = np.nonzero(use)[0]
         per = count[ok]
         query = np.repeat(ok, per)
@@ -137,26 +131,6 @@ class TriangleCells:
         meet = take(self._box, pos) <= take(np.concatenate([hi, -lo], axis=1), query)
         meet = meet[:, 0] & meet[:, 1] & meet[:, 2] & meet[:, 3] & meet[:, 4] & meet[:, 5]
         return query[meet], pos[meet], np.nonzero(~use)[0]
-
-    def _planes(self, pos: np.ndarray, p: np.ndarray):
-        """Float signed distances of points p (k, 3) from the planes of triangles ``pos`` (k,),
-        and a bound on their rounding error."""
-        value = np.einsum("ij,ij->i", take(self.normal, pos), p) - self.offset[pos]
-        tol = self.allowance[pos] * (self.magnitude[pos] + np.abs(p).max(axis=1))
-        return value, tol
-
-    def straddling(self, pos: np.ndarray, p0: np.ndarray, p1: np.ndarray) -> np.ndarray:
-        """(k,) False where segment p0 -> p1 lies clearly on one side of triangle pos's plane
-        (it cannot meet the triangle)."""
-        v0, t0 = self._planes(pos, p0)
-        v1, t1 = self._planes(pos, p1)
-        return ~(((v0 > t0) & (v1 > t1)) | ((v0 < -t0) & (v1 < -t1)))
-
-    def near(self, pos: np.ndarray, p: np.ndarray, distance: float) -> np.ndarray:
-        """(k,) False where point p is clearly farther than ``distance`` from triangle pos's
-        plane (hence from the triangle)."""
-        v, tol = self._planes(pos, p)
-        return np.abs(v) <= distance + tol
 
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)  # odd multiplier of the hash (Fibonacci hashing)

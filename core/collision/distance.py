@@ -151,9 +151,8 @@ def _search(bvh: BVH, p: np.ndarray, max_distance: float, cells: TriangleCells |
         reach = max_distance + margin
         q, pos, pt = cells.candidates(p - reach, p + reach)
         n_v += n - len(pt)
-        near = cells.near(pos, take(p, q), reach)
-        n_p += _pair_tests(bvh, p, q[near], pos[near], tri, bound, best_d, best_tri, best_q,
-                           best_f, max_distance)
+        n_p += _pair_tests(bvh, p, q, pos, tri, bound, best_d, best_tri, best_q, best_f,
+                           max_distance)
     node = np.zeros(len(pt), dtype=np.int64)
     while len(pt):
         lower = np.concatenate([bvh.kind.distance_bound(take(bvh.node_bv, node[s:s + CHUNK]),

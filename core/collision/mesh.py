@@ -104,6 +104,11 @@ class TriangleMesh:
         return _frozen(~normal_signs(self.triangle_vertices).any(axis=1))
 
     @cached_property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lo, hi) (3,) corners of the vertices' box [m]."""
+        return _frozen(self.vertices.min(axis=0)), _frozen(self.vertices.max(axis=0))
+
+    @cached_property
     def scale(self) -> float:
         """Largest absolute coordinate [m] (sets the size of rounding-safety pads)."""
         return float(np.abs(self.vertices).max()) if self.vertices.size else 0.0

@@ -163,8 +163,8 @@ def _first_hits(bvh: BVH, p0: np.ndarray, p1: np.ndarray, cells: TriangleCells |
         q, pos, rest = cells.candidates(np.minimum(a, b) - margin, np.maximum(a, b) + margin)
         n_v += len(seg) - len(rest)
         q, seg = seg[q], seg[rest]
-        cross = cells.straddling(pos, take(p0, q), take(p1, q)) & ~flat[pos]
-        n_p += _pair_tests(bvh, q[cross], pos[cross], p0, p1, tri, best_t, best_tri)
+        live = ~flat[pos]
+        n_p += _pair_tests(bvh, q[live], pos[live], p0, p1, tri, best_t, best_tri)
     node = np.zeros(len(seg), dtype=np.int64)
     # axis-aligned boxes: a segment's own box culls with comparisons only; for a short one it
     # is nearly as selective as the exact slab test, which only long segments add

@@ -71,8 +71,11 @@ class MeshPath(ColliderPath):
         self._cells = None if self.deforming else hierarchies.cells(frame.name, self._bvh0)
         self._welded = self._bvh0.mesh.welded[frame.triangles]  # corners, duplicates merged
         self._bvhs: dict[float, BVH] = {}
-        both = np.concatenate([frame.vertices0, frame.vertices1])
-        self._lo, self._hi = both.min(axis=0), both.max(axis=0)
+        if self.deforming:
+            both = np.concatenate([frame.vertices0, frame.vertices1])
+            self._lo, self._hi = both.min(axis=0), both.max(axis=0)
+        else:  # the hierarchy's mesh has exactly these vertices
+            self._lo, self._hi = self._bvh0.mesh.bounds
         # the most local units a world metre can span over the interval (distance conversions)
         self._local_metre = max(float(np.linalg.norm(inverse_affine(m)[:3, :3], axis=1).max())
                                 for m in self.path.samples)

@@ -107,8 +107,9 @@ def test_long_queries_go_to_the_tree_and_unsuitable_meshes_get_no_grid():
     bvh = build_bvh(mesh, "aabb")
     cells = TriangleCells(bvh)
     size = cells.cell_size
-    lo = np.zeros((2, 3))
-    hi = np.array([[0.5 * size] * 3, [(QUERY_CELLS + 1) * size, 0.0, 0.0]])
+    side = 0.5 * (QUERY_CELLS + 1) * size  # a square over more cells than a query may use
+    lo = np.array([[0.0, 0.0, 0.0], [-side, -side, 0.0]])
+    hi = np.array([[0.5 * size] * 3, [side, side, 0.0]])
     query, pos, rest = cells.candidates(lo, hi)
     np.testing.assert_array_equal(rest, [1])
     assert set(query) <= {0}
