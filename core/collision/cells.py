@@ -30,7 +30,7 @@ CELL = 1 / 3  # cell edge, in median triangle box sides
 QUERY_CELLS = 27  # a query over more cells than this is left to the hierarchy
 LARGE_CELLS = 64  # triangles overlapping more cells than this are tested by every query
 MAX_LARGE = 64  # more large triangles than this: no grid
-MAX_ENTRIES = 48  # (triangle, cell) entries per triangle on average; more: larger cells
+MAX_ENTRIES = 32  # (triangle, cell) entries per triangle on average; more: larger cells
 
 
 class TriangleCells:
@@ -79,9 +79,11 @@ class TriangleCells:
         key = self._key(cell)
         order = np.argsort(key, kind="stable")
         key = key[order]
-        self.entries = owner[order]
-        self.keys, self.starts = np.unique(key, return_index=True)
-        self.ends = np.append(self.starts[1:], len(key))
+        index = np.int32 if len(tri) < 2 ** 31 and len(key) < 2 ** 31 else np.int64  # memory
+        self.entries = owner[order].astype(index)
+        self.keys, starts = np.unique(key, return_index=True)
+        self.starts = starts.astype(index)
+        self.ends = np.append(starts[1:], len(key)).astype(index)
         self._slots = _hash_table(self.keys)
         self.large = np.nonzero(large)[0]
         self._box = np.concatenate([lo, -hi], axis=1)  # [lo, -hi]: one gather, one compare
@@ -145,7 +147,7 @@ def _hash_table(keys: np.ndarray) -> tuple[int, np.ndarray]:
     """An open-addressing table (linear probing, at most half full) of ``keys``' indices:
     (bits, slots), slots holding an index into keys or -1."""
     bits = max(int(np.ceil(np.log2(max(2 * len(keys), 2)))), 1)
-    slots = np.full(1 << bits, -1, dtype=np.int64)
+    slots = np.full(1 << bits, -1, dtype=np.int32 if len(keys) < 2 ** 31 else np.int64)
     mask = (1 << bits) - 1
     pending = np.arange(len(keys))
     at = _slot_of(keys, bits)

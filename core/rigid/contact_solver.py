@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..transforms import take
 from .contact_set import ContactSet, subset_width
 
 CONTACT_HERTZ = 30.0  # stiffness of the soft contact [Hz] (at most a quarter of the step rate)
@@ -96,9 +97,9 @@ def rows(cs: ContactSet, inv_mass: np.ndarray, inv_inertia: np.ndarray, ra: np.n
     slot = np.concatenate([np.arange(s), np.repeat(np.arange(s), 2)])
     dirs = np.concatenate([cs.normal, np.stack([cs.t1, cs.t2], axis=2).reshape(m, 2 * s, 3)],
                           axis=1)  # (M, 3 S, 3)
-    ang_a, ang_b = _cross(ra[:, slot], dirs), _cross(rb[:, slot], dirs)
+    ang_a, ang_b = _cross(np.take(ra, slot, axis=1), dirs), _cross(np.take(rb, slot, axis=1), dirs)
     # I^-1 (r x d) for every row at once (matmul: the tensors are symmetric)
-    wa, wb = np.matmul(ang_a, inv_inertia[a]), np.matmul(ang_b, inv_inertia[b])
+    wa, wb = np.matmul(ang_a, take(inv_inertia, a)), np.matmul(ang_b, take(inv_inertia, b))
     ma, mb = inv_mass[a, None, None], inv_mass[b, None, None]
     j, mj = np.empty((2, m, 3 * s, 12))
     np.negative(dirs, out=j[..., :3])
@@ -250,7 +251,7 @@ class Scales:
 
 def _gather(vel: np.ndarray, ab: np.ndarray) -> np.ndarray:
     """(m, 12) [v_a, w_a, v_b, w_b] of manifolds with body rows ab (m, 2)."""
-    return vel[ab].reshape(len(ab), 12)
+    return take(vel, ab).reshape(len(ab), 12)
 
 
 def _scatter(vel: np.ndarray, ab: np.ndarray, local: np.ndarray) -> None:

@@ -16,7 +16,7 @@ import numpy as np
 from ..bounds import DEFAULT_BOUNDS, StateBounds
 from ..contact import ColliderPaths
 from ..errors import SimulationError
-from ..transforms import TransformPath, tangents
+from ..transforms import TransformPath, take, tangents
 from ..world import SolverSystem, World, WorldFrame
 from .frame_inputs import RigidFrameInputs, RigidPaths, RigidReport
 from . import contact_solver as cs_
@@ -339,12 +339,13 @@ class RigidBodySolver:
         cs, b = step.contacts, step.bodies
         turn = self._turn(step)
         a, bb = cs.ab[:, 0], cs.ab[:, 1]
-        pa = b.x[a, None] + np.matmul(cs.ra, turn[a].transpose(0, 2, 1))
-        pb = b.x[bb, None] + np.matmul(cs.rb, turn[bb].transpose(0, 2, 1))
+        xa, xb = take(b.x, a)[:, None], take(b.x, bb)[:, None]
+        pa = xa + np.matmul(cs.ra, take(turn, a).transpose(0, 2, 1))
+        pb = xb + np.matmul(cs.rb, take(turn, bb).transpose(0, 2, 1))
         step.separation = cs.base + np.einsum("msi,msi->ms", cs.normal, pb - pa)
         mid = 0.5 * (pa + pb)
         step.rows = cs_.rows(cs, step.inv_mass, self._inverse_inertia(step, b.q),
-                             mid - b.x[a, None], mid - b.x[bb, None])
+                             mid - xa, mid - xb)
 
     def _integrate(self, step: _FrameStep) -> None:
         """Positions of the dynamic bodies; their orientation turns with L held, and w is
