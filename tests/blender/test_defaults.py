@@ -159,6 +159,35 @@ def test_collider_at_its_defaults_stops_particles_at_its_visible_surface(physani
     assert (last["position"][:, 1] > 5.0).sum() > 10
 
 
+def test_rain_at_its_defaults_bounces_on_a_mesh_collider_at_its_defaults(physanim_ext,
+                                                                          tmp_path):
+    # a wide cylinder (an Automatic collider: a Mesh) under a default emitter: the particles
+    # (shot up at the default 5 m/s) fall on its top and bounce there until they die, and no
+    # particle is ever behind its visible surface (a still Mesh collider answers its particles
+    # near the surface through its triangle grid)
+    scene = bpy.context.scene
+    scene.physanim.frame_end = 72
+    post = _primitive("cylinder", radius=4.0)  # z from -1 to 1: the top at 1
+    post.physanim.collider.enabled = True
+    extract = sys.modules[f"{physanim_ext.__name__}.addon.extract"]
+    assert extract.automatic_collider(post)[0] == 'MESH'
+    rain = _primitive("plane", size=1.2, location=(0.0, 0.0, 2.0))
+    rain.physanim.emitter.enabled = True
+    _save(tmp_path)
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    bvh = BVHTree.FromObject(post, bpy.context.evaluated_depsgraph_get())
+    touching = 0
+    for f, a in _frames(physanim_ext, rain).items():
+        for i, q in enumerate(a["position"]):
+            near, normal, _, dist = bvh.find_nearest(Vector(q.tolist()))
+            side = (Vector(q.tolist()) - near).dot(normal)
+            if abs(abs(side) - dist) < 1e-6:  # nearest to a face's inside: the side is sure
+                assert side > -1e-4, (f, i, dist)
+        assert (a["position"][:, 2] > 1.0 - 1e-4).all(), f  # all on or over the top
+        touching += int((a["position"][:, 2] < 1.01).sum())
+    assert touching > 100  # the rain reached the top and bounced there
+
+
 # --------------------------------------------------------------------------- spring mesh
 
 @pytest.mark.parametrize("kind", ["grid", "cube", "monkey"])
