@@ -46,9 +46,9 @@ def _rotation_z(angle: float, offset) -> np.ndarray:
 def particles_vs_mesh(module_name: str, particles: int, grid: int, frames: int,
                       analytic: bool = False, substeps: int = 2) -> tuple:
     """Core solver only: ``particles`` falling onto a wavy ``grid`` x ``grid`` mesh collider
-    (``substeps`` per frame: 2 is the emitters' default), or with ``analytic`` onto a flat ground (a HALF_SPACE at the
-    mesh's mean height) in the same way; returns (seconds, particle-steps per second,
-    triangles)."""
+    (``substeps`` per frame: 2 is the emitters' default), or with ``analytic`` onto a flat
+    ground (a HALF_SPACE at the mesh's mean height) in the same way; returns (seconds,
+    particle-steps per second, triangles: 0 for the ground)."""
     shapes = import_module(module_name + ".core.collision.shapes")
     P = import_module(module_name + ".core.particles")
     contact = import_module(module_name + ".core.contact")

@@ -3,12 +3,13 @@ asking about a few millimetres of surface).
 
 A hierarchy answers a query by descending some twenty levels; a grid answers one by looking up
 the few cells its region (a segment's box, a point's ball's box) overlaps. Each cell lists every
-triangle whose bounding box meets the closed cell. Cell coordinates are floor((x - origin) /
-cell_size) for triangles and queries alike, a non-decreasing function of x: a triangle whose box
-meets a query's box at a point x is listed in the cell holding x, which the query looks up. The
-lists are therefore a superset of the triangles the hierarchy would reach, and the exact tests
-that follow decide the same answer (a triangle met in two cells is tested twice, to the same
-result). Regions over more than ``QUERY_CELLS`` cells (long segments) are left to the hierarchy.
+triangle whose bounding box meets the closed cell. Cell coordinates are floor((x - origin) *
+(1 / cell_size)) for triangles and queries alike, a non-decreasing function of x: a triangle
+whose box meets a query's box at a point x is listed in the cell holding x, which the query
+looks up. The lists are therefore a superset of the triangles the hierarchy would reach, and the
+exact tests that follow decide the same answer (a triangle met in two cells is tested twice, to
+the same result). Regions over more than ``QUERY_CELLS`` cells (long segments) are left to the
+hierarchy.
 
 The cell edge is a third of the median triangle's longest box side, so that a resting or slow
 particle's region looks up one or two cells listing a few triangles; it grows while the lists
@@ -167,7 +168,7 @@ def _look_up(table: tuple[int, np.ndarray], keys: np.ndarray, query: np.ndarray)
     mask = (1 << bits) - 1
     out = np.full(len(query), -1, dtype=np.int64)
     at = _slot_of(query, bits)
-    todo = np.arange(len(query))
+    todo = np.arange(len(query) if len(keys) else 0)
     while len(todo):
         index = slots[at[todo]]
         filled = index >= 0

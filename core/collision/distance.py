@@ -74,8 +74,8 @@ def closest_points(bvh: BVH, points, *, max_distance: float = np.inf,
         max_distance: ignore surface farther than this [m] (faster for contact queries).
         matrix: (4, 4) the mesh's local-to-world transform (rotation, translation, uniform
             scale); results are then in world space.
-        cells: the grid over ``bvh`` (:mod:`.cells`), used for points whose ball of radius
-            ``max_distance`` fits a cell; the answers are the same as without it.
+        cells: the grid over ``bvh`` (:mod:`.cells`), for the points whose ball of radius
+            ``max_distance`` spans a few of its cells; the answers are the same as without it.
     """
     p = check_points(bvh.mesh.name, "query point", points, kind="mesh")
     if not max_distance > 0:

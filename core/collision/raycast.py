@@ -79,8 +79,8 @@ def segment_hits(bvh: BVH, start, end, matrix=None, cells: TriangleCells | None 
             else in the mesh's local frame.
         matrix: (4, 4) the mesh's local-to-world transform (any invertible affine map); results
             are then in world space too.
-        cells: the grid over ``bvh`` (:mod:`.cells`), for the segments whose box fits a cell;
-            the answers are the same as without it.
+        cells: the grid over ``bvh`` (:mod:`.cells`), for the segments whose box spans a few
+            of its cells; the answers are the same as without it.
     """
     p0 = check_points(bvh.mesh.name, "segment start", start, kind="mesh")
     p1 = check_points(bvh.mesh.name, "segment end", end, kind="mesh")
