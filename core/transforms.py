@@ -207,7 +207,7 @@ def rows_at(a: np.ndarray, index: np.ndarray) -> np.ndarray:
     """``a[index]`` for sorted, unique row indices (``np.nonzero``'s): ``a`` itself (no copy)
     when they are every row — a settled pile rests whole on its ground, and gathering all of
     it costs more than the arithmetic done on it. Read-only use: the result may be ``a``."""
-    return a if len(index) == len(a) else a[index]
+    return a if len(index) == len(a) else take(a, index)
 
 
 def take(a: np.ndarray, index: np.ndarray) -> np.ndarray:
