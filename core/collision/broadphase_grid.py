@@ -152,15 +152,18 @@ def _cell_pairs(lo_t, hi_t, cell_lo_t, box, cell, count, hashed):
 
 def _entries(boxes, cell_lo, extent):
     """One (box, cell) entry per cell each box overlaps: (k,) boxes and (3, k) cells."""
-    count = extent[boxes].prod(axis=1)
+    count = np.take(extent, boxes, axis=0).prod(axis=1)
+    if (count == 1).all():  # one cell each (small boxes): their first cells
+        return boxes, np.ascontiguousarray(np.take(cell_lo, boxes, axis=0).T)
     box = np.repeat(boxes, count)
     k = np.arange(len(box)) - np.repeat(np.cumsum(count) - count, count)  # index in the box
-    ey, ez = extent[box, 1], extent[box, 2]
+    ext, first = np.take(extent, box, axis=0), np.take(cell_lo, box, axis=0)  # rows: fast
+    ey, ez = ext[:, 1], ext[:, 2]
     cell = np.empty((3, len(box)), dtype=np.int64)
-    cell[2] = cell_lo[box, 2] + k % ez
+    cell[2] = first[:, 2] + k % ez
     k //= ez
-    cell[1] = cell_lo[box, 1] + k % ey
-    cell[0] = cell_lo[box, 0] + k // ey
+    cell[1] = first[:, 1] + k % ey
+    cell[0] = first[:, 0] + k // ey
     return box, cell
 
 

@@ -25,6 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..transforms import take
+from .broadphase_grid import _entries, _keys
 from .bvh import BVH
 
 CELL = 1 / 3  # cell edge, in median triangle box sides
@@ -71,13 +72,8 @@ class TriangleCells:
         self.dims = (last.max(axis=0) + 2).astype(np.int64)
         if float(np.prod(self.dims.astype(float))) >= 2.0 ** 62:
             return
-        small = np.nonzero(~large)[0]
-        per = count[small]
-        owner = np.repeat(small, per)
-        j = np.arange(per.sum()) - np.repeat(np.cumsum(per) - per, per)
-        sy, sz = span[owner, 1], span[owner, 2]
-        cell = first[owner] + np.stack([j // (sy * sz), (j // sz) % sy, j % sz], axis=1)
-        key = self._key(cell)
+        owner, cell = _entries(np.nonzero(~large)[0], first, span)
+        key = _keys(cell, self.dims)[0]
         order = np.argsort(key, kind="stable")
         key = key[order]
         index = np.int32 if len(tri) < 2 ** 31 and len(key) < 2 ** 31 else np.int64  # memory
@@ -97,9 +93,6 @@ class TriangleCells:
         u = np.clip((x - self.origin) * (1.0 / self.cell_size), 0.0, self.dims - 1.0)
         return u.astype(np.int64)  # truncation is floor for u >= 0
 
-    def _key(self, cell: np.ndarray) -> np.ndarray:
-        return (cell[:, 0] * self.dims[1] + cell[:, 1]) * self.dims[2] + cell[:, 2]
-
     def candidates(self, lo: np.ndarray, hi: np.ndarray):
         """Candidate triangles of query boxes [lo, hi] (n, 3).
 
@@ -112,15 +105,8 @@ class TriangleCells:
         count = span.prod(axis=1)
         use = count <= QUERY_CELLS
         ok = np.nonzero(use)[0]
-        per = count[ok]
-        query = np.repeat(ok, per)
-        if len(query) > len(ok):  # some look up several cells
-            j = np.arange(len(query)) - np.repeat(np.cumsum(per) - per, per)
-            sy, sz = span[query, 1], span[query, 2]
-            cell = first[query] + np.stack([j // (sy * sz), (j // sz) % sy, j % sz], axis=1)
-        else:
-            cell = first[ok]
-        at = _look_up(self._slots, self.keys, self._key(cell))
+        query, cell = _entries(ok, first, span)
+        at = _look_up(self._slots, self.keys, _keys(cell, self.dims)[0])
         found = at >= 0
         query, at = query[found], at[found]
         start, many = self.starts[at], self.ends[at] - self.starts[at]
