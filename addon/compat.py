@@ -308,3 +308,10 @@ def usd_modules() -> tuple | None:
     except ImportError:
         return None
     return Usd, UsdGeom, Vt, Sdf
+
+
+def usd_site() -> str | None:
+    """The folder ``pxr`` imports from (for a child process), or None where there is none."""
+    if usd_modules() is None:
+        return None
+    return os.path.dirname(os.path.dirname(importlib.import_module("pxr").__file__))

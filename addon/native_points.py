@@ -22,7 +22,7 @@ import os
 import bpy
 
 from ..core import usd_points
-from . import compat
+from . import compat, usd_process
 
 CACHE_MODIFIER = "physanim_cache"
 ATTRIBUTES_MODIFIER = "physanim_attributes"
@@ -60,33 +60,7 @@ def save_frame(path, data) -> None:
     if str(path).endswith(".usda"):
         usd_points.write_points_usda(path, arrays, frame)
     else:
-        _save_usdc(str(path), usd_points.columns(arrays), frame)
-
-
-def _save_usdc(path: str, data: dict, frame: int) -> None:
-    """The layer :func:`usd_points.points_usda` writes as text, binary through ``pxr``."""
-    Usd, UsdGeom, Vt, Sdf = compat.usd_modules()
-    if os.path.exists(path):
-        os.remove(path)
-    stage = Usd.Stage.CreateNew(path)
-    stage.SetStartTimeCode(frame)
-    stage.SetEndTimeCode(frame)
-    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
-    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
-    prim = UsdGeom.Points.Define(stage, usd_points.PRIM_PATH)
-    stage.SetDefaultPrim(prim.GetPrim())
-    prim.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(data["points"]))
-    if "velocities" in data:
-        prim.CreateVelocitiesAttr(Vt.Vec3fArray.FromNumpy(data["velocities"]))
-    if "widths" in data:
-        prim.CreateWidthsAttr(Vt.FloatArray.FromNumpy(data["widths"]))
-    primvars = UsdGeom.PrimvarsAPI(prim)
-    for key, column in data.items():
-        if key.startswith("primvars:"):
-            var = primvars.CreatePrimvar(key.split(":", 1)[1], Sdf.ValueTypeNames.FloatArray,
-                                         UsdGeom.Tokens.vertex)
-            var.Set(Vt.FloatArray.FromNumpy(column))
-    stage.GetRootLayer().Save()
+        usd_process.save_usdc(str(path), usd_points.columns(arrays), frame, compat.usd_modules())
 
 
 # --- reading: the result object ------------------------------------------------------------------

@@ -11,7 +11,7 @@ from ..core.controls import ImpactTracker, SquashSettings, euler_xyz, log_deform
 from ..core.controls.timing import TimeMap
 from ..core.particles import ParticleSolver, ParticleState, ParticleSystem, emitter_arrays
 from ..core.usd_points import MAX_FLOAT_ID
-from . import convert, limits, native_points, timing
+from . import compat, convert, limits, native_points, timing, usd_process
 from .cache_paths import emitter_cache_dir
 
 STREAM = "points"
@@ -37,6 +37,7 @@ class ParticleBake:
         # Emitters whose result plays without the extension: a USD layer per frame as well.
         self.usd = {ob.name for ob in emitters if ob.physanim.emitter.output == 'USD_POINTS'}
         self.usd_extension = native_points.file_extension() if self.usd else ""
+        self.usd_processes: dict[str, usd_process.UsdProcess | None] = {}
         self.first_frame = 0  # set by start()
         # squash and stretch: each emitter's particles' last impacts, frame to frame
         self.trackers = {ob.name: ImpactTracker(SquashSettings(ob.physanim.emitter.squash,
@@ -113,14 +114,36 @@ class ParticleBake:
                                                 arrays["velocity"].astype(float),
                                                 arrays["age"].astype(float))
             writer = self.writers[ob.name]
-            writer.write_frame(STREAM, frame, arrays)
+            npz = writer.write_frame(STREAM, frame, arrays)
             if ob.name in self.usd:
                 self._check_usd_ids(ob, arrays["id"], frame)
                 number = native_points.file_number(frame, self.first_frame)
-                writer.write_file(native_points.STREAM,
-                                  native_points.frame_file_name(number, self.usd_extension),
-                                  native_points.save_frame, (arrays, frame))
+                name = native_points.frame_file_name(number, self.usd_extension)
+                process = self._usd_process(ob.name, len(arrays["id"]))
+                if process is None:
+                    writer.write_file(native_points.STREAM, name, native_points.save_frame,
+                                      (arrays, frame))
+                else:  # saved from the .npz just queued, by a process on another core
+                    writer.write_file(native_points.STREAM, name, process.save, (npz, frame))
         self.stats["peak"] = max(self.stats["peak"], state.particle_count)
+
+    def _usd_process(self, name: str, count: int) -> usd_process.UsdProcess | None:
+        """The process writing emitter ``name``'s ``.usdc`` layers once its frames reach
+        :data:`usd_process.MIN_POINTS` points; None: the writer thread writes them (smaller
+        frames, ``.usda`` text, or no process could start here)."""
+        if self.usd_extension != ".usdc" or count < usd_process.MIN_POINTS:
+            return self.usd_processes.get(name)
+        if name not in self.usd_processes:
+            process, site = None, compat.usd_site()
+            if site is not None and usd_process.can_start():
+                try:
+                    process = usd_process.UsdProcess(site)
+                except OSError:
+                    process = None  # the writer thread writes them, as where there is no pxr
+                else:
+                    self.writers[name].attach(process)
+            self.usd_processes[name] = process
+        return self.usd_processes[name]
 
     def _squash(self, ob, tracker: ImpactTracker, arrays: dict, frame: int) -> None:
         """The instances' squash and stretch (their volume kept): instance_scale and

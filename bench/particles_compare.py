@@ -46,7 +46,7 @@ class Scene:
 class Run:
     name: str
     wall: float  # [s]
-    cpu: float  # [s] process CPU time (Blender's particle code may use several threads)
+    cpu: float  # [s] CPU time: all threads (Blender's may be several) and child processes
     particles: int
     problems: list[str]
     note: str = ""

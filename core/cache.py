@@ -80,6 +80,16 @@ class CacheWriter:
         # frame simulates while this one goes to disk; at most WRITES_IN_FLIGHT frames wait.
         self._pool = ThreadPoolExecutor(1, "physanim-cache") if background else None
         self._pending: list[Future] = []
+        self._helpers: list = []
+
+    def attach(self, helper) -> None:
+        """Make ``helper`` part of this bake's writing: something that writes files of the
+        partial folder elsewhere (a process of its own, say), with ``sync()`` (wait until they
+        are written; raise their first error) and ``close(kill)``. :meth:`flush` syncs it after
+        the queued writes; commit, detach and abort close it (abort kills it)."""
+        if self._closed:
+            raise RuntimeError("cache writer already committed or aborted")
+        self._helpers.append(helper)
 
     def write_frame(self, stream: str, frame: int, arrays: Mapping[str, np.ndarray]) -> Path:
         """Write one frame of one stream (e.g. one emitter's particles).
@@ -113,14 +123,19 @@ class CacheWriter:
         """Wait for queued writes; raises the first write error."""
         while self._pending:
             self._pending.pop(0).result()
+        for helper in self._helpers:
+            helper.sync()
 
-    def _shutdown(self) -> None:
+    def _shutdown(self, kill: bool = False) -> None:
         if self._pool is not None:
             for future in self._pending:
                 future.cancel()
             self._pool.shutdown(wait=True)
             self._pool = None
         self._pending.clear()
+        helpers, self._helpers = self._helpers, []
+        for helper in helpers:
+            helper.close(kill)
 
     def file_path(self, name: str) -> Path:
         """A file of the bake (e.g. a PC2 mesh cache) to write now: it is created inside the
@@ -164,7 +179,7 @@ class CacheWriter:
     def abort(self) -> None:
         """Delete the partial bake; the previous bake (if any) is untouched."""
         if not self._closed:
-            self._shutdown()
+            self._shutdown(kill=True)
             shutil.rmtree(self.partial_dir, ignore_errors=True)
             self._closed = True
 

@@ -271,3 +271,89 @@ def test_the_render_panel_says_where_each_output_plays(physanim_ext):
     assert "without PhysAnim" in shown['USD_POINTS']
     assert "usdc" in shown['USD_POINTS'] or "usda" in shown['USD_POINTS']
     assert "Needs PhysAnim" in shown['POINTS']
+
+
+def _layers(folder: Path, modules) -> dict[str, dict[str, np.ndarray]]:
+    """Every attribute of every USD layer in ``folder``, read through ``pxr``."""
+    layers = {}
+    for path in sorted(folder.iterdir()):
+        stage = modules[0].Stage.Open(str(path))
+        prim = stage.GetPrimAtPath("/particles")
+        layers[path.name] = {a.GetName(): np.array(a.Get()) for a in prim.GetAttributes()
+                             if a.Get() is not None}
+    return layers
+
+
+def test_a_process_of_its_own_writes_the_same_usd_layers(physanim_ext, tmp_path, monkeypatch):
+    """Large emitters' .usdc layers are saved by a child process (off the bake's lock): the
+    same layers as the writer thread saves, Blender showing the cache's points from them."""
+    usd_process = _addon(physanim_ext, "usd_process")
+    compat = _addon(physanim_ext, "compat")
+    started = []
+    start = usd_process.UsdProcess.__init__
+
+    def spy(self, site):
+        start(self, site)
+        started.append(self)
+
+    monkeypatch.setattr(usd_process.UsdProcess, "__init__", spy)
+    scene = _scene(tmp_path, frame_end=8)
+    ob = _default_emitter(scene)  # 20 a frame: below MIN_POINTS, written on the thread
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    res = ob.physanim.emitter.result
+    folder = Path(bpy.path.abspath(res.modifiers["physanim_cache"].cache_file.filepath)).parent
+    modules = compat.usd_modules()
+    monkeypatch.setattr(usd_process, "MIN_POINTS", 0)
+    if modules is None:  # no pxr (the 4.2 module): text layers, on the thread
+        assert bpy.ops.physanim.bake() == {'FINISHED'}
+        assert started == [] and {p.suffix for p in folder.iterdir()} == {".usda"}
+        return
+    by_thread = _layers(folder, modules)
+    assert started == [] and len(by_thread) == 8
+
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    assert len(started) == 1 and started[0]._proc.poll() == 0  # it ended with the bake
+    by_process = _layers(folder, modules)
+    assert by_process.keys() == by_thread.keys()
+    for name, layer in by_thread.items():
+        assert by_process[name].keys() == layer.keys() and "points" in layer
+        for key, values in layer.items():
+            np.testing.assert_array_equal(by_process[name][key], values, err_msg=key)
+    cache = sys.modules[f"{physanim_ext.__name__}.core.cache"]
+    scene.frame_set(6)
+    shown = result_points(res)
+    cached = cache.read_frame(bpy.path.abspath(res.physanim.result.cache), 6)
+    assert len(shown["id"]) == 6 * 20
+    for name in ("id", "position", "velocity", "color"):
+        np.testing.assert_array_equal(shown[name], cached[name], err_msg=name)
+
+
+def test_the_usd_process_names_a_layer_it_cannot_write(physanim_ext, tmp_path):
+    usd_process = _addon(physanim_ext, "usd_process")
+    site = _addon(physanim_ext, "compat").usd_site()
+    with pytest.raises(OSError, match="cannot import pxr from /nowhere"):
+        usd_process.UsdProcess("/nowhere")
+    if site is None:
+        return
+    cache = sys.modules[f"{physanim_ext.__name__}.core.cache"]
+    writer = cache.CacheWriter(tmp_path / "bake")
+    process = usd_process.UsdProcess(site)
+    writer.attach(process)
+    arrays = {"position": np.zeros((3, 3), np.float32), "id": np.arange(3)}
+    good = writer.write_frame("points", 1, arrays)
+    writer.write_file("usd", "points_000001.usdc", process.save, (good, 1))
+    writer.flush()
+    assert (writer.partial_dir / "usd" / "points_000001.usdc").is_file()
+    missing = tmp_path / "gone.npz"
+    writer.write_file("usd", "points_000002.usdc", process.save, (missing, 2))
+    with pytest.raises(OSError, match=r'points_000002\.usdc" \(frame 2\) was not written.*gone'):
+        writer.commit({})
+    assert process._proc.poll() is not None  # ended with the failed commit
+    writer.abort()
+    assert not (tmp_path / "bake").exists() and not writer.partial_dir.exists()
+    # a cancelled bake kills its process
+    writer = cache.CacheWriter(tmp_path / "bake")
+    process = usd_process.UsdProcess(site)
+    writer.attach(process)
+    writer.abort()
+    assert process._proc.poll() is not None and not writer.partial_dir.exists()

@@ -1,0 +1,201 @@
+"""USD point layers written by a Python process of their own, on another core than the bake.
+
+Saving a frame's ``.usdc`` layer through ``pxr`` takes about 12 ms per 100,000 points and holds
+Python's lock all the while, so on the bake's writer thread it stalls the simulation. A large
+emitter's layers are therefore written by a child process instead: the bake's writer thread,
+having saved a frame's ``.npz``, hands the child that file's path and the layer's; the child
+reads the arrays and saves the layer, the same bits the thread would (:func:`save_usdc` on
+:func:`~physanim.core.usd_points.columns`, in both). A failure in the child (a full disk, say)
+comes back as an :class:`OSError` naming the file, at the next frame or when the bake finishes.
+
+This file is also the child's script: run by the interpreter Blender runs Python with
+(``sys.executable``), it imports only the standard library, numpy, ``core/usd_points.py`` (by
+path) and ``pxr`` from the folder it is given. Where no such interpreter can start it (or it
+cannot import ``pxr``) the bake writes the layers on its writer thread as before.
+"""
+from __future__ import annotations
+
+import json
+import os
+import queue
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import numpy as np
+
+if __package__:
+    from ..core import usd_points
+else:  # the child process: this file run as a script
+    import importlib.util
+
+    _spec = importlib.util.spec_from_file_location(
+        "physanim_usd_points", Path(__file__).resolve().parents[1] / "core" / "usd_points.py")
+    usd_points = importlib.util.module_from_spec(_spec)
+    _spec.loader.exec_module(usd_points)
+
+#: Frames with fewer points are saved on the writer thread (a few ms at most); a bake whose
+#: frames reach this many starts the process.
+MIN_POINTS = 20_000
+#: Seconds the child may take to start and import ``pxr`` before the bake writes without it.
+START_TIMEOUT = 30.0
+
+
+def save_usdc(path: str, data: dict, frame: int, modules: tuple) -> None:
+    """The layer :func:`usd_points.points_usda` writes as text, binary through ``pxr``.
+
+    Args:
+        path: the ``.usdc`` file (replaced). data: :func:`usd_points.columns` of the frame.
+        frame: the layer's time code. modules: ``(Usd, UsdGeom, Vt, Sdf)``.
+    """
+    Usd, UsdGeom, Vt, Sdf = modules
+    if os.path.exists(path):
+        os.remove(path)
+    stage = Usd.Stage.CreateNew(path)
+    stage.SetStartTimeCode(frame)
+    stage.SetEndTimeCode(frame)
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    prim = UsdGeom.Points.Define(stage, usd_points.PRIM_PATH)
+    stage.SetDefaultPrim(prim.GetPrim())
+    prim.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(data["points"]))
+    if "velocities" in data:
+        prim.CreateVelocitiesAttr(Vt.Vec3fArray.FromNumpy(data["velocities"]))
+    if "widths" in data:
+        prim.CreateWidthsAttr(Vt.FloatArray.FromNumpy(data["widths"]))
+    primvars = UsdGeom.PrimvarsAPI(prim)
+    for key, column in data.items():
+        if key.startswith("primvars:"):
+            var = primvars.CreatePrimvar(key.split(":", 1)[1], Sdf.ValueTypeNames.FloatArray,
+                                         UsdGeom.Tokens.vertex)
+            var.Set(Vt.FloatArray.FromNumpy(column))
+    stage.GetRootLayer().Save()
+
+
+def can_start() -> bool:
+    """Whether ``sys.executable`` is a Python interpreter (a Blender build that names its own
+    binary there would open Blender instead)."""
+    name = os.path.basename(sys.executable or "").lower()
+    return name.startswith("python") and os.path.isfile(sys.executable)
+
+
+class UsdProcess:
+    """The child process, seen from the bake: :meth:`save` queues a layer (on the writer
+    thread), :meth:`sync` waits until every queued layer is on disk, :meth:`close` ends it.
+
+    Args:
+        site: the folder ``pxr`` imports from in this Blender.
+
+    Raises:
+        OSError: the child did not start or could not import ``pxr`` (its reason).
+    """
+
+    def __init__(self, site: str):
+        self._replies: queue.Queue[str | None] = queue.Queue()
+        self._failure: str | None = None
+        self._proc = subprocess.Popen(
+            [sys.executable, "-s", str(Path(__file__).resolve()), site], stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, encoding="utf-8")
+        threading.Thread(target=self._read, name="physanim-usd-replies", daemon=True).start()
+        try:
+            reply = self._replies.get(timeout=START_TIMEOUT)
+        except queue.Empty:
+            reply = f"no answer in {START_TIMEOUT:g} s"
+        if reply != "ready":
+            self.close(kill=True)
+            raise OSError(f"the USD writer process did not start: {reply or 'it exited'}")
+
+    def _read(self) -> None:
+        for line in self._proc.stdout:
+            self._replies.put(line.rstrip("\n"))
+        self._replies.put(None)  # the child exited
+
+    def _raise_failure(self) -> None:
+        if self._failure is None:
+            while True:
+                try:
+                    reply = self._replies.get_nowait()
+                except queue.Empty:
+                    return
+                if reply != "ok":
+                    self._failure = reply or "the USD writer process exited"
+                    break
+        raise OSError(self._failure.removeprefix("error: "))
+
+    def save(self, path: Path, data: tuple) -> None:
+        """Queue the layer ``path`` of the frame whose ``.npz`` is written: ``data`` is
+        ``(npz path, frame)``. Raises the child's failure of an earlier layer."""
+        self._raise_failure()
+        npz, frame = data
+        try:
+            self._proc.stdin.write(json.dumps([int(frame), str(npz), str(path)]) + "\n")
+            self._proc.stdin.flush()
+        except OSError:
+            self._replies.put(None)
+            self._raise_failure()
+
+    def sync(self) -> None:
+        """Wait until every queued layer is saved; raises the first failure."""
+        self._raise_failure()
+        try:
+            self._proc.stdin.write("sync\n")
+            self._proc.stdin.flush()
+        except OSError:
+            self._replies.put(None)
+        reply = self._replies.get()
+        if reply != "ok":
+            self._failure = reply or "the USD writer process exited"
+            self._raise_failure()
+
+    def close(self, kill: bool = False) -> None:
+        """End the child: ``kill`` at once (the layers are thrown away), else once its queue is
+        written."""
+        proc = self._proc
+        if proc.poll() is None:
+            if kill:
+                proc.kill()
+            else:
+                try:
+                    proc.stdin.close()
+                except OSError:
+                    proc.kill()
+        try:
+            proc.wait(timeout=None if not kill else 10)
+        finally:
+            for pipe in (proc.stdin, proc.stdout):
+                try:
+                    pipe.close()
+                except OSError:
+                    pass
+
+
+def _serve(site: str) -> int:
+    """The child: a line per layer (``[frame, npz, usdc]`` in JSON) or ``sync``; answers
+    ``ready`` once ``pxr`` imports, ``ok`` per ``sync``, ``error: ...`` and exits on a failure."""
+    try:
+        sys.path.append(site)
+        from pxr import Sdf, Usd, UsdGeom, Vt
+    except Exception as exc:  # any reason it cannot write is the answer
+        print(f"error: cannot import pxr from {site}: {exc}", flush=True)
+        return 1
+    modules = (Usd, UsdGeom, Vt, Sdf)
+    print("ready", flush=True)
+    for line in sys.stdin:
+        if line.strip() == "sync":
+            print("ok", flush=True)
+            continue
+        frame, npz, path = json.loads(line)
+        try:
+            with np.load(npz, allow_pickle=False) as handle:
+                arrays = {key: handle[key] for key in handle.files}
+            save_usdc(path, usd_points.columns(arrays), frame, modules)
+        except Exception as exc:  # reported to the bake, which names the file
+            print(f'error: USD points file "{path}" (frame {frame}) was not written: {exc}',
+                  flush=True)
+            return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(_serve(sys.argv[1]))
