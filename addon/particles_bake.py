@@ -174,28 +174,25 @@ class ParticleBake:
                 "lower the rates or bake fewer frames", obj=ob.name, frame=frame, kind="emitter")
 
     def _check_cache_range(self, state, frame: int) -> None:
-        """Positions and velocities must fit the float32 cache: a value beyond it would be
+        """Every value must be finite and fit the float32 cache: a value beyond it would be
         written as inf (silently) although the float64 simulation is still finite."""
-        for what, values in (("position", state.particle_x), ("velocity", state.particle_v),
-                             ("size", state.particle_size[:, None]),
-                             ("age", state.particle_age[:, None])):
-            if np.isfinite(values).all():
+        for what, values, unit in (("position", state.particle_x, "m"),
+                                   ("velocity", state.particle_v, "m/s"),
+                                   ("size", state.particle_size[:, None], "m"),
+                                   ("age", state.particle_age[:, None], "s")):
+            # min and max are NaN when any value is: within the range, every value is fine
+            if not len(values) or -FLOAT32_MAX <= values.min() and values.max() <= FLOAT32_MAX:
                 continue
             bad = ~np.isfinite(values).all(axis=1)
             if bad.any():
                 raise self._particle_error(state, int(np.argmax(bad)), frame,
                                            f"{what} became {{value}} — nothing non-finite is "
                                            "ever written to a bake", values)
-        for what, values, unit in (("position", state.particle_x, "m"),
-                                   ("velocity", state.particle_v, "m/s")):
-            if not len(values) or np.abs(values).max() <= FLOAT32_MAX:
-                continue
             big = (np.abs(values) > FLOAT32_MAX).any(axis=1)
-            if big.any():
-                raise self._particle_error(
-                    state, int(np.argmax(big)), frame,
-                    f"{what} reached {{value}} {unit}, beyond the cache's float32 range "
-                    f"(±{FLOAT32_MAX:.3g}) — check the emitter's motion and the forces", values)
+            raise self._particle_error(
+                state, int(np.argmax(big)), frame,
+                f"{what} reached {{value}} {unit}, beyond the cache's float32 range "
+                f"(±{FLOAT32_MAX:.3g}) — check the emitter's motion and the forces", values)
 
     def _particle_error(self, state, i: int, frame: int, message: str, values) -> SimulationError:
         value = np.array2string(values[i], precision=4)

@@ -40,6 +40,11 @@ class LifeCurve:
         return cls((0.0,), (tuple(float(v) for v in value),))
 
     @property
+    def is_constant(self) -> bool:
+        """Whether every stop holds the same value (the curve does not depend on t)."""
+        return all(v == self.values[0] for v in self.values)
+
+    @property
     def channels(self) -> int:
         return len(self.values[0])
 
@@ -49,6 +54,9 @@ class LifeCurve:
         pos = np.asarray(self.positions)
         val = np.asarray(self.values)
         out = np.empty(t.shape + (val.shape[1],))
+        if self.is_constant:  # the defaults: one value whatever t is
+            out[...] = val[0]
+            return out
         for c in range(val.shape[1]):  # loop over channels (<= 4), vectorised over particles
             out[..., c] = np.interp(t, pos, val[:, c])
         return out

@@ -47,7 +47,8 @@ def emitter_arrays(model: ParticleModel, state: ParticleState, emitter: int,
     v = state.particle_v[sel]
     age = state.particle_age[sel]
     life = state.particle_life[sel]
-    frac = np.clip(age / np.where(life > 0.0, life, np.inf), 0.0, 1.0)
+    frac = (age if settings.size.is_constant and settings.color.is_constant else  # t unread
+            np.clip(age / np.where(life > 0.0, life, np.inf), 0.0, 1.0))
     size = state.particle_size[sel] * settings.size.evaluate(frac)[:, 0]
     f32 = np.float32
     out = {

@@ -487,3 +487,34 @@ def test_an_emitter_that_cannot_be_read_does_not_stop_a_spring_mesh(physanim_ext
     assert cloth.modifiers["physanim"].type == 'MESH_CACHE'  # the cloth baked all the same
     assert bad.physanim.emitter.result is None
     assert not _leftovers(_cache_root(scene))
+
+
+@pytest.mark.parametrize("what, column, value, says", [
+    ("position", "particle_x", math.nan, "position became [nan"),
+    ("velocity", "particle_v", -math.inf, "velocity became [-inf"),
+    ("position", "particle_x", -1e39, "position reached [-1.e+39"),
+    ("velocity", "particle_v", 5e38, "velocity reached [5.e+38"),
+    ("size", "particle_size", math.inf, "size became [inf"),
+    ("age", "particle_age", 1e300, "age reached [1.e+300"),
+])
+def test_values_the_float32_cache_cannot_hold_name_particle_emitter_and_frame(
+        physanim_ext, what, column, value, says):
+    P = sys.modules[f"{physanim_ext.__name__}.core.particles"]
+    particles_bake = sys.modules[f"{physanim_ext.__name__}.addon.particles_bake"]
+    builder = P.ParticleModelBuilder(seed=0)
+    builder.add_emitter(P.EmitterSettings(name="Spray"))
+    model = builder.finalize(0)
+    state = model.state(0.0)
+    big = 3.0e38  # within float32 (3.4e38): fine
+    state.append(0, np.full((3, 3), big), np.full((3, 3), -big), np.ones(3), np.full(3, big),
+                 np.full(3, 1e6), np.full(3, big))
+    bake = particles_bake.ParticleBake.__new__(particles_bake.ParticleBake)
+    bake.model = model
+    bake._check_cache_range(state, 9)
+    getattr(state, column)[1] = value
+    with pytest.raises(Exception) as caught:
+        bake._check_cache_range(state, 9)
+    message = str(caught.value)
+    ident = int(state.particle_id[1])
+    assert f"particle {ident} {says}" in message, message
+    assert '"Spray"' in message and "frame 9" in message, message

@@ -77,6 +77,26 @@ def test_color_and_size_follow_life_curves():
     assert not set(STRETCH_KEYS) & set(out)  # no stretch: the renderer scales by size
 
 
+def test_constant_curves_give_their_value_at_any_age():
+    # several stops of one value, a single stop, and a curve whose stops differ only in one
+    # channel (not constant): each as np.interp gives it, whatever the life fraction
+    t = np.array([-0.5, 0.0, 0.3, 1.0, 2.0])
+    for curve, constant in ((LifeCurve((0.0, 0.4, 1.0), ((0.2, 0.3),) * 3), True),
+                            (LifeCurve.constant(0.7, 0.1, 0.2, 1.0), True),
+                            (LifeCurve((0.0, 1.0), ((1.0, 0.5), (1.0, 0.6))), False)):
+        assert curve.is_constant is constant
+        expected = np.column_stack([np.interp(t, curve.positions, np.array(curve.values)[:, c])
+                                    for c in range(curve.channels)])
+        np.testing.assert_array_equal(curve.evaluate(t), expected)
+    model = _model(EmitterSettings("Plain", size=LifeCurve((0.0, 1.0), ((1.5,), (1.5,)))))
+    state = model.state()
+    _place(state, np.zeros((3, 3)), np.zeros((3, 3)), age=np.array([0.0, 1.0, 5.0]), life=2.0,
+           size=0.1)
+    out = emitter_arrays(model, state, 0)
+    np.testing.assert_allclose(out["size"], 0.15, rtol=1e-7)
+    assert np.all(out["color"] == out["color"][0])
+
+
 def _euler_xyz(angles):
     """Blender's Euler XYZ: R = Rz(c) Ry(b) Rx(a)."""
     a, b, c = angles
