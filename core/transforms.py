@@ -217,6 +217,12 @@ def take(a: np.ndarray, index: np.ndarray) -> np.ndarray:
     return np.take(a, index, axis=0)
 
 
+def row_indices(rows) -> np.ndarray:
+    """Row indices for :func:`take` from ``rows``: indices, or a boolean mask."""
+    rows = np.asarray(rows)
+    return np.nonzero(rows)[0] if rows.dtype == bool else rows
+
+
 def norm_rows(a: np.ndarray) -> np.ndarray:
     """Euclidean norm of each row of (n, k) ``a``."""
     return np.sqrt(np.einsum("ij,ij->i", a, a))

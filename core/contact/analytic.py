@@ -108,15 +108,27 @@ class AnalyticPath(ColliderPath):
             return SurfacePoints.none()
         d = rows_at(d, cand)
         n_w = np.empty_like(xc)
-        n_w[:] = grad / scale
+        normal = grad / scale
+        n_w[:] = normal
+        sides = 1.0
         if plane:  # the side each point is on
-            n_w[rows_at(z, cand) < 0.0] *= -1.0
-        p_w = xc - d[:, None] * n_w
+            below = rows_at(z, cand) < 0.0
+            if below.any():
+                n_w[below] *= -1.0
+                sides = -1.0 if below.all() else 0.0
+        axis = None
+        along = np.nonzero(normal)[0]
+        if self.path.static and sides and len(along) == 1 and abs(normal[along[0]]) == 1.0:
+            axis = (int(along[0]), float(sides * normal[along[0]]))
+            p_w = xc.copy()  # the same values: the other columns move by d * 0
+            p_w[:, axis[0]] -= d * axis[1]
+        else:
+            p_w = xc - d[:, None] * n_w
         if self.path.static:
             velocity = np.zeros_like(p_w)
         else:
             velocity = self.surface_velocity(self.to_local(p_w, s), s)
-        return SurfacePoints(cand, p_w, n_w, velocity, d)
+        return SurfacePoints(cand, p_w, n_w, velocity, d, axis)
 
     def features(self, s0: float, s1: float) -> Features:
         return self._features

@@ -6,7 +6,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from ..transforms import norm_rows, rows_at
+from ..transforms import norm_rows, row_indices, rows_at, take
 
 
 @dataclass(frozen=True)
@@ -30,6 +30,9 @@ class Contacts:
             not only while forces press the point into the surface.
         collider: (k,) int: which of the system's collider paths each point touches (-1:
             not known) — a collider that is another system's body takes the push back.
+        axis: ``(a, sign)`` when every normal is ``sign`` times the world axis ``a`` and every
+            surface is still (resting on a ground that is not turned): the contact force is
+            then computed by columns, to the same values; None: any normals.
     """
 
     index: np.ndarray
@@ -43,6 +46,7 @@ class Contacts:
     normal_speed: np.ndarray
     held: np.ndarray
     collider: np.ndarray
+    axis: tuple[int, float] | None = None
 
     @classmethod
     def none(cls) -> Contacts:
@@ -51,19 +55,21 @@ class Contacts:
 
     @classmethod
     def of(cls, index, point, normal, surface_velocity, friction, restitution, depth=None,
-           impulse=None, normal_speed=None, held=None, collider=None) -> Contacts:
+           impulse=None, normal_speed=None, held=None, collider=None,
+           axis=None) -> Contacts:
         """Contacts from the arrays that always differ; the rest default to a resting contact
         (depth 0, no impulse, the surface's own normal speed, not held). Sorts by index."""
         k = len(index)
         if normal_speed is None:
-            normal_speed = np.einsum("ij,ij->i", surface_velocity, normal)
+            normal_speed = (np.zeros(k) if axis is not None else
+                            np.einsum("ij,ij->i", surface_velocity, normal))
         made = cls(np.asarray(index, np.int64), point, normal,
                    np.zeros(k) if depth is None else depth, surface_velocity,
                    np.asarray(friction, np.float64), np.asarray(restitution, np.float64),
                    np.zeros(k) if impulse is None else impulse, normal_speed,
                    np.zeros(k, bool) if held is None else held,
                    np.full(k, -1, np.int64) if collider is None
-                   else np.asarray(collider, np.int64))
+                   else np.asarray(collider, np.int64), axis)
         if k > 1 and np.any(made.index[1:] < made.index[:-1]):
             return made.take(np.argsort(made.index, kind="stable"))
         return made
@@ -73,15 +79,21 @@ class Contacts:
 
     def take(self, rows) -> Contacts:
         """These contacts' rows ``rows`` (a mask or indices; kept in the given order)."""
-        return Contacts(*(getattr(self, f.name)[rows] for f in fields(self)))
+        rows = row_indices(rows)
+        return Contacts(*(take(getattr(self, name), rows) for name in _ROWS), self.axis)
 
     def merged(self, other: Contacts) -> Contacts:
         """These contacts with ``other``'s points replaced or added, sorted by index."""
         stay = ~np.isin(self.index, other.index)
-        both = [np.concatenate([getattr(self, f.name)[stay], getattr(other, f.name)])
-                for f in fields(self)]
+        both = [np.concatenate([getattr(self, name)[stay], getattr(other, name)])
+                for name in _ROWS]
         order = np.argsort(both[0], kind="stable")
-        return Contacts(*(a[order] for a in both))
+        axis = (self.axis if self.axis == other.axis or not len(other) else
+                other.axis if not stay.any() else None)
+        return Contacts(*(a[order] for a in both), axis)
+
+
+_ROWS = tuple(f.name for f in fields(Contacts) if f.name != "axis")  # the per-contact arrays
 
 
 @dataclass(frozen=True)
@@ -106,6 +118,9 @@ class ContactForce:
         c = self.contacts
         if len(c) == 0:
             return
+        if c.axis is not None:
+            self._constrain_along(p, f_out, *c.axis)
+            return
         idx, normal = c.index, c.normal
         f = rows_at(f_out, idx)  # every point resting (a settled pile): no gathers
         fn = np.einsum("ij,ij->i", f, normal)
@@ -127,3 +142,35 @@ class ContactForce:
             f_out += need
         else:
             f_out[idx] = f + need
+
+    def _constrain_along(self, p, f_out: np.ndarray, a: int, sign: float) -> None:
+        """:meth:`constrain` when every normal is ``sign`` times axis ``a`` and every surface is
+        still: the same arithmetic by columns (the normal's other components are zeros, so
+        each value equals the general route's)."""
+        c = self.contacts
+        idx = c.index
+        f = rows_at(f_out, idx)
+        v = rows_at(p.v, idx)
+        push = np.minimum(f[:, a] * sign, 0.0)
+        t1, t2 = (a + 1) % 3, (a + 2) % 3
+        factor = rows_at(p.mass, idx) / -self.h
+        need1 = v[:, t1] * factor
+        need1 -= f[:, t1]
+        need2 = v[:, t2] * factor
+        need2 -= f[:, t2]
+        need_mag = np.sqrt(need1 * need1 + need2 * need2)
+        cap = c.friction * -push
+        scale = np.minimum(1.0, cap / np.where(need_mag > 0.0, need_mag, np.inf))
+        need1 *= scale
+        need2 *= scale
+        push *= sign
+        if f is f_out:
+            f_out[:, t1] += need1
+            f_out[:, t2] += need2
+            f_out[:, a] -= push
+        else:
+            f = f.copy()
+            f[:, t1] += need1
+            f[:, t2] += need2
+            f[:, a] -= push
+            f_out[idx] = f

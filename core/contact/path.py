@@ -22,8 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..transforms import (TransformPath, inverse3, inverse_affine, norm_rows, transform_points,
-                          transform_vectors)
+from ..transforms import (TransformPath, inverse3, inverse_affine, norm_rows, row_indices, take,
+                          transform_points, transform_vectors)
 from .frame import ColliderFrame
 
 SKIN = 1e-4  # [m] particles are placed this far outside a surface after a hit
@@ -95,6 +95,9 @@ class SurfacePoints:
         velocity: (k, 3) the surface's velocity there [m/s].
         gap: (k,) distance of each query point beyond the surface, ``offset`` included [m]
             (negative: inside).
+        axis: ``(a, sign)`` when every normal is ``sign`` times the world axis ``a`` and every
+            velocity is zero (a still ground that is not turned: the common case, which
+            :class:`~.contacts.ContactForce` takes by columns); None: any normals.
     """
 
     index: np.ndarray
@@ -102,6 +105,7 @@ class SurfacePoints:
     normal: np.ndarray
     velocity: np.ndarray
     gap: np.ndarray
+    axis: tuple[int, float] | None = None
 
     @classmethod
     def none(cls) -> SurfacePoints:
@@ -110,14 +114,20 @@ class SurfacePoints:
 
     def take(self, rows: np.ndarray) -> SurfacePoints:
         """These points' rows ``rows`` (indices or a mask)."""
-        return SurfacePoints(self.index[rows], self.point[rows], self.normal[rows],
-                             self.velocity[rows], self.gap[rows])
+        rows = row_indices(rows)
+        return SurfacePoints(*(take(getattr(self, k), rows)
+                               for k in ("index", "point", "normal", "velocity", "gap")),
+                             self.axis)
 
     @classmethod
     def joined(cls, parts: list[SurfacePoints]) -> SurfacePoints:
         """The rows of ``parts`` one after another."""
+        if len(parts) == 1:
+            return parts[0]
+        axes = {p.axis for p in parts}
         return cls(*(np.concatenate([getattr(p, k) for p in parts])
-                     for k in ("index", "point", "normal", "velocity", "gap")))
+                     for k in ("index", "point", "normal", "velocity", "gap")),
+                   axes.pop() if len(axes) == 1 else None)
 
 
 class ColliderPath:

@@ -280,7 +280,10 @@ def resting_contacts(colliders: list[ColliderPath], x: np.ndarray, v: np.ndarray
     found = []  # per collider: (its index, its SurfacePoints of the resting points)
     for ci, col in enumerate(colliders if len(x) else ()):
         surf = col.near_surface(x, s)
-        un = np.einsum("ij,ij->i", rows_at(v, surf.index) - surf.velocity, surf.normal)
+        if surf.axis is not None:  # a still ground: the normal speed is one column
+            un = rows_at(v, surf.index)[:, surf.axis[0]] * surf.axis[1]
+        else:
+            un = np.einsum("ij,ij->i", rows_at(v, surf.index) - surf.velocity, surf.normal)
         ok = np.nonzero(un < rest_speed)[0]
         if len(ok):
             found.append((ci, surf if len(ok) == len(un) else surf.take(ok)))
@@ -295,7 +298,11 @@ def resting_contacts(colliders: list[ColliderPath], x: np.ndarray, v: np.ndarray
         keep = order[first]
         surf, which = surf.take(keep), which[keep]
     frames = [col.frame for col in colliders]
-    mu = np.array([f.friction for f in frames])[which]
-    k_r = np.array([f.restitution for f in frames])[which]
+    if len(found) == 1:
+        frame = frames[found[0][0]]
+        mu, k_r = np.full(len(which), frame.friction), np.full(len(which), frame.restitution)
+    else:
+        mu = np.array([f.friction for f in frames])[which]
+        k_r = np.array([f.restitution for f in frames])[which]
     return Contacts.of(surf.index, surf.point, surf.normal, surf.velocity, mu, k_r,
-                       depth=-surf.gap, collider=which)
+                       depth=-surf.gap, collider=which, axis=surf.axis)

@@ -38,7 +38,11 @@ class Gravity:
     g: tuple[float, float, float]
 
     def apply(self, p: ParticleView, f_out: np.ndarray) -> None:
-        f_out += p.mass[:, None] * np.asarray(self.g)
+        f_out += self.force(p)
+
+    def force(self, p: ParticleView) -> np.ndarray:
+        """(n, 3) m g: a new array (an accumulator can start as it)."""
+        return p.mass[:, None] * np.asarray(self.g)
 
 
 @dataclass(frozen=True)

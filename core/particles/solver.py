@@ -102,8 +102,13 @@ class _ParticleOde:
         n = self._n
         view = ParticleView(y[:3 * n].reshape(n, 3), y[3 * n:].reshape(n, 3),
                             self.state.particle_mass, t)
-        f = np.zeros((n, 3))  # clear the accumulator, then every force adds in
-        for force in self.forces:
+        forces = self.forces
+        if forces and isinstance(forces[0], Gravity):  # the accumulator starts as m g
+            f = forces[0].force(view)
+            forces = forces[1:]
+        else:
+            f = np.zeros((n, 3))  # clear the accumulator, then every force adds in
+        for force in forces:
             force.apply(view, f)
         self.contact.constrain(view, f)  # it cancels what the forces push into surfaces
         if self.constraints is not None:  # last: holds the rods against every other force
