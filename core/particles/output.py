@@ -58,7 +58,7 @@ def emitter_arrays(model: ParticleModel, state: ParticleState, emitter: int,
         "age": age.astype(f32),
         "life": life.astype(f32),
         "size": size.astype(f32),
-        "color": np.ascontiguousarray(settings.color.evaluate(frac), f32),
+        "color": settings.color.evaluate(frac, f32),
     }
     if settings.stretch > 0.0:  # round particles need no instance transform: size scales them
         scale = np.repeat(size[:, None], 3, axis=1)

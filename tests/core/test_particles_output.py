@@ -88,6 +88,9 @@ def test_constant_curves_give_their_value_at_any_age():
         expected = np.column_stack([np.interp(t, curve.positions, np.array(curve.values)[:, c])
                                     for c in range(curve.channels)])
         np.testing.assert_array_equal(curve.evaluate(t), expected)
+        single = curve.evaluate(t, np.float32)
+        assert single.dtype == np.float32 and single.flags.c_contiguous
+        np.testing.assert_array_equal(single, expected.astype(np.float32))
     model = _model(EmitterSettings("Plain", size=LifeCurve((0.0, 1.0), ((1.5,), (1.5,)))))
     state = model.state()
     _place(state, np.zeros((3, 3)), np.zeros((3, 3)), age=np.array([0.0, 1.0, 5.0]), life=2.0,
