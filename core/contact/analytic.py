@@ -107,9 +107,8 @@ class AnalyticPath(ColliderPath):
         if len(cand) == 0:
             return SurfacePoints.none()
         d = rows_at(d, cand)
-        n_w = np.empty_like(xc)
         normal = grad / scale
-        n_w[:] = normal
+        n_w = np.tile(normal, (len(cand), 1))  # (a broadcast fill of (k, 3) rows: 2 x slower)
         sides = 1.0
         if plane:  # the side each point is on
             below = rows_at(z, cand) < 0.0

@@ -151,7 +151,7 @@ class ContactForce:
         idx = c.index
         f = rows_at(f_out, idx)
         v = rows_at(p.v, idx)
-        push = np.minimum(f[:, a] * sign, 0.0)
+        push = np.minimum(f[:, a] if sign == 1.0 else f[:, a] * sign, 0.0)
         t1, t2 = (a + 1) % 3, (a + 2) % 3
         factor = rows_at(p.mass, idx) / -self.h
         need1 = v[:, t1] * factor
@@ -163,7 +163,8 @@ class ContactForce:
         scale = np.minimum(1.0, cap / np.where(need_mag > 0.0, need_mag, np.inf))
         need1 *= scale
         need2 *= scale
-        push *= sign
+        if sign != 1.0:
+            push *= sign
         if f is f_out:
             f_out[:, t1] += need1
             f_out[:, t2] += need2
