@@ -334,6 +334,14 @@ class BaraffWitkin(Integrator):
         - f_c p_r n (n^T B) - f_r p_c (B n) n^T + p_r p_c (n^T B n) n n^T, a few passes over
         the whole matrix instead of two 3 x 3 products per block (a third of the time)."""
         p = matrix.pattern
+        if not len(pressed):  # pins only: S = 0 on them, I elsewhere; only their rows and
+            data = matrix.data.copy()  # columns change (to zero, their diagonal blocks to I)
+            blocks = data.reshape(p.n, 3, p.width, 3)
+            row, col = np.nonzero(constrained[:, None] | constrained[p.neighbours])
+            blocks[row, :, col, :] = 0.0
+            fixed = np.nonzero(constrained)[0]
+            blocks[fixed, :, p.diagonal_slot[fixed] % p.width, :] = np.eye(3)
+            return BlockMatrix(p, data)
         f = free.astype(np.float64)
         pr = np.zeros(p.n)
         pr[pressed] = 1.0

@@ -182,7 +182,8 @@ class MatrixBuilder:
         for positions, a, b in self.pattern._groups(clique):
             ga = np.take(table, a.T, axis=0, mode="clip").transpose(1, 2, 0)  # (S, 3, M)
             blocks = np.matmul(ga, np.take(table, b, axis=0, mode="clip"))  # summed over entries
-            self._data[positions] += coefficient * blocks.reshape(-1, 9)
+            blocks *= -coefficient
+            self._subtract(positions, blocks.reshape(-1, 9))  # (unique positions)
 
     def finish(self) -> BlockMatrix:
         p = self.pattern
