@@ -115,18 +115,16 @@ class AnalyticPath(ColliderPath):
             if below.any():
                 n_w[below] *= -1.0
                 sides = -1.0 if below.all() else 0.0
-        axis = None
         along = np.nonzero(normal)[0]
+        axis = None
         if self.path.static and sides and len(along) == 1 and abs(normal[along[0]]) == 1.0:
             axis = (int(along[0]), float(sides * normal[along[0]]))
             p_w = xc.copy()  # the same values: the other columns move by d * 0
             p_w[:, axis[0]] -= d * axis[1]
         else:
             p_w = xc - d[:, None] * n_w
-        if self.path.static:
-            velocity = np.zeros_like(p_w)
-        else:
-            velocity = self.surface_velocity(self.to_local(p_w, s), s)
+        velocity = (np.zeros_like(p_w) if self.path.static else
+                    self.surface_velocity(self.to_local(p_w, s), s))
         return SurfacePoints(cand, p_w, n_w, velocity, d, axis)
 
     def features(self, s0: float, s1: float) -> Features:

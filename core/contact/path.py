@@ -115,9 +115,7 @@ class SurfacePoints:
     def take(self, rows: np.ndarray) -> SurfacePoints:
         """These points' rows ``rows`` (indices or a mask)."""
         rows = row_indices(rows)
-        return SurfacePoints(*(take(getattr(self, k), rows)
-                               for k in ("index", "point", "normal", "velocity", "gap")),
-                             self.axis)
+        return SurfacePoints(*(take(getattr(self, k), rows) for k in _SURFACE_ROWS), self.axis)
 
     @classmethod
     def joined(cls, parts: list[SurfacePoints]) -> SurfacePoints:
@@ -125,9 +123,11 @@ class SurfacePoints:
         if len(parts) == 1:
             return parts[0]
         axes = {p.axis for p in parts}
-        return cls(*(np.concatenate([getattr(p, k) for p in parts])
-                     for k in ("index", "point", "normal", "velocity", "gap")),
+        return cls(*(np.concatenate([getattr(p, k) for p in parts]) for k in _SURFACE_ROWS),
                    axes.pop() if len(axes) == 1 else None)
+
+
+_SURFACE_ROWS = ("index", "point", "normal", "velocity", "gap")  # SurfacePoints' row arrays
 
 
 class ColliderPath:
