@@ -192,6 +192,17 @@ class BakeJob(Resumable, Failures):
         return self.particles.alive if self.particles is not None else 0
 
     @property
+    def contents(self) -> str:
+        """What is being simulated, for progress lines: "12,000 particles, 40 rigid bodies"."""
+        parts = [f"{self.alive:,} particles"] if self.particles is not None else []
+        if self.rigid is not None:
+            count = len(self.rigid.objects)
+            parts.append(f"{count:,} rigid bod{'y' if count == 1 else 'ies'}")
+        if self.meshes:
+            parts.append(f"{len(self.meshes)} spring mesh{'' if len(self.meshes) == 1 else 'es'}")
+        return ", ".join(parts) or "nothing left to simulate"
+
+    @property
     def total_frames(self) -> int:
         return self.frame_end - self.frame_start
 

@@ -263,7 +263,7 @@ def _bake(scene, only, resume: bool = False) -> set:
             else:
                 _log(f'resuming frames {job.frame}-{job.frame_end} of scene "{scene.name}" '
                      f"(frames {job.frame_start}-{job.frame} were baked)")
-        _log(f"frame {job.frame}: {job.alive:,} particles")
+        _log(f"frame {job.frame}: {job.contents}")
 
     try:
         info, failed = bake.run(bpy.context, only, log_frame, resume)

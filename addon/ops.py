@@ -56,7 +56,7 @@ class PHYSANIM_OT_bake(bpy.types.Operator):
             wm.progress_update(job.frame - job.frame_start)
             if bpy.app.background:
                 print(f"PhysAnim: frame {job.frame}/{job.frame_end} "
-                      f"({job.alive:,} particles)", flush=True)
+                      f"({job.contents})", flush=True)
 
         try:
             if only is not None and not only:
@@ -110,7 +110,7 @@ class PHYSANIM_OT_bake(bpy.types.Operator):
             context.window_manager.progress_update(job.frame - job.frame_start)
             context.workspace.status_text_set(
                 f"PhysAnim: baking frame {job.frame}/{job.frame_end} — "
-                f"{job.alive:,} particles (Esc to stop; Resume goes on later)")
+                f"{job.contents} (Esc to stop; Resume goes on later)")
             if not done:
                 return {'RUNNING_MODAL'}
             info = job.finish(context)
