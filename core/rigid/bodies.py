@@ -21,12 +21,19 @@ class Posed:
 
     def __init__(self, paths: list[TransformPath], com: np.ndarray):
         self.paths, self.com = paths, com
+        # all still (a ground, a wall): one pose for the whole frame, no velocity
+        self._still = self._at(0.0) if all(p.static for p in paths) else None
 
     def __len__(self) -> int:
         return len(self.paths)
 
     def pose(self, s: float) -> tuple[np.ndarray, np.ndarray]:
         """(x (p, 3), q (p, 4)) at s."""
+        if self._still is not None:  # (copies: callers may write into them)
+            return self._still[0].copy(), self._still[1].copy()
+        return self._at(s)
+
+    def _at(self, s: float) -> tuple[np.ndarray, np.ndarray]:
         if not self.paths:
             return np.zeros((0, 3)), np.zeros((0, 4))
         m = np.stack([p.matrices(s) for p in self.paths])
@@ -37,6 +44,8 @@ class Posed:
 
     def velocity(self, s0: float, s1: float, h: float) -> tuple[np.ndarray, np.ndarray]:
         """Mean (v, w) over s0..s1, h [s] long: what takes the bodies from one pose to the next."""
+        if self._still is not None:
+            return np.zeros((len(self), 3)), np.zeros((len(self), 3))
         x0, q0 = self.pose(s0)
         x1, q1 = self.pose(s1)
         turn = quat.normalized(quat.multiply(q1, quat.conjugate(q0)))

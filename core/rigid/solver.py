@@ -352,8 +352,10 @@ class RigidBodySolver:
         re-derived at the new orientation (so torque-free motion keeps L exactly)."""
         d, m, h, b = step.awake, self.model, step.h, step.bodies
         b.x[d] += h * step.v[d]
-        L = dynamics.angular_momentum(b.q[d], m.body_inertia[d], step.w[d])
-        b.q[d] = dynamics.integrate_orientation(b.q[d], m.body_inv_inertia[d], L, h)
+        q0 = b.q[d]
+        r0 = quat.to_matrix(q0)
+        L = dynamics.angular_momentum(q0, m.body_inertia[d], step.w[d], r0)
+        b.q[d] = dynamics.integrate_orientation(q0, m.body_inv_inertia[d], L, h, r0)
         step.w[d] = dynamics.angular_velocity(b.q[d], m.body_inv_inertia[d], L)
 
     def _store(self, step: _FrameStep, last: bool) -> None:
