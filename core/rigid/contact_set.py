@@ -113,12 +113,16 @@ class ContactSet:
         width = max(p.valid.shape[1] for p in parts)
 
         def widened(x):
+            if x.shape[1] == width:
+                return x
             pad = [(0, 0), (0, width - x.shape[1])] + [(0, 0)] * (x.ndim - 2)
             return np.pad(x, pad)
 
         def square(p, x):  # a coupling or block: padded slots decoupled unit rows
             if x is None:
                 return np.full((len(p), width, width), np.nan)
+            if x.shape[1] == width:
+                return x
             out = np.zeros((len(p), width, width))
             out[:, :x.shape[1], :x.shape[2]] = x
             extra = np.arange(x.shape[1], width)
@@ -169,6 +173,8 @@ def _subsets_widened(part: ContactSet, width: int) -> np.ndarray:
     A subset's index keeps its meaning (bit i: slot i); subsets with padded slots are never
     used (a padded slot holds no point)."""
     w = subset_width(width)
+    if part.subsets is not None and part.subsets.shape[1:] == (1 << w, w, w):
+        return part.subsets
     out = np.full((len(part), 1 << w, w, w), np.nan)
     if part.subsets is not None:
         c, v = part.subsets.shape[1], part.subsets.shape[2]
