@@ -395,7 +395,8 @@ class BakeJob(Resumable, Failures):
     def _summary(self, emitters: int) -> str:
         took = time.perf_counter() - self.started
         stats = self.stats
-        parts = [f"{emitters} emitter(s)"]
+        # (emitters named only when the bake had some: "0 emitter(s)" says they failed)
+        parts = [f"{emitters} emitter(s)"] if self.roles.emitters else []
         if self.meshes:
             parts.append(f"{len(self.meshes)} spring mesh(es)")
         if self.rigid is not None:
