@@ -13,7 +13,11 @@ Per collider, in its local frame (a moving collider becomes a still one, as for 
    in proportion to their inverse mass and their weight in the nearest point (the impulse
    that moves the nearest point by exactly the shortfall); Gauss-Seidel passes over groups
    of pairs that share no moving point (:func:`..colouring.colour`) until every pair is
-   within TOLERANCE, then detect again (a moved face may meet another part of a feature);
+   within TOLERANCE, then detect again (a moved face may meet another part of a feature).
+   A face that went through a whole sphere in the sub-step (its centre now beyond the face)
+   is not pushed back across it, which would move its points further than the sphere is
+   wide and could sweep a neighbouring face through it: its points go back to where they
+   started in the collider's frame (as in 4), then detection runs again;
 3. respond: the nearest point's approach to the collider cancelled (a bounce of restitution
    times it when faster than the rest speed), Coulomb friction on its sliding, spread over
    the corners the same way;
@@ -87,9 +91,14 @@ def keep_off_features(paths: list[ColliderPath], faces: FaceSet, x0: np.ndarray,
             continue
         found_pairs, settled = [], True
         for _ in range(rounds):
-            pairs = _detect(path, features, faces, x0, x1, s0, s1)
+            through = []
+            pairs = _detect(path, features, faces, x0, x1, s0, s1, through=through)
             if pairs is None:
                 break
+            past = np.concatenate(through)
+            if past.any() and _home(path, pairs.vertex[past].ravel(), x0, x1, v, inv_mass, s0,
+                                    s1):
+                continue  # (and detect again: the points back home may uncover others)
             found_pairs.append(pairs)
             if not _separate(path, pairs, x1, inv_mass, s1):
                 break
@@ -117,13 +126,23 @@ def _fail_safe(path: ColliderPath, features: Features, faces: FaceSet, x0, x1, v
         if pairs is None:
             return
         _, _, rows = shares(pairs, inv_mass)
-        stuck = pairs.vertex[rows][pairs.depth[rows] < 0.0]
-        stuck = np.unique(stuck[inv_mass[stuck] > 0.0])
-        if not len(stuck):
+        if not _home(path, pairs.vertex[rows][pairs.depth[rows] < 0.0].ravel(), x0, x1, v,
+                     inv_mass, s0, s1):
             return
-        home = path.to_local(x0[stuck], s0)
-        x1[stuck] = path.to_world(home, np.ones_like(home), s1)[0]
-        v[stuck] = path.surface_velocity(home, s1)
+
+
+def _home(path: ColliderPath, points: np.ndarray, x0, x1, v, inv_mass, s0: float,
+          s1: float) -> bool:
+    """The moving ones of ``points`` back where they were at s0 in the collider's frame,
+    moving with it (x1 and v in place). Returns whether any moved."""
+    stuck = np.unique(points)
+    stuck = stuck[inv_mass[stuck] > 0.0]
+    if not len(stuck):
+        return False
+    home = path.to_local(x0[stuck], s0)
+    x1[stuck] = path.to_world(home, np.ones_like(home), s1)[0]
+    v[stuck] = path.surface_velocity(home, s1)
+    return True
 
 
 def resting_on_features(paths: list[ColliderPath], faces: FaceSet, x: np.ndarray,
@@ -157,8 +176,11 @@ def resting_on_features(paths: list[ColliderPath], faces: FaceSet, x: np.ndarray
 
 
 def _detect(path: ColliderPath, f: Features, faces: FaceSet, x0, x1, s0: float,
-            s1: float, reach: float = 0.0) -> PointPairs | None:
-    """Pairs apart by less than the gap (plus ``reach`` [m]) or crossed, in local units."""
+            s1: float, reach: float = 0.0, through: list | None = None) -> PointPairs | None:
+    """Pairs apart by less than the gap (plus ``reach`` [m]) or crossed, in local units.
+    ``through``: given a list, it receives per pair whether a round feature's centre ended
+    on the far side of a face (the face went through the whole sphere, not into it: pushing
+    it back out the near side would move its points further than the sphere is wide)."""
     l0, l1 = path.to_local(x0, s0), path.to_local(x1, s1)
     scale = float(path.per_metre.mean())
     gap = (path.offset + FACE_GAP) * scale
@@ -167,8 +189,10 @@ def _detect(path: ColliderPath, f: Features, faces: FaceSet, x0, x1, s0: float,
         return None
     vertex, weight, normal, anchor, depth = [], [], [], [], []
 
-    def keep(apart, ids, w, sep_normal, point):
+    def keep(apart, ids, w, sep_normal, point, past=None):
         hit = apart < near
+        if through is not None:
+            through.append(past[hit] if past is not None else np.zeros(int(hit.sum()), bool))
         vertex.append(ids[hit])
         weight.append(w[hit])
         normal.append(sep_normal[hit])
@@ -185,7 +209,8 @@ def _detect(path: ColliderPath, f: Features, faces: FaceSet, x0, x1, s0: float,
             sep = triangle_point(t0[i], t1[i], f.points0[j], f.points1[j])
             r = f.radius[j]
             point = f.points1[j] + r[:, None] * sep.normal
-            keep(sep.gap - r, faces.triangles[i], sep.weight, sep.normal, point)
+            keep(sep.gap - r, faces.triangles[i], sep.weight, sep.normal, point,
+                 (sep.gap < 0.0) & (r > 0.0))
     for ends0, ends1, radius, edges in (
             (f.segments0, f.segments1, np.zeros(len(f.segments0)), faces.edges),
             (np.repeat(f.points0[:, None], 2, 1), np.repeat(f.points1[:, None], 2, 1), f.radius,
