@@ -19,6 +19,8 @@ class AnalyticPath(ColliderPath):
         extent: (3,) the shape's extent in local units, thickness included (see below).
     """
 
+    reusable = True
+
     def __init__(self, frame: ColliderFrame, frame_dt: float):
         super().__init__(frame, frame_dt)
         margin = frame.thickness * self.per_metre

@@ -71,6 +71,16 @@ class ColliderFrame:
             raise ValueError(f"{owner}: vertices and triangles are for MESH colliders only "
                              f"(shape is {self.shape})")
 
+    def same_as(self, other: ColliderFrame) -> bool:
+        """Whether ``other`` describes the same collider in the same place: a still collider's
+        next frame interval, whose path can be the one already made."""
+        if other is self:
+            return True
+        if (self.name, self.shape, self.restitution, self.friction, self.thickness) != (
+                other.name, other.shape, other.restitution, other.friction, other.thickness):
+            return False
+        return all(_same_array(getattr(self, k), getattr(other, k)) for k in _ARRAYS)
+
     def _validate_mesh(self, owner: str) -> None:
         verts = []
         for key in ("vertices0", "vertices1"):
@@ -105,3 +115,12 @@ class ColliderFrame:
                              f"mesh has {len(verts[0])} vertices")
         t.setflags(write=False)
         object.__setattr__(self, "triangles", t)
+
+
+_ARRAYS = ("matrix0", "matrix1", "matrices", "vertices0", "vertices1", "triangles")
+
+
+def _same_array(a: np.ndarray | None, b: np.ndarray | None) -> bool:
+    if a is None or b is None:
+        return a is b
+    return a is b or (a.shape == b.shape and bool(np.array_equal(a, b)))

@@ -23,10 +23,14 @@ class ColliderPaths:
 
     def __init__(self):
         self.hierarchies = MeshHierarchies()
+        # by collider name: the last interval's frame, frame_dt and path of each kind whose
+        # paths hold nothing but their frame (a still ground gets one path for the whole run)
+        self._kept: dict[str, tuple[ColliderFrame, float, ColliderPath]] = {}
 
     def release(self) -> None:
         """Drop what is kept between frame intervals (a run calls this when it ends)."""
         self.hierarchies.clear()
+        self._kept.clear()
 
     def of(self, frames: Sequence[ColliderFrame], frame_dt: float) -> list[ColliderPath]:
         return [self.path(frame, frame_dt) for frame in frames]
@@ -36,4 +40,11 @@ class ColliderPaths:
         if kind is None:
             raise ValueError(f'collider "{frame.name}": no collider kind handles shape '
                              f"{frame.shape!r}")
-        return kind.build(frame, frame_dt, self)
+        if not kind.reusable:
+            return kind.build(frame, frame_dt, self)
+        kept = self._kept.get(frame.name)
+        if kept is not None and kept[1] == frame_dt and kept[0].same_as(frame):
+            return kept[2]
+        path = kind.build(frame, frame_dt, self)
+        self._kept[frame.name] = (frame, frame_dt, path)
+        return path

@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 
+from physanim.core import contact as coll
 from physanim.core.contact import ColliderFrame
 from physanim.core.particles import EmitterFrame, EmitterSettings, FrameInputs, ParticleSolver
 from physanim.core.contact import SKIN
@@ -160,6 +161,46 @@ def test_particle_rides_rising_platform():
             assert state.particle_v[0, 2] == pytest.approx(speed, abs=1e-9)
 
 
+
+def test_a_still_collider_keeps_one_path_until_it_changes():
+    # A still collider's next interval reuses its path; any change (a move, a property, the
+    # interval's length) makes a new one.
+    paths = coll.ColliderPaths()
+    still = ColliderFrame("Ground", "HALF_SPACE", np.eye(4), np.eye(4), restitution=0.3)
+    first = paths.path(still, DT)
+    again = ColliderFrame("Ground", "HALF_SPACE", np.eye(4), np.eye(4), restitution=0.3)
+    assert paths.path(again, DT) is first
+    moved = _translate(z=0.01)
+    for changed, dt in [(ColliderFrame("Ground", "HALF_SPACE", np.eye(4), moved, 0.3), DT),
+                        (ColliderFrame("Ground", "HALF_SPACE", moved, moved, 0.3), DT),
+                        (ColliderFrame("Ground", "HALF_SPACE", np.eye(4), np.eye(4), 0.4), DT),
+                        (ColliderFrame("Ground", "HALF_SPACE", np.eye(4), np.eye(4), 0.3,
+                                       thickness=0.01), DT),
+                        (ColliderFrame("Ground", "PLANE", np.eye(4), np.eye(4), 0.3), DT),
+                        (still, 0.5 * DT)]:
+        made = paths.path(changed, dt)
+        assert made is not first and made.frame is changed and made.frame_dt == dt
+        first = paths.path(still, DT)
+
+
+def test_particle_rides_a_platform_that_waits_rises_and_stops():
+    # Still for 6 frames (one path kept), rising at 1 m/s for 12, then still again: the
+    # particle rides it up, flies on when it stops (about 5 cm up and back) and rests on it.
+    model = _model(EmitterSettings("Pebble"))
+    state = model.state()
+    _place(state, [0.0, 0.0, 0.01], [0.0, 0.0, 0.0])
+    solver = ParticleSolver(model, "SYMPLECTIC_EULER", substeps=2)
+    height = [min(max(f - 6, 0), 12) * DT for f in range(41)]  # the platform at frame f
+    for f in range(40):
+        lift = ColliderFrame("Lift", "HALF_SPACE", _translate(z=height[f]),
+                             _translate(z=height[f + 1]), restitution=0.0, friction=0.5)
+        solver.advance(state, _inputs(f, [lift]))
+        gap = state.particle_x[0, 2] - height[f + 1]
+        assert gap >= 0.0, f"frame {f}: {gap} below the platform"
+        if 8 <= f < 18 or f >= 36:
+            assert gap <= 2e-3, f"frame {f}: {gap} above the platform"
+    assert abs(state.particle_v[0, 2]) < 1e-9
+
 # -- exact bounces on transformed shapes --------------------------------------------------------
 
 def _transformed_collider():
@@ -274,7 +315,6 @@ def test_respond_records_each_hit_for_the_spring_solver():
     collider's restitution and friction, the normal velocity change of its bounce, and a landing
     point SKIN above the surface where the ground has carried it at the sub-step's end; a
     particle that misses is not recorded."""
-    from physanim.core import contact as coll
 
     m0, m1 = np.eye(4), np.eye(4)
     m1[2, 3] = DT  # the ground rises 1 m/s
