@@ -196,10 +196,9 @@ class BakeJob(Resumable, Failures):
         """What is being simulated, for progress lines: "12,000 particles, 40 rigid bodies"."""
         parts = [f"{self.alive:,} particles"] if self.particles is not None else []
         if self.rigid is not None:
-            count = len(self.rigid.objects)
-            parts.append(f"{count:,} rigid bod{'y' if count == 1 else 'ies'}")
+            parts.append(_counted(len(self.rigid.objects), "rigid body", "rigid bodies"))
         if self.meshes:
-            parts.append(f"{len(self.meshes)} spring mesh{'' if len(self.meshes) == 1 else 'es'}")
+            parts.append(_counted(len(self.meshes), "spring mesh", "spring meshes"))
         return ", ".join(parts) or "nothing left to simulate"
 
     @property
@@ -398,10 +397,9 @@ class BakeJob(Resumable, Failures):
         # (emitters named only when the bake had some: "0 emitter(s)" says they failed)
         parts = [f"{emitters} emitter(s)"] if self.roles.emitters else []
         if self.meshes:
-            parts.append(f"{len(self.meshes)} spring mesh(es)")
+            parts.append(_counted(len(self.meshes), "spring mesh", "spring meshes"))
         if self.rigid is not None:
-            count = len(self.rigid.objects)
-            parts.append(f"{count} rigid bod{'y' if count == 1 else 'ies'}")
+            parts.append(_counted(len(self.rigid.objects), "rigid body", "rigid bodies"))
             if self.rigid.constraints:
                 parts.append(f"{len(self.rigid.constraints)} constraint(s)")
         if self.roles.followers:
@@ -486,3 +484,8 @@ def run(context, only: set[str] | None = None, on_frame=None,
     except BaseException:
         job.abort()
         raise
+
+
+def _counted(count: int, one: str, many: str) -> str:
+    """A count and its noun: "1 rigid body", "1,000 rigid bodies"."""
+    return f"{count:,} {one if count == 1 else many}"

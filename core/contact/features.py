@@ -78,12 +78,14 @@ class FaceSet:
 
 def keep_off_features(paths: list[ColliderPath], faces: FaceSet, x0: np.ndarray, x1: np.ndarray,
                       v: np.ndarray, inv_mass: np.ndarray, s0: float, s1: float,
-                      rest_speed: float, rounds: int = ROUNDS) -> Contacts:
+                      rest_speed: float, rounds: int = ROUNDS,
+                      near: NearPairs | None = None) -> Contacts:
     """Keep the colliders' features off ``faces`` over a sub-step: points x0 (at s0) -> x1 (at
     s1), (n, 3) [m], velocities v (n, 3) [m/s]; x1 and v are changed in place. Points of zero
     inverse mass (pinned) are never moved. Returns the touched points as contacts (one row per
     point and collider, ``collider`` its index in ``paths``). ``rounds``: detections at most
-    (an estimate with fewer skips the fail-safe)."""
+    (an estimate with fewer skips the fail-safe). ``near``: the sub-step's candidate pairs
+    (:class:`NearPairs`), given to every detection of the sub-step."""
     found = []
     for ci, path in enumerate(paths):
         features = path.features(s0, s1)
@@ -92,7 +94,7 @@ def keep_off_features(paths: list[ColliderPath], faces: FaceSet, x0: np.ndarray,
         found_pairs, settled = [], True
         for _ in range(rounds):
             through = []
-            pairs = _detect(path, features, faces, x0, x1, s0, s1, through=through)
+            pairs = _detect(path, features, faces, x0, x1, s0, s1, through=through, near=near)
             if pairs is None:
                 break
             past = np.concatenate(through)
@@ -108,7 +110,7 @@ def keep_off_features(paths: list[ColliderPath], faces: FaceSet, x0: np.ndarray,
             found.append(_respond(path, PointPairs.joined(found_pairs), v, inv_mass, s1,
                                   rest_speed, ci))
         if not settled and rounds == ROUNDS:
-            _fail_safe(path, features, faces, x0, x1, v, inv_mass, s0, s1)
+            _fail_safe(path, features, faces, x0, x1, v, inv_mass, s0, s1, near)
     out = Contacts.none()
     for c in found:
         out = out.merged(c)
@@ -116,13 +118,13 @@ def keep_off_features(paths: list[ColliderPath], faces: FaceSet, x0: np.ndarray,
 
 
 def _fail_safe(path: ColliderPath, features: Features, faces: FaceSet, x0, x1, v, inv_mass,
-               s0: float, s1: float) -> None:
+               s0: float, s1: float, near: NearPairs | None = None) -> None:
     """Points of pairs still crossed after the passes (rare: pushes that undo each other
     round after round) go back to where they were at the start in the collider's frame,
     moving with it — a state in which they did not cross it — and again for what that
     uncovers, so nothing ever ends a sub-step through a feature."""
     for _ in range(ROUNDS):
-        pairs = _detect(path, features, faces, x0, x1, s0, s1)
+        pairs = _detect(path, features, faces, x0, x1, s0, s1, near=near)
         if pairs is None:
             return
         _, _, rows = shares(pairs, inv_mass)
@@ -147,19 +149,19 @@ def _home(path: ColliderPath, points: np.ndarray, x0, x1, v, inv_mass, s0: float
 
 def resting_on_features(paths: list[ColliderPath], faces: FaceSet, x: np.ndarray,
                         v: np.ndarray, inv_mass: np.ndarray, s: float, rest_speed: float,
-                        skip: frozenset = frozenset()) -> Contacts:
+                        skip: frozenset = frozenset(), near: NearPairs | None = None) -> Contacts:
     """The points of faces and edges resting on the colliders' features at s (x (n, 3) [m],
     v (n, 3) [m/s]): pairs nearer than the gap plus CONTACT_DISTANCE whose nearest point does
     not leave faster than ``rest_speed``, as resting contacts of their points (the normal
     their pairs' weighted mean). A solve that holds them there does not pull the faces back
     onto the feature, which the separation after it would then have to undo. Colliders named
-    in ``skip`` give none."""
+    in ``skip`` give none. ``near``: as for :func:`keep_off_features`."""
     found = Contacts.none()
     for ci, path in enumerate(paths):
         features = path.features(s, s)
         if not len(features) or path.frame.name in skip:
             continue
-        pairs = _detect(path, features, faces, x, x, s, s, CONTACT_DISTANCE)
+        pairs = _detect(path, features, faces, x, x, s, s, CONTACT_DISTANCE, near=near)
         if pairs is None:
             continue
         share, _, rows = shares(pairs, inv_mass)
@@ -176,21 +178,23 @@ def resting_on_features(paths: list[ColliderPath], faces: FaceSet, x: np.ndarray
 
 
 def _detect(path: ColliderPath, f: Features, faces: FaceSet, x0, x1, s0: float,
-            s1: float, reach: float = 0.0, through: list | None = None) -> PointPairs | None:
+            s1: float, reach: float = 0.0, through: list | None = None,
+            near: NearPairs | None = None) -> PointPairs | None:
     """Pairs apart by less than the gap (plus ``reach`` [m]) or crossed, in local units.
     ``through``: given a list, it receives per pair whether a round feature's centre ended
     on the far side of a face (the face went through the whole sphere, not into it: pushing
-    it back out the near side would move its points further than the sphere is wide)."""
+    it back out the near side would move its points further than the sphere is wide).
+    ``near``: the sub-step's candidate pairs, kept between detections (the same result)."""
     l0, l1 = path.to_local(x0, s0), path.to_local(x1, s1)
     scale = float(path.per_metre.mean())
     gap = (path.offset + FACE_GAP) * scale
-    near = gap + reach * scale
-    if not _within_reach(f, l0, l1, near):
+    within = gap + reach * scale
+    if not _within_reach(f, l0, l1, within):
         return None
     vertex, weight, normal, anchor, depth = [], [], [], [], []
 
     def keep(apart, ids, w, sep_normal, point, past=None):
-        hit = apart < near
+        hit = apart < within
         if through is not None:
             through.append(past[hit] if past is not None else np.zeros(int(hit.sum()), bool))
         vertex.append(ids[hit])
@@ -199,42 +203,120 @@ def _detect(path: ColliderPath, f: Features, faces: FaceSet, x0, x1, s0: float,
         anchor.append(point[hit])
         depth.append(apart[hit])
 
-    if len(f.points0) and len(faces.triangles):
-        t0, t1 = l0[faces.triangles], l1[faces.triangles]
-        grow = (f.radius + near)[:, None]
-        i, j = box_pairs(np.minimum(t0.min(1), t1.min(1)), np.maximum(t0.max(1), t1.max(1)),
-                         np.minimum(f.points0, f.points1) - grow,
-                         np.maximum(f.points0, f.points1) + grow)
-        if len(i):
-            sep = triangle_point(t0[i], t1[i], f.points0[j], f.points1[j])
-            r = f.radius[j]
-            point = f.points1[j] + r[:, None] * sep.normal
-            keep(sep.gap - r, faces.triangles[i], sep.weight, sep.normal, point,
-                 (sep.gap < 0.0) & (r > 0.0))
-    for ends0, ends1, radius, edges in (
-            (f.segments0, f.segments1, np.zeros(len(f.segments0)), faces.edges),
+    # the box of each face and edge over the sub-step (from its points' boxes), and of each
+    # feature grown by its radius and the reach: (faces, corners and spheres), (edges,
+    # creases), (loose edges, spheres)
+    low, high = np.minimum(l0, l1), np.maximum(l0, l1)
+    grow = (f.radius + within)[:, None]
+    boxes = [(*_element_boxes(low, high, faces.triangles),
+              np.minimum(f.points0, f.points1) - grow, np.maximum(f.points0, f.points1) + grow)]
+    ends = ((f.segments0, f.segments1, np.zeros(len(f.segments0)), faces.edges),
             (np.repeat(f.points0[:, None], 2, 1), np.repeat(f.points1[:, None], 2, 1), f.radius,
-             faces.loose)):
-        if not (len(ends0) and len(edges)):
-            continue
-        e0, e1 = l0[edges], l1[edges]
-        grow = (radius + near)[:, None]
-        i, j = box_pairs(np.minimum(e0.min(1), e1.min(1)), np.maximum(e0.max(1), e1.max(1)),
-                         np.minimum(ends0.min(1), ends1.min(1)) - grow,
-                         np.maximum(ends0.max(1), ends1.max(1)) + grow)
+             faces.loose))
+    for ends0, ends1, radius, edges in ends:
+        grow = (radius + within)[:, None]
+        boxes.append((*_element_boxes(low, high, edges),
+                      np.minimum(np.minimum(ends0[:, 0], ends0[:, 1]),
+                                 np.minimum(ends1[:, 0], ends1[:, 1])) - grow,
+                      np.maximum(np.maximum(ends0[:, 0], ends0[:, 1]),
+                                 np.maximum(ends1[:, 0], ends1[:, 1])) + grow))
+    found = (near.pairs(path, f, faces, l0, l1, within, boxes) if near is not None else
+             [box_pairs(*b) for b in boxes])
+
+    i, j = found[0]
+    if len(i):
+        tri = faces.triangles[i]
+        sep = triangle_point(l0[tri], l1[tri], f.points0[j], f.points1[j])
+        r = f.radius[j]
+        point = f.points1[j] + r[:, None] * sep.normal
+        keep(sep.gap - r, tri, sep.weight, sep.normal, point, (sep.gap < 0.0) & (r > 0.0))
+    for (ends0, ends1, radius, edges), (i, j) in zip(ends, found[1:]):
         if not len(i):
             continue
-        sep = segment_segment(e0[i, 0], e0[i, 1], ends0[j, 0], ends0[j, 1],
-                              e1[i, 0], e1[i, 1], ends1[j, 0], ends1[j, 1])
+        a, b = edges[i, 0], edges[i, 1]
+        sep = segment_segment(l0[a], l0[b], ends0[j, 0], ends0[j, 1],
+                              l1[a], l1[b], ends1[j, 0], ends1[j, 1])
         r = radius[j]
         point = np.einsum("ck,ckj->cj", sep.other, ends1[j]) + r[:, None] * sep.normal
-        ids = np.concatenate([edges[i], edges[i, :1]], axis=1)
+        ids = np.stack([a, b, a], axis=1)
         w = np.concatenate([sep.weight, np.zeros((len(i), 1))], axis=1)
         keep(sep.gap - r, ids, w, sep.normal, point)
     if not vertex or not sum(len(a) for a in vertex):
         return None
     return PointPairs(np.concatenate(vertex), np.concatenate(weight), np.concatenate(normal),
                       np.concatenate(anchor), np.concatenate(depth), gap)
+
+
+class NearPairs:
+    """The candidate pairs of the colliders' features and a mesh's faces and edges, kept
+    through one sub-step (a Verlet list). A sub-step detects many times — resting faces, each
+    landing round's estimate, each separating round — with the faces and features barely
+    moved between them, and finding the pairs of 12,000 edge boxes and 1,500 crease boxes is
+    most of a detection. They are found once with every feature's box grown by a margin and
+    hold while the faces and features have moved (in the collider's frame, from where they
+    were then) by less than that margin, less any wider reach; each detection keeps those whose
+    boxes overlap now: exactly the pairs a fresh search gives, in the same order."""
+
+    DRIFT = 0.25  # the margin: this fraction of the mesh's mean edge length
+
+    def __init__(self):
+        self._kept: dict[int, _Kept] = {}
+
+    def pairs(self, path: ColliderPath, f: Features, faces: FaceSet, l0: np.ndarray,
+              l1: np.ndarray, within: float, boxes: list) -> list:
+        """:func:`box_pairs` of each of ``boxes`` (lo_a, hi_a, lo_b, hi_b) of a detection on
+        ``path`` with faces at l0 -> l1 (local) and features' boxes grown by ``within``."""
+        kept = self._kept.get(id(path))
+        if kept is None or not kept.holds(path, f, l0, l1, within):
+            edges = l0[faces.edges]
+            length = float(np.mean(norm_rows(edges[:, 1] - edges[:, 0]))) if len(edges) else 0.0
+            kept = _Kept(path, f, l0, l1, within, self.DRIFT * length, boxes)
+            self._kept[id(path)] = kept
+        return [_overlapping(i, j, *b) for (i, j), b in zip(kept.found, boxes)]
+
+
+class _Kept:
+    """One collider's candidate pairs (:class:`NearPairs`), with what they were found from."""
+
+    def __init__(self, path: ColliderPath, f: Features, l0, l1, within: float, margin: float,
+                 boxes: list):
+        self.path, self.l0, self.l1, self.cover = path, l0, l1, within + margin
+        self.start = (f.points0, f.segments0, f.radius)
+        self.end = (f.points1, f.segments1)
+        self.found = [box_pairs(lo_a, hi_a, lo_b - margin, hi_b + margin)
+                      for lo_a, hi_a, lo_b, hi_b in boxes]
+
+    def holds(self, path: ColliderPath, f: Features, l0, l1, within: float) -> bool:
+        if path is not self.path or not np.array_equal(l0, self.l0) or not all(
+                np.array_equal(a, b) for a, b in zip((f.points0, f.segments0, f.radius),
+                                                     self.start)):
+            return False
+        moved = _farthest(l1, self.l1) + max(_farthest(f.points1, self.end[0]),
+                                             _farthest(f.segments1, self.end[1]))
+        return moved + within <= self.cover
+
+
+def _element_boxes(low: np.ndarray, high: np.ndarray, ids: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Boxes (m, 3) of elements ``ids`` (m, k) of points whose own boxes are low, high (n, 3)."""
+    lo, hi = low[ids[:, 0]], high[ids[:, 0]]
+    for c in range(1, ids.shape[1]):
+        np.minimum(lo, low[ids[:, c]], out=lo)
+        np.maximum(hi, high[ids[:, c]], out=hi)
+    return lo, hi
+
+
+def _farthest(a: np.ndarray, b: np.ndarray) -> float:
+    """The largest coordinate difference of two equal-shaped arrays (0 for empty ones)."""
+    return float(np.abs(a - b).max(initial=0.0))
+
+
+def _overlapping(i, j, lo_a, hi_a, lo_b, hi_b) -> tuple[np.ndarray, np.ndarray]:
+    """The pairs (i, j) whose boxes overlap (closed): in :func:`box_pairs`'s order."""
+    if not len(i):
+        return i, j
+    ok = np.all((lo_a[i] <= hi_b[j]) & (lo_b[j] <= hi_a[i]), axis=1)
+    return i[ok], j[ok]
 
 
 def _within_reach(f: Features, l0: np.ndarray, l1: np.ndarray, near: float) -> bool:

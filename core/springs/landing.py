@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..contact import Contacts
-from ..contact.features import FaceSet, keep_off_features
+from ..contact.features import FaceSet, NearPairs, keep_off_features
 
 ESTIMATE_ROUNDS = 2  # detection rounds that estimate where the faces' vertices must land
 
@@ -38,13 +38,14 @@ def contacts(base: Contacts, hit: Contacts, x0: np.ndarray, h: float, free: np.n
 
 def off_features(paths: list, faces: FaceSet, x0: np.ndarray, x: np.ndarray, v: np.ndarray,
                  inv_mass: np.ndarray, s0: float, s1: float,
-                 rest_speed: float) -> tuple[Contacts, np.ndarray, np.ndarray]:
+                 rest_speed: float, near: NearPairs | None = None
+                 ) -> tuple[Contacts, np.ndarray, np.ndarray]:
     """Where keeping the colliders' features off the faces puts a step's vertices (x, v at
     its end; x0 at its start), as hits to land on, and that projection (positions,
     velocities)."""
     placed, pushed = x.copy(), v.copy()
     kept = keep_off_features(paths, faces, x0, placed, pushed, inv_mass, s0, s1, rest_speed,
-                             ESTIMATE_ROUNDS)
+                             ESTIMATE_ROUNDS, near)
     moved = np.nonzero(np.any(placed != x, axis=1))[0]
     moved = moved[np.isin(moved, kept.index)]
     rows = np.searchsorted(kept.index, moved)

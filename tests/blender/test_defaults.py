@@ -199,6 +199,7 @@ def test_spring_mesh_at_its_defaults_falls_lands_and_rests(physanim_ext, tmp_pat
     ob.physanim.spring_mesh.enabled = True
     _save(tmp_path)
     assert bpy.ops.physanim.bake() == {'FINISHED'}
+    assert scene.physanim.bake_info.startswith("baked 1 spring mesh, frames")  # no emitters
     x = _pc2(physanim_ext, ob)
     assert x.shape[0] == scene.physanim.frame_end - scene.physanim.frame_start + 1
     assert np.isfinite(x).all()

@@ -204,3 +204,40 @@ def test_a_coarse_plane_dropped_over_a_box_or_plane_collider_edge_never_has_it_i
         assert _overlaps(state.x, tris, verts, vtris) == 0, f"frame {frame}"
         caught |= bool(state.x[:, 2].min() < TOP - 0.3 and state.x[:, 2].max() > TOP)
     assert caught  # it hung over the edge at some frame, its low side well below the top
+
+
+@pytest.mark.parametrize("collider", ["sphere", "cone", "rod"])
+def test_detections_through_kept_candidate_pairs_equal_fresh_ones(collider):
+    # A sub-step's detections share candidate pairs found once with a margin (NearPairs):
+    # every detection gives exactly what a fresh search gives, while the pairs are kept
+    # (small moves), found again (a move past the margin) or read with a wider reach.
+    from physanim.core.contact import ColliderPaths
+    from physanim.core.contact.features import FaceSet, NearPairs, _detect
+
+    rng = np.random.default_rng(3)
+    x, edges, tris = _sheet(11)
+    x[:, 2] = TOP + 0.002 + 0.01 * rng.random(len(x))  # lying on the collider's top
+    faces = FaceSet.of(tris, edges)
+    path = ColliderPaths().path(_collider(collider), DT)
+    features = path.features(0.0, 0.5)
+    near = NearPairs()
+
+    def both(x1, reach=0.0):
+        fresh = _detect(path, features, faces, x, x1, 0.0, 0.5, reach)
+        kept = _detect(path, features, faces, x, x1, 0.0, 0.5, reach, near=near)
+        assert (fresh is None) == (kept is None)
+        if fresh is not None:
+            assert len(fresh.vertex) > 0
+            for a, b in zip(fresh, kept):
+                np.testing.assert_array_equal(a, b)
+        return near._kept[id(path)] if near._kept else None
+
+    down = x - (0.0, 0.0, 0.02)  # into the collider's top
+    first = both(down)
+    assert first is not None
+    for _ in range(3):  # small moves: the same kept pairs
+        assert both(down + rng.normal(0.0, 1e-4, x.shape)) is first
+    assert both(down, reach=0.5 * NearPairs.DRIFT / 11) is first  # a reach within the margin
+    moved = both(down + (0.05, 0.0, 0.0))  # past the margin: found again
+    assert moved is not first
+    assert both(down + (0.05, 0.0, 0.0), reach=0.2) is not moved  # a reach past it
