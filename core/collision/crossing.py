@@ -249,6 +249,67 @@ def box_pairs(lo_a: np.ndarray, hi_a: np.ndarray, lo_b: np.ndarray,
                          cell_hi.max(axis=0) + 1)
 
 
+def element_boxes(low: np.ndarray, high: np.ndarray, ids: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Boxes (m, 3) of elements ``ids`` (m, k) — triangles, edges — of points whose own boxes
+    are low, high (n, 3): k gathers, not a reduction over an (m, k, 3) copy."""
+    lo, hi = low[ids[:, 0]], high[ids[:, 0]]
+    for c in range(1, ids.shape[1]):
+        np.minimum(lo, low[ids[:, c]], out=lo)
+        np.maximum(hi, high[ids[:, c]], out=hi)
+    return lo, hi
+
+
+class KeptPairs:
+    """Box pairs kept between searches (a Verlet list): a search from boxes that moved little
+    since the last one reads the pairs it found then instead of searching again.
+
+    The pairs are found for the boxes grown by ``margin``; they hold every overlapping pair of
+    later boxes that each still lie within their grown box, and a later search keeps those
+    overlapping now: exactly what a fresh search gives, in the same order. Boxes past their
+    grown ones, or another count of them, search again. Nothing is kept when pickled (a
+    resumed bake searches afresh).
+
+    Args:
+        find: the search, ``find(lo_a, hi_a, lo_b, hi_b) -> (i, j)`` (default
+            :func:`box_pairs`), or, for ``within=True``, ``find(lo, hi) -> (i, j)``: the pairs
+            among one set of boxes.
+    """
+
+    def __init__(self, find=None, within: bool = False):
+        self.find = box_pairs if find is None else find
+        self.within = within
+        self._grown: tuple[np.ndarray, ...] | None = None
+        self._pairs: tuple[np.ndarray, np.ndarray] | None = None
+
+    def __getstate__(self):
+        return {"find": self.find, "within": self.within, "_grown": None, "_pairs": None}
+
+    def pairs(self, margin: float, lo_a: np.ndarray, hi_a: np.ndarray,
+              lo_b: np.ndarray | None = None, hi_b: np.ndarray | None = None
+              ) -> tuple[np.ndarray, np.ndarray]:
+        """The overlapping pairs (i into A, j into B; within one set: i < j) of these boxes,
+        (n, 3) each; B is A for a search within one set."""
+        boxes = (lo_a, hi_a) if self.within else (lo_a, hi_a, lo_b, hi_b)
+        if not self._holds(boxes):
+            self._grown = tuple(b - margin if k % 2 == 0 else b + margin
+                                for k, b in enumerate(boxes))
+            self._pairs = self.find(*self._grown)
+        i, j = self._pairs
+        if not len(i):
+            return i, j
+        lo_b, hi_b = boxes[-2:]
+        ok = np.all((lo_a[i] <= hi_b[j]) & (lo_b[j] <= hi_a[i]), axis=1)
+        return i[ok], j[ok]
+
+    def _holds(self, boxes: tuple[np.ndarray, ...]) -> bool:
+        grown = self._grown
+        if grown is None or any(b.shape != g.shape for b, g in zip(boxes, grown)):
+            return False
+        return all(bool(np.all(b >= g) if k % 2 == 0 else np.all(b <= g))
+                   for k, (b, g) in enumerate(zip(boxes, grown)))
+
+
 def _across_cells(lo, hi, count_a: int, cell_lo, extent, dims) -> tuple[np.ndarray, np.ndarray]:
     """Box pairs across the sets A (the first ``count_a`` boxes of lo, hi) and B (the rest)
     through one uniform grid of B's boxes, looked up by A's: no pair within a set is ever

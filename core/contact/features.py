@@ -33,7 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..collision.crossing import box_pairs, segment_segment, triangle_point
+from ..collision.crossing import (KeptPairs, box_pairs, element_boxes, segment_segment,
+                                  triangle_point)
 from ..transforms import dot_rows, norm_rows
 from .contacts import Contacts
 from .pair_solve import PointPairs, respond, separate, shares
@@ -84,8 +85,8 @@ def keep_off_features(paths: list[ColliderPath], faces: FaceSet, x0: np.ndarray,
     s1), (n, 3) [m], velocities v (n, 3) [m/s]; x1 and v are changed in place. Points of zero
     inverse mass (pinned) are never moved. Returns the touched points as contacts (one row per
     point and collider, ``collider`` its index in ``paths``). ``rounds``: detections at most
-    (an estimate with fewer skips the fail-safe). ``near``: the sub-step's candidate pairs
-    (:class:`NearPairs`), given to every detection of the sub-step."""
+    (an estimate with fewer skips the fail-safe). ``near``: the mesh's candidate pairs kept
+    between detections (:class:`NearPairs`)."""
     found = []
     for ci, path in enumerate(paths):
         features = path.features(s0, s1)
@@ -184,7 +185,7 @@ def _detect(path: ColliderPath, f: Features, faces: FaceSet, x0, x1, s0: float,
     ``through``: given a list, it receives per pair whether a round feature's centre ended
     on the far side of a face (the face went through the whole sphere, not into it: pushing
     it back out the near side would move its points further than the sphere is wide).
-    ``near``: the sub-step's candidate pairs, kept between detections (the same result)."""
+    ``near``: the mesh's candidate pairs, kept between detections (the same result)."""
     l0, l1 = path.to_local(x0, s0), path.to_local(x1, s1)
     scale = float(path.per_metre.mean())
     gap = (path.offset + FACE_GAP) * scale
@@ -208,19 +209,19 @@ def _detect(path: ColliderPath, f: Features, faces: FaceSet, x0, x1, s0: float,
     # creases), (loose edges, spheres)
     low, high = np.minimum(l0, l1), np.maximum(l0, l1)
     grow = (f.radius + within)[:, None]
-    boxes = [(*_element_boxes(low, high, faces.triangles),
+    boxes = [(*element_boxes(low, high, faces.triangles),
               np.minimum(f.points0, f.points1) - grow, np.maximum(f.points0, f.points1) + grow)]
     ends = ((f.segments0, f.segments1, np.zeros(len(f.segments0)), faces.edges),
             (np.repeat(f.points0[:, None], 2, 1), np.repeat(f.points1[:, None], 2, 1), f.radius,
              faces.loose))
     for ends0, ends1, radius, edges in ends:
         grow = (radius + within)[:, None]
-        boxes.append((*_element_boxes(low, high, edges),
+        boxes.append((*element_boxes(low, high, edges),
                       np.minimum(np.minimum(ends0[:, 0], ends0[:, 1]),
                                  np.minimum(ends1[:, 0], ends1[:, 1])) - grow,
                       np.maximum(np.maximum(ends0[:, 0], ends0[:, 1]),
                                  np.maximum(ends1[:, 0], ends1[:, 1])) + grow))
-    found = (near.pairs(path, f, faces, l0, l1, within, boxes) if near is not None else
+    found = (near.pairs(path, faces, x0, boxes) if near is not None else
              [box_pairs(*b) for b in boxes])
 
     i, j = found[0]
@@ -248,75 +249,28 @@ def _detect(path: ColliderPath, f: Features, faces: FaceSet, x0, x1, s0: float,
 
 
 class NearPairs:
-    """The candidate pairs of the colliders' features and a mesh's faces and edges, kept
-    through one sub-step (a Verlet list). A sub-step detects many times — resting faces, each
-    landing round's estimate, each separating round — with the faces and features barely
-    moved between them, and finding the pairs of 12,000 edge boxes and 1,500 crease boxes is
-    most of a detection. They are found once with every feature's box grown by a margin and
-    hold while the faces and features have moved (in the collider's frame, from where they
-    were then) by less than that margin, less any wider reach; each detection keeps those whose
-    boxes overlap now: exactly the pairs a fresh search gives, in the same order."""
+    """The candidate pairs of the colliders' features and a mesh's faces and edges, kept between
+    detections (:class:`~..collision.crossing.KeptPairs`, per collider and kind of pair). A
+    sub-step detects many times — resting faces, each landing round's estimate, each
+    separating round — with the faces and features barely moved between them, as between the
+    sub-steps of a mesh at rest; finding the pairs of 12,000 edge boxes and 1,500 crease boxes
+    is most of a detection. The result is exactly a fresh search's. One per mesh and run."""
 
-    DRIFT = 0.25  # the margin: this fraction of the mesh's mean edge length
+    DRIFT = 0.25  # the boxes' margin: this fraction of the mesh's mean edge length
 
     def __init__(self):
-        self._kept: dict[int, _Kept] = {}
+        self._kept: dict[tuple[str, int], KeptPairs] = {}
+        self._edge: float | None = None  # the mesh's mean edge length [m]
 
-    def pairs(self, path: ColliderPath, f: Features, faces: FaceSet, l0: np.ndarray,
-              l1: np.ndarray, within: float, boxes: list) -> list:
+    def pairs(self, path: ColliderPath, faces: FaceSet, x0: np.ndarray, boxes: list) -> list:
         """:func:`box_pairs` of each of ``boxes`` (lo_a, hi_a, lo_b, hi_b) of a detection on
-        ``path`` with faces at l0 -> l1 (local) and features' boxes grown by ``within``."""
-        kept = self._kept.get(id(path))
-        if kept is None or not kept.holds(path, f, l0, l1, within):
-            edges = l0[faces.edges]
-            length = float(np.mean(norm_rows(edges[:, 1] - edges[:, 0]))) if len(edges) else 0.0
-            kept = _Kept(path, f, l0, l1, within, self.DRIFT * length, boxes)
-            self._kept[id(path)] = kept
-        return [_overlapping(i, j, *b) for (i, j), b in zip(kept.found, boxes)]
-
-
-class _Kept:
-    """One collider's candidate pairs (:class:`NearPairs`), with what they were found from."""
-
-    def __init__(self, path: ColliderPath, f: Features, l0, l1, within: float, margin: float,
-                 boxes: list):
-        self.path, self.l0, self.l1, self.cover = path, l0, l1, within + margin
-        self.start = (f.points0, f.segments0, f.radius)
-        self.end = (f.points1, f.segments1)
-        self.found = [box_pairs(lo_a, hi_a, lo_b - margin, hi_b + margin)
-                      for lo_a, hi_a, lo_b, hi_b in boxes]
-
-    def holds(self, path: ColliderPath, f: Features, l0, l1, within: float) -> bool:
-        if path is not self.path or not np.array_equal(l0, self.l0) or not all(
-                np.array_equal(a, b) for a, b in zip((f.points0, f.segments0, f.radius),
-                                                     self.start)):
-            return False
-        moved = _farthest(l1, self.l1) + max(_farthest(f.points1, self.end[0]),
-                                             _farthest(f.segments1, self.end[1]))
-        return moved + within <= self.cover
-
-
-def _element_boxes(low: np.ndarray, high: np.ndarray, ids: np.ndarray
-                   ) -> tuple[np.ndarray, np.ndarray]:
-    """Boxes (m, 3) of elements ``ids`` (m, k) of points whose own boxes are low, high (n, 3)."""
-    lo, hi = low[ids[:, 0]], high[ids[:, 0]]
-    for c in range(1, ids.shape[1]):
-        np.minimum(lo, low[ids[:, c]], out=lo)
-        np.maximum(hi, high[ids[:, c]], out=hi)
-    return lo, hi
-
-
-def _farthest(a: np.ndarray, b: np.ndarray) -> float:
-    """The largest coordinate difference of two equal-shaped arrays (0 for empty ones)."""
-    return float(np.abs(a - b).max(initial=0.0))
-
-
-def _overlapping(i, j, lo_a, hi_a, lo_b, hi_b) -> tuple[np.ndarray, np.ndarray]:
-    """The pairs (i, j) whose boxes overlap (closed): in :func:`box_pairs`'s order."""
-    if not len(i):
-        return i, j
-    ok = np.all((lo_a[i] <= hi_b[j]) & (lo_b[j] <= hi_a[i]), axis=1)
-    return i[ok], j[ok]
+        ``path`` (in its local units; the mesh's points x0 (n, 3) [m] at the start)."""
+        if self._edge is None:
+            e = faces.edges
+            self._edge = float(np.mean(norm_rows(x0[e[:, 1]] - x0[e[:, 0]]))) if len(e) else 0.0
+        margin = self.DRIFT * self._edge * float(path.per_metre.mean())
+        return [self._kept.setdefault((path.frame.name, k), KeptPairs()).pairs(margin, *b)
+                for k, b in enumerate(boxes)]
 
 
 def _within_reach(f: Features, l0: np.ndarray, l1: np.ndarray, near: float) -> bool:

@@ -5,8 +5,11 @@ vertices are kept off its triangles and its edges off its edges (pairs that shar
 Per sub-step, after the step and the colliders (positions x0 -> x1):
 
 1. detect: vertex-triangle and edge-edge pairs whose boxes over the sub-step overlap (the
-   library's uniform grid: across the triangles and the points, within the edges), then those nearer than the distance at the end or that crossed
-   during the step (continuous tests, :mod:`..collision.crossing`: the side each came from);
+   library's uniform grid: across the triangles and the points, within the edges; the pairs
+   are kept between detections while the boxes move less than a margin,
+   :class:`~..collision.crossing.KeptPairs`), then those nearer than the distance at the end
+   or that crossed during the step (continuous tests, :mod:`..collision.crossing`: the side
+   each came from);
 2. separate: each pair's weighted points pushed apart along its normal, in proportion to
    their inverse masses (:mod:`..contact.pair_solve`: Gauss-Seidel over coloured pairs, or
    relaxed Jacobi passes where a heap crowds dozens of pairs on a point), then detect again,
@@ -22,11 +25,13 @@ from __future__ import annotations
 import numpy as np
 
 from ..collision.broadphase_grid import UniformGrid
-from ..collision.crossing import box_pairs, segment_segment, triangle_point
+from ..collision.crossing import KeptPairs, element_boxes, segment_segment, triangle_point
 from ..contact.features import FaceSet
 from ..contact.pair_solve import PointPairs, respond, separate, shares
+from ..transforms import norm_rows
 
 ROUNDS = 8  # detections per sub-step
+DRIFT = 0.25  # candidate pairs are kept while boxes move less than this many mean edge lengths
 GROUNDED_SHARE = 0.01  # of the inverse mass a point touching a collider keeps here
 
 
@@ -46,6 +51,10 @@ class SelfCollision:
         self.inv_mass = inv_mass
         self.distance = float(distance)
         self.friction = float(friction)
+        # the candidate pairs, kept between detections (the same pairs as a fresh search)
+        self._faces_points = KeptPairs()
+        self._edges = KeptPairs(_pairs_within, within=True)
+        self._margin: float | None = None
 
     def keep_apart(self, x0: np.ndarray, x1: np.ndarray, v: np.ndarray, rest_speed: float,
                    grounded: np.ndarray | None = None) -> int:
@@ -106,9 +115,12 @@ class SelfCollision:
         d = self.distance
         tris, edges = self.faces.triangles, self.faces.edges
         lo, hi = np.minimum(x0, x1) - 0.5 * d, np.maximum(x0, x1) + 0.5 * d
+        if self._margin is None:
+            length = norm_rows(x0[edges[:, 1]] - x0[edges[:, 0]]) if len(edges) else np.zeros(1)
+            self._margin = DRIFT * float(np.mean(length))
         vertex, weight, normal, depth = [], [], [], []
         if len(tris):
-            i, j = box_pairs(lo[tris].min(axis=1), hi[tris].max(axis=1), lo, hi)
+            i, j = self._faces_points.pairs(self._margin, *element_boxes(lo, hi, tris), lo, hi)
             keep = ~np.any(tris[i] == j[:, None], axis=1)
             i, j = i[keep], j[keep]
             if len(i):
@@ -119,7 +131,7 @@ class SelfCollision:
                 normal.append(sep.normal[near])
                 depth.append(sep.gap[near])
         if len(edges):
-            i, j = _pairs_within(lo[edges].min(axis=1), hi[edges].max(axis=1))
+            i, j = self._edges.pairs(self._margin, *element_boxes(lo, hi, edges))
             a, b = edges[i], edges[j]
             keep = ~np.any(a[:, :, None] == b[:, None, :], axis=(1, 2))
             a, b = a[keep], b[keep]

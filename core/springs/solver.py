@@ -171,6 +171,7 @@ class SpringMeshSolver:
         edges = model.spring_family == 0
         self.faces = FaceSet.of(model.triangles, np.stack([model.spring_i[edges],
                                                            model.spring_j[edges]], axis=1))
+        self._near = NearPairs()  # the colliders' features' candidate pairs, kept between detections
         self.itself = SelfCollision(self.faces, model.vertex_mass, self._inv_mass,
                                     s.self_distance, s.self_friction) \
             if s.self_collision else None
@@ -232,7 +233,7 @@ class SpringMeshSolver:
             attach.hold(self.model, state, step.held, s0, s1, h, pin_x1, pin_v)
         start = state.x.copy() if (step.paths and self.faces) or self.itself else None
         contact = resting_contacts(step.paths, state.x, state.v, s0, step.rest_speed)
-        near = NearPairs()  # the features' candidate pairs, for every detection of the sub-step
+        near = self._near
         if step.paths and self.faces:  # faces resting on features: their points rest too (on a body
             # stepped first, the coupling takes them as pressed on it: not through a feature)
             contact = resting_on_features(step.paths, self.faces, state.x, state.v,
@@ -387,7 +388,7 @@ class SpringMeshSolver:
         LANDING_ROUNDS times). Returns (x, v, collisions, the contacts of the step and of each
         round's hits, the impulses from outside the mesh's forces (implicit only, else None:
         :meth:`_outside`)) after response, or None when there are no colliders (the state
-        holds the integrated step). ``near``: the sub-step's feature pairs (:class:`NearPairs`)."""
+        holds the integrated step). ``near``: the features' candidate pairs (:class:`NearPairs`)."""
         state, h, paths = step.state, step.h, step.paths
         implicit = isinstance(self.integrator, BaraffWitkin)
 

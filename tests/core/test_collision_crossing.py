@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from physanim.core.collision.crossing import (box_pairs, closest_on_segments, segment_segment,
-                                              triangle_point)
+from physanim.core.collision.crossing import (KeptPairs, box_pairs, closest_on_segments,
+                                              segment_segment, triangle_point)
 from physanim.core.collision.mesh import TriangleMesh
 from physanim.core.collision.shapes import box_mesh, cylinder_mesh
 from physanim.core.colouring import colour
@@ -183,3 +183,43 @@ def test_box_pairs_across_two_sets_are_every_overlapping_pair(case):
     expected_i, expected_j = np.nonzero(every)
     assert len(expected_i) > 0 or case == "hashed"
     assert np.array_equal(i, expected_i) and np.array_equal(j, expected_j)
+
+
+@pytest.mark.parametrize("within", [False, True])
+def test_kept_pairs_equal_a_fresh_search_as_the_boxes_move(within):
+    # KeptPairs gives exactly box_pairs's pairs (or, within one set, the grid's), in its
+    # order, whether it reads the pairs kept from an earlier search (boxes moved less than the
+    # margin) or searches again (moved further, or another count of boxes); pickled, it keeps
+    # nothing.
+    import pickle
+
+    from physanim.core.springs.self_collision import _pairs_within
+
+    rng = np.random.default_rng(11)
+    centres = rng.uniform(0.0, 1.0, (600, 3))
+    half = rng.uniform(0.005, 0.03, (600, 3))
+    kept = KeptPairs(_pairs_within, within=True) if within else KeptPairs()
+    margin, searches = 0.01, []
+
+    def check(c):
+        lo, hi = c - half[:len(c)], c + half[:len(c)]
+        if within:
+            got, want = kept.pairs(margin, lo, hi), _pairs_within(lo, hi)
+        else:
+            got = kept.pairs(margin, lo[:200], hi[:200], lo[200:], hi[200:])
+            want = box_pairs(lo[:200], hi[:200], lo[200:], hi[200:])
+        assert len(want[0]) > 20
+        np.testing.assert_array_equal(got[0], want[0])
+        np.testing.assert_array_equal(got[1], want[1])
+        searches.append(kept._grown)
+
+    check(centres)
+    for _ in range(5):  # each box within the margin of where it was searched
+        check(centres + rng.uniform(-0.9 * margin, 0.9 * margin, centres.shape))
+    assert all(g is searches[0] for g in searches)
+    check(centres + (0.02, 0.0, 0.0))  # further: searched again
+    assert searches[-1] is not searches[0]
+    check(centres[:500])  # fewer boxes: searched again
+    assert searches[-1] is not searches[-2]
+    restored = pickle.loads(pickle.dumps(kept))
+    assert restored._grown is None and restored._pairs is None and restored.within == within
