@@ -296,11 +296,15 @@ class KeptPairs:
                                 for k, b in enumerate(boxes))
             self._pairs = self.find(*self._grown)
         i, j = self._pairs
-        if not len(i):
-            return i, j
         lo_b, hi_b = boxes[-2:]
-        ok = np.all((lo_a[i] <= hi_b[j]) & (lo_b[j] <= hi_a[i]), axis=1)
-        return i[ok], j[ok]
+        for a in range(3):  # axis by axis, the pairs compacted after each (1-D gathers)
+            if not len(i):
+                break
+            ok = lo_a[:, a][i] <= hi_b[:, a][j]
+            ok &= lo_b[:, a][j] <= hi_a[:, a][i]
+            keep = np.flatnonzero(ok)
+            i, j = i[keep], j[keep]
+        return i, j
 
     def _holds(self, boxes: tuple[np.ndarray, ...]) -> bool:
         grown = self._grown
