@@ -20,7 +20,8 @@ same seconds):
 Each run is checked afterwards (particle count, nobody below the ground, particles moved).
 
 Part 2, "steady" — core solver only: N particles pre-filled high above a ground with long lives,
-one warm-up frame, then ``--steady-frames`` frames of one sub-step each, per integrator.
+one warm-up frame, then ``--steady-frames`` frames of one sub-step each, per integrator, one
+after another as a bake runs them (garbage collected once before them, not before each).
 
 Part 3, "memory" (``--parts memory``; not run by default: it writes gigabytes) — the peak memory
 of a ``--memory-count`` particle bake at the defaults for each of ``--memory-frames`` frame
@@ -36,6 +37,7 @@ import gc
 import importlib
 import sys
 import tempfile
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -72,9 +74,12 @@ def steady(n: int, integrator: str, frames: int) -> dict:
     collisions = 0
     with importlib.import_module("physanim.addon.allocator").reuse():  # as a bake runs
         solver.advance(state, inputs(0))  # warm-up (allocations, caches)
+        gc.collect()  # once, before the frames: a bake's frames follow each other (a full
+        # collection before each would evict the caches and time a cold start every frame)
         for frame in range(1, frames + 1):
-            report, wall, _ = common.timed(lambda f=frame: solver.advance(state, inputs(f)))
-            times.append(wall)
+            start = time.perf_counter()
+            report = solver.advance(state, inputs(frame))
+            times.append(time.perf_counter() - start)
             collisions += report.collisions
     times = np.array(times)
     return {"n": n, "integrator": integrator, "frame_ms": 1e3 * times.mean(),
@@ -122,7 +127,7 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--emit-frames", type=int,
                     help="frames over which all particles are born (default min(100, 2/5 frames))")
     ap.add_argument("--sizes", help="steady-state particle counts (default 10000,100000,1000000)")
-    ap.add_argument("--steady-frames", type=int, help="timed frames per steady run (default 5)")
+    ap.add_argument("--steady-frames", type=int, help="timed frames per steady run (default 20)")
     ap.add_argument("--integrators", default="SYMPLECTIC_EULER,RK4")
     ap.add_argument("--blender-method", choices=("frames", "bake"), default="frames",
                     help="frame_set(1..F) from an empty cache (default) or ptcache.bake")
@@ -156,7 +161,7 @@ def parse_args(argv: list[str]) -> Options:
         scene=particles_compare.Scene(count, frames, min(emit, frames - 1)),
         sizes=tuple(common.int_list(args.sizes or ("10000,100000" if args.quick else
                                                    "10000,100000,1000000"))),
-        steady_frames=args.steady_frames or (3 if args.quick else 5),
+        steady_frames=args.steady_frames or (5 if args.quick else 20),
         integrators=tuple(i.strip() for i in args.integrators.split(",")),
         parts=frozenset(parts), blender_method=args.blender_method, no_blender=args.no_blender,
         top=args.top, memory_count=args.memory_count,
