@@ -45,6 +45,7 @@ from .path import CONTACT_DISTANCE, SKIN, ColliderPath, Features
 # never push against each other
 FACE_GAP = 0.5 * SKIN
 ROUNDS = 8  # detections per sub-step: a moved face may come near another part of a feature
+DRIFT = 0.25  # kept candidate pairs' margin: this fraction of the mesh's mean edge length
 
 
 @dataclass(frozen=True)
@@ -75,6 +76,12 @@ class FaceSet:
 
     def __bool__(self) -> bool:
         return bool(len(self.triangles) or len(self.edges))
+
+    def margin(self, x: np.ndarray) -> float:
+        """[m] the margin candidate pairs are kept with (:class:`~..collision.crossing.KeptPairs`)
+        for points x (n, 3): DRIFT times the mean edge length (0 without edges)."""
+        e = self.edges
+        return DRIFT * float(np.mean(norm_rows(x[e[:, 1]] - x[e[:, 0]]))) if len(e) else 0.0
 
 
 def keep_off_features(paths: list[ColliderPath], faces: FaceSet, x0: np.ndarray, x1: np.ndarray,
@@ -256,19 +263,16 @@ class NearPairs:
     sub-steps of a mesh at rest; finding the pairs of 12,000 edge boxes and 1,500 crease boxes
     is most of a detection. The result is exactly a fresh search's. One per mesh and run."""
 
-    DRIFT = 0.25  # the boxes' margin: this fraction of the mesh's mean edge length
-
     def __init__(self):
         self._kept: dict[tuple[str, int], KeptPairs] = {}
-        self._edge: float | None = None  # the mesh's mean edge length [m]
+        self._margin: float | None = None  # [m] (:meth:`FaceSet.margin`)
 
     def pairs(self, path: ColliderPath, faces: FaceSet, x0: np.ndarray, boxes: list) -> list:
         """:func:`box_pairs` of each of ``boxes`` (lo_a, hi_a, lo_b, hi_b) of a detection on
         ``path`` (in its local units; the mesh's points x0 (n, 3) [m] at the start)."""
-        if self._edge is None:
-            e = faces.edges
-            self._edge = float(np.mean(norm_rows(x0[e[:, 1]] - x0[e[:, 0]]))) if len(e) else 0.0
-        margin = self.DRIFT * self._edge * float(path.per_metre.mean())
+        if self._margin is None:
+            self._margin = faces.margin(x0)
+        margin = self._margin * float(path.per_metre.mean())
         return [self._kept.setdefault((path.frame.name, k), KeptPairs()).pairs(margin, *b)
                 for k, b in enumerate(boxes)]
 

@@ -28,10 +28,8 @@ from ..collision.broadphase_grid import UniformGrid
 from ..collision.crossing import KeptPairs, element_boxes, segment_segment, triangle_point
 from ..contact.features import FaceSet
 from ..contact.pair_solve import PointPairs, respond, separate, shares
-from ..transforms import norm_rows
 
 ROUNDS = 8  # detections per sub-step
-DRIFT = 0.25  # candidate pairs are kept while boxes move less than this many mean edge lengths
 GROUNDED_SHARE = 0.01  # of the inverse mass a point touching a collider keeps here
 
 
@@ -116,8 +114,7 @@ class SelfCollision:
         tris, edges = self.faces.triangles, self.faces.edges
         lo, hi = np.minimum(x0, x1) - 0.5 * d, np.maximum(x0, x1) + 0.5 * d
         if self._margin is None:
-            length = norm_rows(x0[edges[:, 1]] - x0[edges[:, 0]]) if len(edges) else np.zeros(1)
-            self._margin = DRIFT * float(np.mean(length))
+            self._margin = self.faces.margin(x0)
         vertex, weight, normal, depth = [], [], [], []
         if len(tris):
             i, j = self._faces_points.pairs(self._margin, *element_boxes(lo, hi, tris), lo, hi)

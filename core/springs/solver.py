@@ -233,21 +233,20 @@ class SpringMeshSolver:
             attach.hold(self.model, state, step.held, s0, s1, h, pin_x1, pin_v)
         start = state.x.copy() if (step.paths and self.faces) or self.itself else None
         contact = resting_contacts(step.paths, state.x, state.v, s0, step.rest_speed)
-        near = self._near
         if step.paths and self.faces:  # faces resting on features: their points rest too (on a body
             # stepped first, the coupling takes them as pressed on it: not through a feature)
             contact = resting_on_features(step.paths, self.faces, state.x, state.v,
                                           self._inv_mass, s0, step.rest_speed,
-                                          frozenset(inputs.bodies), near).merged(contact)
+                                          frozenset(inputs.bodies), self._near).merged(contact)
         forces = self._forces(step, t, s0, s1)
-        solved = self._solve(step, forces, contact, t, s0, s1, pin_x1, pin_v, near)
+        solved = self._solve(step, forces, contact, t, s0, s1, pin_x1, pin_v)
         touched = [contact]
         outside = self._outside(state.v, state.v)
         if solved is not None:
             x, v, collided, touched, outside = solved
             x[~self.free], v[~self.free] = pin_x1[~self.free], pin_v[~self.free]
             if self.faces:
-                touched = [*touched, self._keep_off(step, start, x, v, s0, s1, outside, near)]
+                touched = [*touched, self._keep_off(step, start, x, v, s0, s1, outside)]
             state.x, state.v, step.hits = x, v, step.hits + collided
         if self.itself is not None:  # its own impulses: equal and opposite, none from outside
             self._keep_apart(step, start, touched, s1)
@@ -256,13 +255,12 @@ class SpringMeshSolver:
         self._check(state, inputs.frame)
 
     def _keep_off(self, step: _FrameStep, x0: np.ndarray, x: np.ndarray, v: np.ndarray,
-                  s0: float, s1: float, outside: np.ndarray | None,
-                  near: NearPairs | None = None) -> Contacts:
+                  s0: float, s1: float, outside: np.ndarray | None) -> Contacts:
         """The colliders' corners, creases and spheres kept off the mesh's faces and edges
         (:mod:`..contact.features`): x and v in place; their impulses join ``outside``."""
         before = v.copy() if outside is not None else None
         kept = keep_off_features(step.paths, self.faces, x0, x, v, self._inv_mass, s0, s1,
-                                 step.rest_speed, near=near)
+                                 step.rest_speed, near=self._near)
         if outside is not None and len(kept):
             outside += self.model.vertex_mass[:, None] * (v - before)
         return kept
@@ -382,13 +380,13 @@ class SpringMeshSolver:
                 np.broadcast_to(m1[:3, 3], (len(vs.index), 3)))
 
     def _solve(self, step: _FrameStep, forces: SubstepForces, contact: Contacts, t: float,
-               s0: float, s1: float, pin_x1, pin_v, near: NearPairs | None = None):
+               s0: float, s1: float, pin_x1, pin_v):
         """Integrate, then respond to collisions on the vertices' paths; with IMPLICIT, a step
         whose vertices hit a collider is solved again with them landing on it (up to
         LANDING_ROUNDS times). Returns (x, v, collisions, the contacts of the step and of each
         round's hits, the impulses from outside the mesh's forces (implicit only, else None:
         :meth:`_outside`)) after response, or None when there are no colliders (the state
-        holds the integrated step). ``near``: the features' candidate pairs (:class:`NearPairs`)."""
+        holds the integrated step)."""
         state, h, paths = step.state, step.h, step.paths
         implicit = isinstance(self.integrator, BaraffWitkin)
 
@@ -427,7 +425,7 @@ class SpringMeshSolver:
             if implicit and self.faces and (first is None or (again and more is None)):
                 faced, *placed = landing_.off_features(step.paths, self.faces, x0, x, v,
                                                        self._inv_mass, s0, s1, step.rest_speed,
-                                                       near)
+                                                       self._near)
             if first is None:
                 first = (*placed, self._outside(placed[1], solved))
             if again and more is None:
