@@ -27,7 +27,8 @@ from ..integrators import Integrator, StepReport
 from ..integrators.krylov import projected_pcg
 from ..transforms import inverse3
 from .implicit_parts import (BaraffWitkinSystem, Linearisation, NewtonResult, SolvePattern,
-                             StepMemory, VelocityFilter, positions_and_velocities)
+                             StepMemory, VelocityFilter, diagonal_filter,
+                             positions_and_velocities)
 from .multigrid import AggregationHierarchy
 from .sparse import BlockMatrix, BlockPattern, MatrixBuilder
 
@@ -147,7 +148,8 @@ class BaraffWitkin(Integrator):
             pressed, normal = contact.index[keep], contact.normal[keep]
             vn = np.einsum("ij,ij->i", v0[pressed], normal)
             given[pressed] = (contact.normal_speed[keep] - vn)[:, None] * normal
-        return VelocityFilter(given, free.astype(np.float64), pressed, normal, contact)
+        return VelocityFilter(given, free.astype(np.float64), pressed, normal, contact,
+                              diagonal_filter(system.free, pressed, normal))
 
     def _newton(self, system: BaraffWitkinSystem, t: float, h: float, x0: np.ndarray,
                 v0: np.ndarray, f0: np.ndarray, constraints: VelocityFilter,
@@ -204,7 +206,8 @@ class BaraffWitkin(Integrator):
         turning within the step changes its matrix enough that the first one's preconditioner
         would cost hundreds of iterations in the later Newton iterations."""
         matrix = self._assemble(blocks, system.mass, h)
-        filtered = self._filtered(matrix, system.free, constraints.pressed, constraints.normal)
+        filtered = self._filtered(matrix, system.free, constraints.pressed, constraints.normal,
+                                  constraints.diagonal)
         return Linearisation(rhs, matrix.__matmul__, self._preconditioner(filtered, system.free))
 
     def _solve(self, linear: Linearisation, known: np.ndarray, constraints: VelocityFilter,
@@ -299,16 +302,21 @@ class BaraffWitkin(Integrator):
         return builder.finish()
 
     @staticmethod
-    def _filtered(matrix, free, pressed, normal):
+    def _filtered(matrix, free, pressed, normal, diagonal=None):
         """The matrix CG really solves with: S A S + (I - S), S removing each vertex's
         constrained directions (all three for a pinned vertex, the normal for a pressed one) —
         what the preconditioner must approximate; a hierarchy built on A itself would move
         constrained vertices with their aggregates and lose most of its power when many are
-        constrained (cloth landing on a collider)."""
+        constrained (cloth landing on a collider). ``diagonal``: S's diagonal when S is one
+        (:func:`~.implicit_parts.diagonal_filter`; found here when not given)."""
         constrained = ~free
         constrained[pressed] = True
         if not constrained.any():
             return matrix
+        if diagonal is None:
+            diagonal = diagonal_filter(free, pressed, normal)
+        if diagonal is not None:
+            return BaraffWitkin._filtered_diagonal(matrix, diagonal, constrained)
         if not len(pressed) or (normal == normal[0]).all():  # pins only, or a flat ground
             return BaraffWitkin._filtered_one_normal(matrix, free, pressed,
                                                      normal[0] if len(pressed) else np.zeros(3),
@@ -326,6 +334,19 @@ class BaraffWitkin(Integrator):
         fixed = np.nonzero(constrained)[0]
         blocks[fixed, :, p.diagonal_slot[fixed] % p.width, :] += np.eye(3) - s[fixed]
         return BlockMatrix(p, data)
+
+    @staticmethod
+    def _filtered_diagonal(matrix, diagonal, constrained):
+        """:meth:`_filtered` for a diagonal S (``diagonal`` (n, 3)): (S_r B S_c)_ij =
+        d_r,i B_ij d_c,j, two passes over the matrix."""
+        p = matrix.pattern
+        blocks = matrix.data.reshape(p.n, 3, p.width, 3) * diagonal[:, :, None, None]
+        blocks *= diagonal[p.neighbours][:, None, :, :]
+        fixed = np.nonzero(constrained)[0]
+        slot = p.diagonal_slot[fixed] % p.width
+        for i in range(3):  # + (I - S) on the constrained vertices' diagonal blocks
+            blocks[fixed, i, slot, i] += 1.0 - diagonal[fixed, i]
+        return BlockMatrix(p, blocks.reshape(matrix.data.shape))
 
     @staticmethod
     def _filtered_one_normal(matrix, free, pressed, n, constrained):

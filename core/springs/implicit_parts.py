@@ -74,6 +74,8 @@ class VelocityFilter:
         free_scale: (n, 1) 1.0 for a free vertex, 0.0 for a pinned one.
         pressed: (k,) vertices held on a collider, with their unit normals ``normal`` (k, 3).
         contact: the step's contacts ``pressed`` was chosen from (friction reads them).
+        diagonal: (n, 3) the filter's diagonal when it is one (:func:`diagonal_filter`: every
+            pressed normal a coordinate axis, as on a ground), else None.
     """
 
     given: np.ndarray
@@ -81,14 +83,34 @@ class VelocityFilter:
     pressed: np.ndarray
     normal: np.ndarray
     contact: Contacts
+    diagonal: np.ndarray | None = None
 
     def project(self, u: np.ndarray) -> np.ndarray:
         """Remove the constrained directions, in place (callers pass fresh arrays)."""
+        if self.diagonal is not None:  # one pass; the same values as the general route
+            u *= self.diagonal
+            return u
         u *= self.free_scale
         if len(self.pressed):
             un = np.einsum("ij,ij->i", u[self.pressed], self.normal)
             u[self.pressed] -= un[:, None] * self.normal
         return u
+
+
+def diagonal_filter(free: np.ndarray, pressed: np.ndarray,
+                    normal: np.ndarray) -> np.ndarray | None:
+    """The filter S (I on a free vertex, 0 on a pinned one, I - n n^T on a pressed one) as its
+    diagonal (n, 3) when it is diagonal: every pressed normal ``normal`` (k, 3) a coordinate axis
+    (a ground, a box's faces), the common case; else None. S u is then ``diagonal * u``, with
+    the same values as I - n n^T applied (for n = +-e_k, u - (u.n) n only zeroes u_k)."""
+    if not len(pressed):
+        return None
+    nonzero = normal != 0.0
+    if not ((nonzero.sum(axis=1) == 1) & (np.abs(normal).max(axis=1) == 1.0)).all():
+        return None
+    diagonal = np.repeat(free.astype(np.float64)[:, None], 3, axis=1)
+    diagonal[pressed, np.argmax(nonzero, axis=1)] = 0.0
+    return diagonal
 
 
 @dataclass(frozen=True)

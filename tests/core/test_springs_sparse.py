@@ -200,11 +200,12 @@ def test_unknown_preconditioner_is_refused():
 
 
 @pytest.mark.parametrize("seed", range(4))
-@pytest.mark.parametrize("normals", ["one", "each", "none"])
+@pytest.mark.parametrize("normals", ["one", "each", "none", "axis", "axes"])
 def test_filtered_matrix_equals_s_a_s_plus_i_minus_s(seed, normals):
     """What the implicit step's preconditioner is built from: S A S + (I - S), S removing each
     pinned vertex's motion and each pressed vertex's normal — the same whether the pressed
-    vertices share one normal (a flat ground: its own faster path) or not."""
+    vertices share one normal (a flat ground: its own faster path), each have a coordinate
+    axis as theirs (S diagonal: its own faster path, ground and box faces) or not."""
     from physanim.core.springs.implicit import BaraffWitkin
 
     n, pairs, blocks, hinge, grad, c, index, values = _random_terms(seed)
@@ -220,6 +221,10 @@ def test_filtered_matrix_equals_s_a_s_plus_i_minus_s(seed, normals):
         np.nonzero(free & (rng.random(n) > 0.4))[0]
     normal = rng.normal(size=(len(pressed), 3)) if normals == "each" else \
         np.tile(rng.normal(size=3), (len(pressed), 1))
+    if normals in ("axis", "axes"):  # -z as on a ceiling, or any of +-x, +-y, +-z
+        axes = np.concatenate([np.eye(3), -np.eye(3)])
+        normal = axes[np.full(len(pressed), 5) if normals == "axis" else
+                      rng.integers(0, 6, len(pressed))]
     normal /= np.linalg.norm(normal, axis=1, keepdims=True)
     s = np.zeros((3 * n, 3 * n))
     for v in range(n):
@@ -231,3 +236,15 @@ def test_filtered_matrix_equals_s_a_s_plus_i_minus_s(seed, normals):
     u = rng.normal(size=(n, 3))
     np.testing.assert_allclose(filtered @ u, (expected @ u.ravel()).reshape(n, 3), atol=1e-10)
     np.testing.assert_allclose(matrix @ u, (dense @ u.ravel()).reshape(n, 3), atol=1e-12)
+    # the step's projection applies the same S to vectors, by its diagonal where S is one
+    from physanim.core.springs.implicit_parts import VelocityFilter, diagonal_filter
+
+    diagonal = diagonal_filter(free, pressed, normal)
+    assert (diagonal is not None) == (normals in ("axis", "axes"))
+    general = VelocityFilter(np.zeros((n, 3)), free[:, None].astype(float), pressed, normal,
+                             None)
+    fast = VelocityFilter(np.zeros((n, 3)), free[:, None].astype(float), pressed, normal, None,
+                          diagonal)
+    expected_su = (s @ u.ravel()).reshape(n, 3)
+    np.testing.assert_allclose(general.project(u.copy()), expected_su, atol=1e-14)
+    np.testing.assert_array_equal(fast.project(u.copy()), general.project(u.copy()))
