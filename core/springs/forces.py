@@ -82,9 +82,25 @@ class AngularSprings:
     def __post_init__(self):
         # derived once from the frozen fields (scatter order of the (h, 4) hinge vertices)
         object.__setattr__(self, "_flat", flat_index(np.asarray(self.hinge).ravel()))
+        object.__setattr__(self, "_last", _LastGeometry())
+
+    def _geometry(self, x: np.ndarray, gradients: bool = True):
+        """(theta, grad) at x — grad None unless ``gradients`` — the last ones again while x is
+        the same: an implicit step asks at its start for the forces, the energy and the
+        Jacobian, and the energy at its end is the next step's start."""
+        last = self._last
+        if last.x is not None and (last.grad is not None or not gradients) and \
+                np.array_equal(last.x, x):
+            return last.theta, last.grad
+        if gradients:
+            theta, grad = dihedral_angles_and_gradients(x, self.hinge)
+        else:
+            theta, grad = topology.dihedral_angles(x, self.hinge), None
+        last.x, last.theta, last.grad = x.copy(), theta, grad
+        return theta, grad
 
     def _forces(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
-        theta, grad = dihedral_angles_and_gradients(x, self.hinge)
+        theta, grad = self._geometry(x)
         delta = wrap_angle(theta - self.rest)
         rate = np.einsum("hkc,hkc->h", grad, v[self.hinge])
         torque = self.stiffness * delta + self.damping * rate
@@ -97,13 +113,26 @@ class AngularSprings:
     def linearize(self, p: ParticleView) -> LinearizedHinges:
         """Jacobian blocks at ``p.x``; the gradients are recomputed, not remembered from
         :meth:`apply` (a force object holds no state of a step)."""
-        grad = dihedral_gradients(p.x, self.hinge)
-        return LinearizedHinges(self.hinge, grad, self.stiffness, self.damping)
+        return LinearizedHinges(self.hinge, self._geometry(p.x)[1], self.stiffness, self.damping)
 
     def energy(self, x: np.ndarray) -> float:
         """0.5 k sum (theta - theta0)^2 [J]."""
-        turn = wrap_angle(topology.dihedral_angles(x, self.hinge) - self.rest)
+        turn = wrap_angle(self._geometry(x, gradients=False)[0] - self.rest)
         return 0.5 * self.stiffness * float(np.vdot(turn, turn))
+
+
+class _LastGeometry:
+    """The hinge geometry :meth:`AngularSprings._geometry` computed last (a cache of a pure
+    function: copies and pickles empty, so a saved bake state holds none of it)."""
+
+    def __init__(self):
+        self.x = self.theta = self.grad = None
+
+    def __reduce__(self):
+        return _LastGeometry, ()
+
+    def __deepcopy__(self, memo):
+        return _LastGeometry()
 
 
 @dataclass(frozen=True)

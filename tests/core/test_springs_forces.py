@@ -186,3 +186,31 @@ def test_spring_jacobian_matches_central_differences_and_products_agree(seed):
     jac.product(0.3, -0.7, w, out)
     expected = (0.3 * dense["x"] - 0.7 * dense["v"]) @ w.ravel()
     np.testing.assert_allclose(out.ravel(), expected, atol=1e-10 * np.abs(expected).max())
+
+
+def test_angular_springs_reuse_their_geometry_only_at_the_same_positions():
+    """The angular springs remember the hinge geometry of the last positions (an implicit step
+    asks for forces, energy and Jacobian at its start): the same values as a fresh object at
+    every call, whatever the order, after x changed in place, and nothing of it pickled."""
+    import pickle
+
+    model = _model()
+    springs = AngularSprings(model.hinge, model.hinge_rest, 0.7, 0.2)
+
+    def fresh():
+        return AngularSprings(model.hinge, model.hinge_rest, 0.7, 0.2)
+
+    for seed in range(3):
+        p = _deformed(model, seed)
+        for _ in range(2):  # the second round hits the remembered geometry
+            f, f_fresh = np.zeros_like(p.x), np.zeros_like(p.x)
+            springs.apply(p, f)
+            fresh().apply(p, f_fresh)
+            np.testing.assert_array_equal(f, f_fresh)
+            assert springs.energy(p.x) == fresh().energy(p.x)
+            np.testing.assert_array_equal(springs.linearize(p).grad, fresh().linearize(p).grad)
+        p.x[3] += 0.01  # moved in place: no stale geometry
+        assert springs.energy(p.x) == fresh().energy(p.x)
+        np.testing.assert_array_equal(springs.linearize(p).grad, fresh().linearize(p).grad)
+    assert springs._last.x is not None
+    assert pickle.loads(pickle.dumps(springs))._last.x is None
