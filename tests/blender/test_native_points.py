@@ -328,6 +328,55 @@ def test_a_process_of_its_own_writes_the_same_usd_layers(physanim_ext, tmp_path,
         np.testing.assert_array_equal(shown[name], cached[name], err_msg=name)
 
 
+def test_the_usd_process_reads_cache_frames_as_np_load_does(physanim_ext, tmp_path):
+    """The child maps a cache frame's stored members instead of reading and checking them:
+    the same arrays (values, dtypes, shapes, memory order) as ``np.load``, for every kind the
+    cache writes and a few it does not; compressed members go through ``np.load``; a
+    truncated member is refused, naming the file."""
+    usd_process = _addon(physanim_ext, "usd_process")
+    cache = sys.modules[f"{physanim_ext.__name__}.core.cache"]
+    rng = np.random.default_rng(3)
+    arrays = {"id": np.arange(7, dtype=np.int32), "position": rng.random((7, 3), np.float32),
+              "color": rng.random((7, 4)).astype(np.float32), "empty": np.zeros((0, 3)),
+              "flag": rng.random(7) > 0.5, "wide": rng.random((2, 3, 4)),
+              "fortran": np.asfortranarray(rng.random((5, 3))), "scalar": np.array(2.5)}
+    writer = cache.CacheWriter(tmp_path / "bake", background=False)
+    stored = writer.write_frame("points", 1, arrays)
+    compressed = tmp_path / "compressed.npz"
+    np.savez_compressed(compressed, **arrays)
+    for path in (stored, compressed):
+        got = usd_process.read_npz(str(path))
+        with np.load(path, allow_pickle=False) as loaded:
+            assert got.keys() == set(loaded.files)
+            for key in loaded.files:
+                expected = loaded[key]
+                assert got[key].dtype == expected.dtype and got[key].shape == expected.shape
+                assert got[key].flags.f_contiguous == expected.flags.f_contiguous, key
+                np.testing.assert_array_equal(got[key], expected, err_msg=key)
+    cut = tmp_path / "cut.npz"
+    data = stored.read_bytes()
+    member = data.index(b"PK\x03\x04", 1)  # the second member: the first one loses its tail
+    cut.write_bytes(data[:member - 8] + data[member:])
+    with pytest.raises(Exception, match="cut.npz"):
+        usd_process.read_npz(str(cut))
+    writer.abort()
+
+
+def test_the_usd_process_runs_pxr_on_one_thread_and_keeps_freed_memory(physanim_ext,
+                                                                       monkeypatch):
+    """The child stays on one core (pxr's pool would spin on the simulation's) and reuses
+    freed memory; a value the user set for either is kept."""
+    usd_process = _addon(physanim_ext, "usd_process")
+    for name in ("PXR_WORK_THREAD_LIMIT", "MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_"):
+        monkeypatch.delenv(name, raising=False)
+    env = usd_process.child_environment()
+    assert env["PXR_WORK_THREAD_LIMIT"] == "1"
+    assert int(env["MALLOC_MMAP_THRESHOLD_"]) == 32 * 1024 * 1024
+    assert int(env["MALLOC_TRIM_THRESHOLD_"]) >= 1 << 30
+    monkeypatch.setenv("PXR_WORK_THREAD_LIMIT", "4")
+    assert usd_process.child_environment()["PXR_WORK_THREAD_LIMIT"] == "4"
+
+
 def test_the_usd_process_names_a_layer_it_cannot_write(physanim_ext, tmp_path):
     usd_process = _addon(physanim_ext, "usd_process")
     site = _addon(physanim_ext, "compat").usd_site()
