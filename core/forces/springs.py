@@ -139,8 +139,14 @@ class LinearizedPairs:
     def blocks(self, cx: float, cv: float) -> np.ndarray:
         """(s, 3, 3) blocks of cx df/dx + cv df/dv."""
         u = self.u
-        out = (cx * self.x_axis + cv * self.v_axis)[:, None, None] * u[:, :, None] * u[:, None, :]
-        out[:, [0, 1, 2], [0, 1, 2]] += (cx * self.x_iso)[:, None]
+        along = cx * self.x_axis + cv * self.v_axis
+        iso = cx * self.x_iso
+        out = np.empty((len(u), 3, 3))
+        for a in range(3):  # column by column: numpy runs broadcasts over 3 slowly
+            scaled = along * u[:, a]
+            for b in range(3):
+                np.multiply(scaled, u[:, b], out=out[:, a, b])
+            out[:, a, a] += iso
         return out
 
     @property

@@ -24,6 +24,7 @@ class LinearizedHinges:
     grad: np.ndarray
     stiffness: float
     damping: float
+    flat: np.ndarray | None = None  # flat_index of the hinge's vertices, when known
 
     @property
     def clique(self) -> np.ndarray:
@@ -37,7 +38,8 @@ class LinearizedHinges:
         """out += (cx df/dx + cv df/dv) u, matrix-free (for a one-off product)."""
         c = cx * self.stiffness + cv * self.damping
         w = c * np.einsum("hkc,hkc->h", self.grad, u[self.hinge])
-        scatter_add(out, self.hinge.ravel(), (-w[:, None, None] * self.grad).reshape(-1, 3))
+        scatter_add(out, self.hinge.ravel(), (-w[:, None, None] * self.grad).reshape(-1, 3),
+                    self.flat)
 
 
 def dihedral_gradients(x: np.ndarray, hinge: np.ndarray) -> np.ndarray:
@@ -119,7 +121,8 @@ class AngularSprings:
     def linearize(self, p: ParticleView) -> LinearizedHinges:
         """Jacobian blocks at ``p.x``; the gradients are recomputed, not remembered from
         :meth:`apply` (a force object holds no state of a step)."""
-        return LinearizedHinges(self.hinge, self._geometry(p.x)[1], self.stiffness, self.damping)
+        return LinearizedHinges(self.hinge, self._geometry(p.x)[1], self.stiffness, self.damping,
+                                self._flat)
 
     def energy(self, x: np.ndarray) -> float:
         """0.5 k sum (theta - theta0)^2 [J]."""
