@@ -36,8 +36,9 @@ PACKAGE = __name__.rsplit(".addon.", 1)[0]
 #: a pickle of the state). PHYSANIM_CHECKPOINT_SECONDS overrides it (:func:`interval`).
 EVERY_SECONDS = 10.0
 #: Bumped when what a checkpoint holds changes shape (2: an emitter's particle constraints carry
-#: their wire), so an older checkpoint is not resumed but baked afresh.
-FORMAT = 2
+#: their wire; 3: a spring mesh's solver keeps its tearing lengths and its angular springs their
+#: last geometry), so an older checkpoint is not resumed but baked afresh.
+FORMAT = 3
 
 
 def folder(scene) -> Path:

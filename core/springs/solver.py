@@ -167,6 +167,11 @@ class SpringMeshSolver:
         self.free = ~model.held
         self._inv_mass = np.where(self.free, 1.0 / model.vertex_mass, 0.0)
         self._mass_share = model.vertex_mass / model.vertex_mass.sum()
+        # what a spring's length is measured against for tearing: its rest length, and
+        # zero-length springs (duplicate vertices) the mesh's scale
+        rest = model.spring_rest
+        scale = float(np.median(rest[rest > 0])) if np.any(rest > 0) else 1.0
+        self._tear_length = np.maximum(rest, scale)
         self.drag = LinearDrag(model.settings.drag)
         edges = model.spring_family == 0
         self.faces = FaceSet.of(model.triangles, np.stack([model.spring_i[edges],
@@ -480,10 +485,7 @@ class SpringMeshSolver:
         m = self.model
         if len(m.spring_i):
             length = np.linalg.norm(state.x[m.spring_i] - state.x[m.spring_j], axis=1)
-            # zero-length springs (duplicate vertices) are measured against the mesh's scale
-            scale = float(np.median(m.spring_rest[m.spring_rest > 0])) if np.any(
-                m.spring_rest > 0) else 1.0
-            ratio = length / np.maximum(m.spring_rest, scale)
+            ratio = length / self._tear_length
             worst = int(np.argmax(ratio))
             if ratio[worst] > TEAR_FACTOR and length[worst] > 1e-6:
                 raise self._fail(
