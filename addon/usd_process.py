@@ -47,9 +47,6 @@ MIN_POINTS = 20_000
 START_TIMEOUT = 30.0
 
 
-
-
-
 def save_usdc(path: str, data: dict, frame: int, modules: tuple) -> None:
     """The layer :func:`usd_points.points_usda` writes as text, binary through ``pxr``.
 

@@ -119,8 +119,8 @@ class AngularSprings:
             scatter_add(f_out, None, self._forces(p.x, p.v).reshape(-1, 3), self._flat)
 
     def linearize(self, p: ParticleView) -> LinearizedHinges:
-        """Jacobian blocks at ``p.x``; the gradients are recomputed, not remembered from
-        :meth:`apply` (a force object holds no state of a step)."""
+        """Jacobian blocks at ``p.x``; the gradients are those :meth:`apply` computed when it
+        was asked at the same positions (compared by value), else computed here."""
         return LinearizedHinges(self.hinge, self._geometry(p.x)[1], self.stiffness, self.damping,
                                 self._flat)
 
