@@ -4,8 +4,9 @@ runs from the beam to the crate in the frame before the first (Even Timing: its 
 of 0.2 kg 10 cm apart, each joined to the one before by a rigid link); two constraints of type
 Tie hold it — its first particle on the world at the beam, its last on the crate (the crate as
 Second: the crate swings on the rope and pulls it taut, two-way). Everything else is the
-default (2 sub-steps). A rope of 60 links of 0.1 kg on a 10 kg crate passes this
-self-check at 2 sub-steps too (a 100 kg end needs more).
+default (2 sub-steps). A rope of 60 links of 0.1 kg on a 10 kg crate passed this
+self-check at 2 sub-steps too, measured on an earlier machine (where such a rope's limit lies
+depends on rounding: see the README's limitations; a 100 kg end needs more sub-steps).
 
 Self-check: in every frame no link of the rope is longer or shorter than at birth by more than
 1 mm, the particle tied at the beam stays where it was tied and the one tied to the crate
