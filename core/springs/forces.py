@@ -42,29 +42,18 @@ class LinearizedHinges:
                     self.flat)
 
 
-def dihedral_gradients(x: np.ndarray, hinge: np.ndarray) -> np.ndarray:
-    """d(theta)/dx of every hinge's dihedral angle: (h, 4, 3) for (e0, e1, w0, w1)."""
-    return dihedral_angles_and_gradients(x, hinge)[1]
-
-
 def dihedral_angles_and_gradients(x: np.ndarray, hinge: np.ndarray):
     """Signed dihedral angles theta (h,) [rad] (as :func:`topology.dihedral_angles`) and their
     gradients d(theta)/dx (h, 4, 3) for (e0, e1, w0, w1), sharing the face normals."""
     (x0, x1, x2, x3), e, length, n1, n2, theta = topology.hinge_geometry(x, hinge)
     safe = np.where(length > 1e-12, length, 1.0)
-    m1, m2 = np.maximum(dot_rows(n1, n1), 1e-24), np.maximum(dot_rows(n2, n2), 1e-24)
-    # with a = n / |n|^2: g_w0 = -|e| a1, g_w1 = -|e| a2, g_e0 = -c0 a1 - c1 a2,
-    # g_e1 = c2 a1 + c3 a2; computed column by column (numpy runs an (h, 1) by (h, 3) product
-    # three elements at a time), the same values
-    back, c0, c1 = -safe, -(dot_rows(x2 - x1, e) / safe), dot_rows(x3 - x1, e) / safe
-    c2, c3 = dot_rows(x2 - x0, e) / safe, dot_rows(x3 - x0, e) / safe
+    a1 = n1 / np.maximum(dot_rows(n1, n1), 1e-24)[:, None]
+    a2 = n2 / np.maximum(dot_rows(n2, n2), 1e-24)[:, None]
     grad = np.empty((len(hinge), 4, 3))
-    for k in range(3):
-        a1, a2 = n1[:, k] / m1, n2[:, k] / m2
-        grad[:, 2, k] = back * a1
-        grad[:, 3, k] = back * a2
-        grad[:, 0, k] = c0 * a1 - c1 * a2
-        grad[:, 1, k] = c2 * a1 + c3 * a2
+    grad[:, 2] = -safe[:, None] * a1
+    grad[:, 3] = -safe[:, None] * a2
+    grad[:, 0] = -(dot_rows(x2 - x1, e) / safe)[:, None] * a1 - (dot_rows(x3 - x1, e) / safe)[:, None] * a2
+    grad[:, 1] = (dot_rows(x2 - x0, e) / safe)[:, None] * a1 + (dot_rows(x3 - x0, e) / safe)[:, None] * a2
     return theta, grad
 
 
