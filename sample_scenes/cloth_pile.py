@@ -16,13 +16,15 @@ CUTS = 30  # vertices along a side: 32
 DROP = 0.8  # [m] from the lowest corner to the floor
 
 # Frames that show the point (landing on its corner and buckling; folding over; lying in a
-# pile of folds); README_FRAME is the README's picture.
-SHOWCASE = (14, 22, 60)
-README_FRAME = 60
+# pile of folds, the fold rolled over onto the rest by frame 80); README_FRAME is the README's
+# picture.
+END = 96
+SHOWCASE = (14, 22, END)
+README_FRAME = END
 
 
 def build(scene) -> None:
-    _common.stage(scene, (1.3, -1.7, 1.5), (0.05, 0.0, 0.15), frame_end=60)
+    _common.stage(scene, (1.3, -1.7, 1.5), (0.05, 0.0, 0.15), frame_end=END)
     _common.ground(scene, color=(0.3, 0.27, 0.24))
     cloth = _common.grid(scene, "Cloth", CUTS, CUTS, SIDE)
     # a diamond standing corner-down in the XZ plane, leaning a little

@@ -58,6 +58,11 @@ class BaraffWitkin(Integrator):
     # this fraction of the energy's own size.
     ENERGY_SPEED = 1e-5
     ENERGY_ROUNDING = 1e-12
+    # A pressed vertex sliding slower than this [m/s] is taken as held by static friction (and
+    # let slide when the impulse that holds it leaves the friction cone): a cloth at rest on a
+    # collider then has nothing left to solve, where each step solved its tiny in-plane
+    # forces only for friction to cancel the motion again
+    STICK_SPEED = 3e-3
 
     PRECONDITIONERS = ("MULTIGRID", "JACOBI")
 
@@ -91,6 +96,13 @@ class BaraffWitkin(Integrator):
         # equilibrium the right-hand side -> 0 and a purely relative test never stops
         floor = h * float(system.weight_norm())
         newton = self._newton(system, t, h, x0, v0, f0, constraints, floor)
+        if constraints.stuck is not None and constraints.stuck.any():
+            slipping = self._slipping(constraints, newton.reaction)
+            if len(slipping):  # they slide after all: solved again with kinetic friction
+                constraints = self._constraints(system, t, h, v0, f0, slipping)
+                spent = newton.iterations
+                newton = self._newton(system, t, h, x0, v0, f0, constraints, floor)
+                newton.iterations += spent
         v1, iterations = v0 + newton.dv, newton.iterations
         residual = newton.residual
         if len(constraints.pressed):
@@ -131,15 +143,19 @@ class BaraffWitkin(Integrator):
         return dv, linear.apply_a(dv)
 
     # --- the passes of a step ------------------------------------------------------------------
-    @staticmethod
-    def _constraints(system: BaraffWitkinSystem, t: float, h: float, v0: np.ndarray,
-                     f0: np.ndarray) -> VelocityFilter:
+    @classmethod
+    def _constraints(cls, system: BaraffWitkinSystem, t: float, h: float, v0: np.ndarray,
+                     f0: np.ndarray, slipping: np.ndarray | None = None) -> VelocityFilter:
         """Baraff & Witkin's filter: pinned vertices move with their pins at the step's end;
-        contacts hold their vertices on the surface where the forces ``f0`` press them into it."""
-        free = system.free[:, None]
-        given = np.where(free, 0.0, system.pinned_velocity(t + h) - v0)
+        contacts hold their vertices on the surface where the forces ``f0`` press them into it.
+        A pressed vertex that is not sliding along its surface (slower than STICK_SPEED) is
+        held by static friction: its whole velocity becomes the surface's, as a pin's (the
+        solve then finds the friction impulse that holds it, :meth:`_slipping` checks it
+        against the cone). ``slipping``: vertices static friction was found not to hold."""
+        free = system.free.copy()
+        given = np.where(free[:, None], 0.0, system.pinned_velocity(t + h) - v0)
         contact = system.contact
-        pressed, normal = np.zeros(0, np.int64), np.zeros((0, 3))
+        pressed, normal, stuck = np.zeros(0, np.int64), np.zeros((0, 3)), None
         if len(contact):
             push = np.einsum("ij,ij->i", f0[contact.index], contact.normal)
             # only where forces press inwards, or where the vertex is held (landing: the
@@ -148,8 +164,31 @@ class BaraffWitkin(Integrator):
             pressed, normal = contact.index[keep], contact.normal[keep]
             vn = np.einsum("ij,ij->i", v0[pressed], normal)
             given[pressed] = (contact.normal_speed[keep] - vn)[:, None] * normal
-        return VelocityFilter(given, free.astype(np.float64), pressed, normal, contact,
-                              diagonal_filter(system.free, pressed, normal))
+            rel = v0[pressed] - contact.surface_velocity[keep]
+            slide = rel - np.einsum("ij,ij->i", rel, normal)[:, None] * normal
+            stuck = (contact.friction[keep] > 0.0) & \
+                (np.einsum("ij,ij->i", slide, slide) <= cls.STICK_SPEED ** 2)
+            if slipping is not None:
+                stuck &= ~np.isin(pressed, slipping)
+            given[pressed[stuck]] -= slide[stuck]
+            free[pressed[stuck]] = False
+        sliding = slice(None) if stuck is None else ~stuck
+        return VelocityFilter(given, free[:, None].astype(np.float64), pressed, normal, contact,
+                              diagonal_filter(free, pressed[sliding], normal[sliding]), stuck)
+
+    @staticmethod
+    def _slipping(constraints: VelocityFilter, reaction: np.ndarray) -> np.ndarray:
+        """(j,) the stuck vertices static friction cannot hold: the impulse that held them
+        (``reaction`` (n, 3) [N s], the solve's constraint impulses) leaves the friction cone,
+        its tangential part above mu times its normal part."""
+        stuck = constraints.pressed[constraints.stuck]
+        normal = constraints.normal[constraints.stuck]
+        contact = constraints.contact
+        mu = contact.friction[np.searchsorted(contact.index, stuck)]
+        r = reaction[stuck]
+        rn = np.einsum("ij,ij->i", r, normal)
+        rt = r - rn[:, None] * normal
+        return stuck[np.einsum("ij,ij->i", rt, rt) > (mu * np.maximum(rn, 0.0)) ** 2]
 
     def _newton(self, system: BaraffWitkinSystem, t: float, h: float, x0: np.ndarray,
                 v0: np.ndarray, f0: np.ndarray, constraints: VelocityFilter,
@@ -205,10 +244,15 @@ class BaraffWitkin(Integrator):
         """Assemble A and its preconditioner — rebuilt for every linearisation: a stiff mesh
         turning within the step changes its matrix enough that the first one's preconditioner
         would cost hundreds of iterations in the later Newton iterations."""
+        sliding, free = constraints.sliding, constraints.free
+        if not free.any():  # every vertex pinned or stuck: dv is given, only products remain
+            n = len(system.mass)
+            return Linearisation(rhs, MatrixFree(blocks, system.mass, h),
+                                 BlockJacobi(np.zeros((n, 3, 3))))
         matrix = self._assemble(blocks, system.mass, h)
-        filtered = self._filtered(matrix, system.free, constraints.pressed, constraints.normal,
-                                  constraints.diagonal)
-        return Linearisation(rhs, matrix.__matmul__, self._preconditioner(filtered, system.free))
+        filtered = self._filtered(matrix, free, constraints.pressed[sliding],
+                                  constraints.normal[sliding], constraints.diagonal)
+        return Linearisation(rhs, matrix.__matmul__, self._preconditioner(filtered, free))
 
     def _solve(self, linear: Linearisation, known: np.ndarray, constraints: VelocityFilter,
                start: np.ndarray | None, floor: float):
@@ -228,8 +272,9 @@ class BaraffWitkin(Integrator):
         velocities (n, 3) [m/s], the CG iterations spent and the impulses (n, 3) [N s] the
         step's residual gains (friction's on the pressed vertices)."""
         mass = system.mass[:, None]
-        stop = self._friction(v1, constraints.pressed, constraints.normal, constraints.contact,
-                              newton.reaction, mass)
+        sliding = constraints.sliding  # (the stuck ones' friction was in the solve)
+        stop = self._friction(v1, constraints.pressed[sliding], constraints.normal[sliding],
+                              constraints.contact, newton.reaction, mass)
         if not np.any(stop):
             return v1, 0, 0.0
         b = constraints.project(mass * stop)
@@ -409,6 +454,21 @@ class BaraffWitkin(Integrator):
         stop = np.minimum(speed, mu * impulse / mass[pressed, 0])
         out = np.zeros_like(v1)
         out[pressed] = -(stop / np.where(speed > 1e-12, speed, np.inf))[:, None] * vt
+        return out
+
+
+class MatrixFree:
+    """u -> A u for A = M - h df/dv - h^2 df/dx from the Jacobian blocks themselves, without
+    assembling A: for a step that only needs a product or two (every vertex pinned or held by
+    static friction: a cloth at rest on the ground); a plain callable, as :class:`BlockJacobi`."""
+
+    def __init__(self, blocks: list, mass: np.ndarray, h: float):
+        self.blocks, self.mass, self.h = blocks, mass, h
+
+    def __call__(self, u: np.ndarray) -> np.ndarray:
+        out = self.mass[:, None] * u
+        for blk in self.blocks:
+            blk.product(-self.h * self.h, -self.h, u, out)
         return out
 
 

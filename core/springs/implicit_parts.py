@@ -67,15 +67,17 @@ class BaraffWitkinSystem(System, Protocol):
 class VelocityFilter:
     """Baraff & Witkin's constraints on one step's velocity change dv (n, 3) [m/s]: pinned
     vertices have a prescribed change; vertices pressed onto a collider have a prescribed normal
-    velocity (the surface's) and move freely along the surface.
+    velocity (the surface's) and move freely along the surface — unless static friction holds
+    them (``stuck``): then their whole velocity is prescribed, the surface's, as a pin's.
 
     Attributes:
         given: (n, 3) the prescribed part of dv [m/s] (zero in the free directions).
-        free_scale: (n, 1) 1.0 for a free vertex, 0.0 for a pinned one.
+        free_scale: (n, 1) 1.0 for a free vertex, 0.0 for a pinned or stuck one.
         pressed: (k,) vertices held on a collider, with their unit normals ``normal`` (k, 3).
         contact: the step's contacts ``pressed`` was chosen from (friction reads them).
         diagonal: (n, 3) the filter's diagonal when it is one (:func:`diagonal_filter`: every
             pressed normal a coordinate axis, as on a ground), else None.
+        stuck: (k,) bool, the pressed vertices static friction holds (None: none).
     """
 
     given: np.ndarray
@@ -84,6 +86,17 @@ class VelocityFilter:
     normal: np.ndarray
     contact: Contacts
     diagonal: np.ndarray | None = None
+    stuck: np.ndarray | None = None
+
+    @property
+    def free(self) -> np.ndarray:
+        """(n,) bool: the vertices with a free direction (neither pinned nor stuck)."""
+        return self.free_scale[:, 0] > 0.0
+
+    @property
+    def sliding(self) -> np.ndarray:
+        """(k,) bool: the pressed vertices free to slide along their surface."""
+        return np.ones(len(self.pressed), bool) if self.stuck is None else ~self.stuck
 
     def project(self, u: np.ndarray) -> np.ndarray:
         """Remove the constrained directions, in place (callers pass fresh arrays)."""

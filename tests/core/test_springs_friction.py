@@ -1,0 +1,94 @@
+"""Coulomb friction on spring meshes (the implicit stepper): a cloth lying on a slope steeper
+than its friction angle slides at the Coulomb rate, g (sin theta - mu cos theta); on a slope
+shallower than it, static friction holds it where it lies, and a cloth at rest on a collider
+costs no linear solve (its vertices are held as pins are)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from physanim.core.contact import ColliderFrame
+from physanim.core.springs import (SpringFrameInputs, SpringMeshBuilder, SpringMeshSettings,
+                                   SpringMeshSolver)
+from physanim.tests.core.helpers import grid as _grid
+
+DT = 1.0 / 24.0
+G = 9.81
+THETA = math.radians(30.0)
+
+
+def _tilt() -> np.ndarray:
+    """The slope's frame: the ground turned THETA about x (its normal is the third column)."""
+    c, s = math.cos(THETA), math.sin(THETA)
+    m = np.eye(4)
+    m[1:3, 1:3] = [[c, -s], [s, c]]
+    return m
+
+
+def _on_slope(mu: float):
+    """A 0.4 m cloth patch (7 x 7 vertices) lying on a 30 degree slope of friction ``mu``, no
+    air drag (nothing but gravity, the slope and the cloth's own springs act on it)."""
+    m = _tilt()
+    x, edges, tris, ls, lt, lv = _grid(7, 7, 0.4)
+    x = (x - [0.2, 0.2, 0.0]) @ m[:3, :3].T
+    settings = SpringMeshSettings("Patch", mass=0.2, stiffness=2000.0, damping=2.0,
+                                  shear_stiffness=500.0, bend_stiffness=0.01, drag=0.0)
+    model = SpringMeshBuilder(settings, x, edges, tris, ls, lt, lv).finalize(1)
+    slope = ColliderFrame("Slope", "HALF_SPACE", m, m, restitution=0.0, friction=mu)
+    return model, slope, m[:3, 2], -m[:3, 1] * 1.0  # normal, downhill
+
+
+def _run(model, slope, frames: int):
+    solver = SpringMeshSolver(model, "IMPLICIT", 2, frame_dt=DT, frame=1)
+    state = model.state()
+    for frame in range(1, frames + 1):
+        solver.advance(state, SpringFrameInputs(frame, frame * DT, DT, colliders=[slope]))
+        yield frame, state, solver
+
+
+def test_cloth_on_a_slope_steeper_than_its_friction_slides_at_the_coulomb_rate():
+    mu = 0.2  # < tan 30 = 0.577
+    model, slope, normal, downhill = _on_slope(mu)
+    speed = {}
+    for frame, state, _ in _run(model, slope, 36):
+        assert (state.x @ normal).min() >= -1e-6
+        speed[frame] = float(state.v.mean(axis=0) @ downhill)
+    expected = G * (math.sin(THETA) - mu * math.cos(THETA))
+    measured = (speed[36] - speed[12]) / (24 * DT)
+    assert measured == pytest.approx(expected, rel=0.02)
+
+
+def test_cloth_on_a_slope_shallower_than_its_friction_stays_where_it_lies():
+    mu = 0.8  # > tan 30
+    model, slope, normal, downhill = _on_slope(mu)
+    centre = None
+    for frame, state, solver in _run(model, slope, 72):
+        assert (state.x @ normal).min() >= -1e-6
+        if frame == 12:
+            centre = state.x.mean(axis=0)
+        if frame > 12:  # settled: held by static friction, no solve left to do
+            assert np.linalg.norm(state.x.mean(axis=0) - centre) < 1e-4
+            assert solver.integrator.last_iterations == 0
+    assert np.abs(state.v).max() < 1e-6
+    # where it lies: it slid no more than it could in the one sub-step before friction held it
+    assert abs((centre - model.rest_x.mean(axis=0)) @ downhill) < 1e-3
+
+
+def test_cloth_at_rest_on_the_ground_at_the_defaults_costs_no_solve():
+    """The defaults (a collider's friction, the mesh's settings) on the common case: a cloth
+    dropped flat onto the ground comes to rest, and from then on its steps solve nothing."""
+    x, edges, tris, ls, lt, lv = _grid(9, 9, 1.0)
+    x = x - [0.5, 0.5, -0.3]
+    model = SpringMeshBuilder(SpringMeshSettings("Sheet"), x, edges, tris, ls, lt,
+                              lv).finalize(1)
+    ground = ColliderFrame("Ground", "HALF_SPACE", np.eye(4), np.eye(4))
+    iterations = []
+    for frame, state, solver in _run(model, ground, 48):
+        assert state.x[:, 2].min() >= -1e-6
+        if frame > 24:
+            iterations.append(solver.integrator.last_iterations)
+    assert state.x[:, 2].max() < 0.01
+    assert np.abs(state.v).max() < 1e-6
+    assert max(iterations) == 0
