@@ -63,6 +63,12 @@ class BaraffWitkin(Integrator):
     # collider then has nothing left to solve, where each step solved its tiny in-plane
     # forces only for friction to cancel the motion again
     STICK_SPEED = 3e-3
+    # Contacts only push. A pressed vertex whose contact impulse pulls it onto the surface by
+    # more than this share of the step's largest push leaves it (the step is solved again
+    # without it): held, it would stick to the surface, and drag and spin a free body it rests
+    # on. Smaller pulls are the inexact solve's rounding.
+    PULL_SHARE = 0.05
+    RELEASE_ROUNDS = 3  # re-solves a step may take for that (and for slipping vertices)
 
     PRECONDITIONERS = ("MULTIGRID", "JACOBI")
 
@@ -96,13 +102,19 @@ class BaraffWitkin(Integrator):
         # equilibrium the right-hand side -> 0 and a purely relative test never stops
         floor = h * float(system.weight_norm())
         newton = self._newton(system, t, h, x0, v0, f0, constraints, floor)
-        if constraints.stuck is not None and constraints.stuck.any():
-            slipping = self._slipping(constraints, newton.reaction)
-            if len(slipping):  # they slide after all: solved again with kinetic friction
-                constraints = self._constraints(system, t, h, v0, f0, slipping)
-                spent = newton.iterations
-                newton = self._newton(system, t, h, x0, v0, f0, constraints, floor)
-                newton.iterations += spent
+        slipping, leaving = np.zeros(0, np.int64), np.zeros(0, np.int64)
+        for _ in range(self.RELEASE_ROUNDS):
+            if not len(constraints.pressed):
+                break
+            more = self._released(constraints, newton.reaction)
+            if not (len(more[0]) or len(more[1])):
+                break
+            # solved again: they slide, or leave the surface (which may load others)
+            slipping, leaving = np.union1d(slipping, more[0]), np.union1d(leaving, more[1])
+            constraints = self._constraints(system, t, h, v0, f0, slipping, leaving)
+            spent = newton.iterations
+            newton = self._newton(system, t, h, x0, v0, f0, constraints, floor)
+            newton.iterations += spent
         v1, iterations = v0 + newton.dv, newton.iterations
         residual = newton.residual
         if len(constraints.pressed):
@@ -145,13 +157,15 @@ class BaraffWitkin(Integrator):
     # --- the passes of a step ------------------------------------------------------------------
     @classmethod
     def _constraints(cls, system: BaraffWitkinSystem, t: float, h: float, v0: np.ndarray,
-                     f0: np.ndarray, slipping: np.ndarray | None = None) -> VelocityFilter:
+                     f0: np.ndarray, slipping: np.ndarray | None = None,
+                     leaving: np.ndarray | None = None) -> VelocityFilter:
         """Baraff & Witkin's filter: pinned vertices move with their pins at the step's end;
         contacts hold their vertices on the surface where the forces ``f0`` press them into it.
         A pressed vertex that is not sliding along its surface (slower than STICK_SPEED) is
         held by static friction: its whole velocity becomes the surface's, as a pin's (the
-        solve then finds the friction impulse that holds it, :meth:`_slipping` checks it
-        against the cone). ``slipping``: vertices static friction was found not to hold."""
+        solve then finds the friction impulse that holds it, :meth:`_released` checks it
+        against the cone). ``slipping``: vertices static friction was found not to hold;
+        ``leaving``: vertices the contact was found to pull (:meth:`_released`)."""
         free = system.free.copy()
         given = np.where(free[:, None], 0.0, system.pinned_velocity(t + h) - v0)
         contact = system.contact
@@ -161,6 +175,8 @@ class BaraffWitkin(Integrator):
             # only where forces press inwards, or where the vertex is held (landing: the
             # solver's re-solve of a step in which it hit the surface, SpringMeshSolver.advance)
             keep = ((push < 0.0) | contact.held) & system.free[contact.index]
+            if leaving is not None:
+                keep &= ~np.isin(contact.index, leaving)
             pressed, normal = contact.index[keep], contact.normal[keep]
             vn = np.einsum("ij,ij->i", v0[pressed], normal)
             given[pressed] = (contact.normal_speed[keep] - vn)[:, None] * normal
@@ -176,19 +192,23 @@ class BaraffWitkin(Integrator):
         return VelocityFilter(given, free[:, None].astype(np.float64), pressed, normal, contact,
                               diagonal_filter(free, pressed[sliding], normal[sliding]), stuck)
 
-    @staticmethod
-    def _slipping(constraints: VelocityFilter, reaction: np.ndarray) -> np.ndarray:
-        """(j,) the stuck vertices static friction cannot hold: the impulse that held them
-        (``reaction`` (n, 3) [N s], the solve's constraint impulses) leaves the friction cone,
-        its tangential part above mu times its normal part."""
-        stuck = constraints.pressed[constraints.stuck]
-        normal = constraints.normal[constraints.stuck]
-        contact = constraints.contact
-        mu = contact.friction[np.searchsorted(contact.index, stuck)]
-        r = reaction[stuck]
-        rn = np.einsum("ij,ij->i", r, normal)
-        rt = r - rn[:, None] * normal
-        return stuck[np.einsum("ij,ij->i", rt, rt) > (mu * np.maximum(rn, 0.0)) ** 2]
+    @classmethod
+    def _released(cls, constraints: VelocityFilter,
+                  reaction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The pressed vertices the step's contact impulses (``reaction`` (n, 3) [N s], the
+        solve's constraint impulses) cannot hold: ``(slipping, leaving)``. Slipping: stuck
+        ones whose holding impulse leaves the friction cone, its tangential part above mu
+        times its normal part. Leaving: those the contact pulls (more than PULL_SHARE of the
+        largest push)."""
+        pressed, normal = constraints.pressed, constraints.normal
+        rn = np.einsum("ij,ij->i", reaction[pressed], normal)
+        pulls = rn < -cls.PULL_SHARE * np.abs(rn).max(initial=0.0)
+        held = np.flatnonzero(constraints.stuck & ~pulls) if constraints.stuck is not None \
+            else np.zeros(0, np.int64)
+        rt = reaction[pressed[held]] - rn[held, None] * normal[held]
+        mu = constraints.contact.friction[constraints.rows[held]]
+        out = np.einsum("ij,ij->i", rt, rt) > (mu * np.maximum(rn[held], 0.0)) ** 2
+        return pressed[held[out]], pressed[pulls]
 
     def _newton(self, system: BaraffWitkinSystem, t: float, h: float, x0: np.ndarray,
                 v0: np.ndarray, f0: np.ndarray, constraints: VelocityFilter,
@@ -246,9 +266,8 @@ class BaraffWitkin(Integrator):
         would cost hundreds of iterations in the later Newton iterations."""
         sliding, free = constraints.sliding, constraints.free
         if not free.any():  # every vertex pinned or stuck: dv is given, only products remain
-            n = len(system.mass)
-            return Linearisation(rhs, MatrixFree(blocks, system.mass, h),
-                                 BlockJacobi(np.zeros((n, 3, 3))))
+            # (and the filter leaves nothing to precondition)
+            return Linearisation(rhs, MatrixFree(blocks, system.mass, h), np.zeros_like)
         matrix = self._assemble(blocks, system.mass, h)
         filtered = self._filtered(matrix, free, constraints.pressed[sliding],
                                   constraints.normal[sliding], constraints.diagonal)
@@ -274,7 +293,8 @@ class BaraffWitkin(Integrator):
         mass = system.mass[:, None]
         sliding = constraints.sliding  # (the stuck ones' friction was in the solve)
         stop = self._friction(v1, constraints.pressed[sliding], constraints.normal[sliding],
-                              constraints.contact, newton.reaction, mass)
+                              constraints.contact, constraints.rows[sliding], newton.reaction,
+                              mass)
         if not np.any(stop):
             return v1, 0, 0.0
         b = constraints.project(mass * stop)
@@ -441,11 +461,10 @@ class BaraffWitkin(Integrator):
         return BlockJacobi(inv)
 
     @staticmethod
-    def _friction(v1, pressed, normal, contact, reaction, mass) -> np.ndarray:
-        """Coulomb friction on pressed vertices: the velocity change (n, 3) that would stop
-        each one's sliding, capped by mu times the constraint's normal impulse (the residual of
-        the unfiltered system along n)."""
-        row = np.searchsorted(contact.index, pressed)  # contact.index is sorted
+    def _friction(v1, pressed, normal, contact, row, reaction, mass) -> np.ndarray:
+        """Coulomb friction on pressed vertices (their rows ``row`` in ``contact``): the
+        velocity change (n, 3) that would stop each one's sliding, capped by mu times the
+        constraint's normal impulse (the residual of the unfiltered system along n)."""
         mu = contact.friction[row]
         impulse = np.maximum(0.0, np.einsum("ij,ij->i", reaction[pressed], normal))
         rel = v1[pressed] - contact.surface_velocity[row]

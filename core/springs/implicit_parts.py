@@ -94,6 +94,11 @@ class VelocityFilter:
         return self.free_scale[:, 0] > 0.0
 
     @property
+    def rows(self) -> np.ndarray:
+        """(k,) each pressed vertex's row in ``contact`` (whose index is sorted)."""
+        return np.searchsorted(self.contact.index, self.pressed)
+
+    @property
     def sliding(self) -> np.ndarray:
         """(k,) bool: the pressed vertices free to slide along their surface."""
         return np.ones(len(self.pressed), bool) if self.stuck is None else ~self.stuck

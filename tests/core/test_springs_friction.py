@@ -37,7 +37,7 @@ def _on_slope(mu: float):
                                   shear_stiffness=500.0, bend_stiffness=0.01, drag=0.0)
     model = SpringMeshBuilder(settings, x, edges, tris, ls, lt, lv).finalize(1)
     slope = ColliderFrame("Slope", "HALF_SPACE", m, m, restitution=0.0, friction=mu)
-    return model, slope, m[:3, 2], -m[:3, 1] * 1.0  # normal, downhill
+    return model, slope, m[:3, 2], -m[:3, 1]  # normal, downhill
 
 
 def _run(model, slope, frames: int):
