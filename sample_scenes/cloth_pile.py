@@ -21,6 +21,10 @@ DROP = 0.8  # [m] from the lowest corner to the floor
 END = 96
 SHOWCASE = (14, 22, END)
 README_FRAME = END
+# Settled at the end: no vertex faster than SETTLED [m/s], at most a quarter faster than MOVING
+# (measured: 0.10 m/s, 111 of 961; when the floor let go of vertices the solve pulled on,
+# though the layers above pressed them down, 0.24 m/s and 856: the whole pile sliding)
+SETTLED, MOVING = 0.15, 0.03
 
 
 def build(scene) -> None:
@@ -69,9 +73,12 @@ def check(scene) -> list[str]:
     if covered > 0.75 * SIDE * SIDE:
         problems.append(f"the cloth lies almost flat: it covers {covered:.2f} m^2 of floor of "
                         f"its {SIDE * SIDE:.2f} m^2 (not folded over onto itself)")
-    speed = float(np.abs(last - previous).max()) * scene.render.fps
-    if speed > 0.2:
-        problems.append(f"the pile has not settled: a vertex moves at {speed:.2f} m/s at the end")
+    speed = np.linalg.norm(last - previous, axis=1) * scene.render.fps
+    moving = int((speed > MOVING).sum())
+    if speed.max() > SETTLED or moving > len(speed) // 4:
+        problems.append(f"the pile has not settled: at the end a vertex moves at "
+                        f"{speed.max():.2f} m/s, {moving} of {len(speed)} faster than "
+                        f"{MOVING} m/s")
     return problems
 
 

@@ -63,10 +63,13 @@ class BaraffWitkin(Integrator):
     # collider then has nothing left to solve, where each step solved its tiny in-plane
     # forces only for friction to cancel the motion again
     STICK_SPEED = 3e-3
-    # Contacts only push. A pressed vertex whose contact impulse pulls it onto the surface by
-    # more than this share of the step's largest push leaves it (the step is solved again
-    # without it): held, it would stick to the surface, and drag and spin a free body it rests
-    # on. Smaller pulls are the inexact solve's rounding.
+    # Contacts with bodies (two-way coupled) only push. A vertex pressed on one whose contact
+    # impulse pulls it onto the surface by more than this share of the step's largest push
+    # leaves it (the step is solved again without it): held, it would drag and spin the body.
+    # Smaller pulls are the inexact solve's rounding. Other colliders hold pressed vertices as
+    # Baraff & Witkin's filter does: loads that act outside the solve (their corners and creases
+    # on the mesh's faces, the mesh's own layers on each other) press there too, so the solve's
+    # impulse alone does not tell a pull (let go, a cloth slid off a faceted sphere).
     PULL_SHARE = 0.05
     RELEASE_ROUNDS = 3  # re-solves a step may take for that (and for slipping vertices)
 
@@ -106,7 +109,7 @@ class BaraffWitkin(Integrator):
         for _ in range(self.RELEASE_ROUNDS):
             if not len(constraints.pressed):
                 break
-            more = self._released(constraints, newton.reaction)
+            more = self._released(constraints, newton.reaction, system.bodies)
             if not (len(more[0]) or len(more[1])):
                 break
             # solved again: they slide, or leave the surface (which may load others)
@@ -193,16 +196,18 @@ class BaraffWitkin(Integrator):
                               diagonal_filter(free, pressed[sliding], normal[sliding]), stuck)
 
     @classmethod
-    def _released(cls, constraints: VelocityFilter,
-                  reaction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _released(cls, constraints: VelocityFilter, reaction: np.ndarray,
+                  bodies: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The pressed vertices the step's contact impulses (``reaction`` (n, 3) [N s], the
         solve's constraint impulses) cannot hold: ``(slipping, leaving)``. Slipping: stuck
         ones whose holding impulse leaves the friction cone, its tangential part above mu
-        times its normal part. Leaving: those the contact pulls (more than PULL_SHARE of the
-        largest push)."""
+        times its normal part. Leaving: those pressed on ``bodies`` (colliders, as in
+        ``contact.collider``) that the contact pulls (more than PULL_SHARE of the largest
+        push)."""
         pressed, normal = constraints.pressed, constraints.normal
         rn = np.einsum("ij,ij->i", reaction[pressed], normal)
         pulls = rn < -cls.PULL_SHARE * np.abs(rn).max(initial=0.0)
+        pulls &= np.isin(constraints.contact.collider[constraints.rows], bodies)
         held = np.flatnonzero(constraints.stuck & ~pulls) if constraints.stuck is not None \
             else np.zeros(0, np.int64)
         rt = reaction[pressed[held]] - rn[held, None] * normal[held]

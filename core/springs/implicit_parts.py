@@ -41,11 +41,14 @@ class BaraffWitkinSystem(System, Protocol):
         contact: the vertices touching colliders (:class:`~physanim.core.contact.Contacts`,
             sorted by index): constrained to move with the surface along its normal while
             forces press them into it (or always, if ``held``).
+        bodies: (b,) the colliders (as in ``contact.collider``) that are bodies taking the
+            contacts' impulses back (two-way coupling): their contacts only push.
     """
 
     mass: np.ndarray
     free: np.ndarray
     contact: Contacts
+    bodies: np.ndarray
 
     def pinned_velocity(self, t: float) -> np.ndarray:
         """(n, 3) velocity of the pinned vertices at ``t`` [m/s] (rows of free ones unused)."""

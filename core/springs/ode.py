@@ -33,17 +33,19 @@ class MeshOde:
 
     ``contact``: the vertices touching colliders. Explicit integrators see them as a constraint
     on the accumulated forces (``constraint``, a :class:`ContactForce`); the implicit stepper
-    enforces ``contact`` as velocity constraints instead (``constraint`` None)."""
+    enforces ``contact`` as velocity constraints instead (``constraint`` None). ``bodies``: the
+    colliders (``contact.collider`` values) that are two-way coupled bodies (None: none)."""
 
     def __init__(self, state: SpringMeshState, mass: np.ndarray, free: np.ndarray,
                  forces: SubstepForces, pin_v: np.ndarray, contact: Contacts,
-                 constraint: ContactForce | None):
+                 constraint: ContactForce | None, bodies: np.ndarray | None = None):
         self.state = state
         self.mass = mass
         self.free = free
         self.forces = forces
         self.contact = contact
         self.constraint = constraint
+        self.bodies = np.zeros(0, np.int64) if bodies is None else bodies
         self._pin_v = pin_v
         self.n = len(mass)
         self.dim = 6 * self.n

@@ -395,9 +395,12 @@ class SpringMeshSolver:
         state, h, paths = step.state, step.h, step.paths
         implicit = isinstance(self.integrator, BaraffWitkin)
 
+        bodies = np.array([k for k, path in enumerate(paths)
+                           if path.frame.name in step.inputs.bodies], np.int64)
+
         def ode_with(constraints: Contacts) -> MeshOde:
             return MeshOde(state, self.model.vertex_mass, self.free, forces, pin_v, constraints,
-                           None if implicit else ContactForce(constraints, h))
+                           None if implicit else ContactForce(constraints, h), bodies)
 
         ode = ode_with(contact)
         x0, v0 = state.x.copy(), state.v.copy()
