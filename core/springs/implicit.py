@@ -26,9 +26,9 @@ import numpy as np
 from ..integrators import Integrator, StepReport
 from ..integrators.krylov import projected_pcg
 from ..transforms import inverse3
-from .implicit_parts import (BaraffWitkinSystem, Linearisation, NewtonResult, SolvePattern,
-                             StepMemory, VelocityFilter, diagonal_filter,
-                             positions_and_velocities)
+from .implicit_parts import (BaraffWitkinSystem, BlockJacobi, Linearisation, MatrixFree,
+                             NewtonResult, SolvePattern, StepMemory, VelocityFilter,
+                             diagonal_filter, positions_and_velocities)
 from .multigrid import AggregationHierarchy
 from .sparse import BlockMatrix, BlockPattern, MatrixBuilder
 
@@ -481,29 +481,3 @@ class BaraffWitkin(Integrator):
         out = np.zeros_like(v1)
         out[pressed] = -(stop / np.where(speed > 1e-12, speed, np.inf))[:, None] * vt
         return out
-
-
-class MatrixFree:
-    """u -> A u for A = M - h df/dv - h^2 df/dx from the Jacobian blocks themselves, without
-    assembling A: for a step that only needs a product or two (every vertex pinned or held by
-    static friction: a cloth at rest on the ground); a plain callable, as :class:`BlockJacobi`."""
-
-    def __init__(self, blocks: list, mass: np.ndarray, h: float):
-        self.blocks, self.mass, self.h = blocks, mass, h
-
-    def __call__(self, u: np.ndarray) -> np.ndarray:
-        out = self.mass[:, None] * u
-        for blk in self.blocks:
-            blk.product(-self.h * self.h, -self.h, u, out)
-        return out
-
-
-class BlockJacobi:
-    """r -> D^-1 r with the inverse 3 x 3 diagonal blocks ``inverse`` (n, 3, 3); a plain
-    callable (not a closure) so a bake's state can be saved and resumed."""
-
-    def __init__(self, inverse: np.ndarray):
-        self.inverse = inverse
-
-    def __call__(self, r: np.ndarray) -> np.ndarray:
-        return np.matmul(self.inverse, r[:, :, None])[:, :, 0]

@@ -1,6 +1,7 @@
 """What the Baraff-Witkin stepper (:mod:`.implicit`) asks of a system and the records one step
-passes between its passes: the velocity filter (pins and contacts), the linear system, the
-Newton result, the solve pattern, and the memory carried from step to step."""
+passes between its passes: the velocity filter (pins and contacts), the linear system and its
+products (matrix-free, block Jacobi), the Newton result, the solve pattern, and the memory
+carried from step to step."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -195,3 +196,29 @@ def positions_and_velocities(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if y.shape[0] != 6 * n:
         raise ValueError(f"a spring mesh's state has 6 values per vertex (got {y.shape[0]})")
     return y[:3 * n].reshape(n, 3), y[3 * n:].reshape(n, 3)
+
+
+class MatrixFree:
+    """u -> A u for A = M - h df/dv - h^2 df/dx from the Jacobian blocks themselves, without
+    assembling A: for a step that only needs a product or two (every vertex pinned or held by
+    static friction: a cloth at rest on the ground); a plain callable, as :class:`BlockJacobi`."""
+
+    def __init__(self, blocks: list, mass: np.ndarray, h: float):
+        self.blocks, self.mass, self.h = blocks, mass, h
+
+    def __call__(self, u: np.ndarray) -> np.ndarray:
+        out = self.mass[:, None] * u
+        for blk in self.blocks:
+            blk.product(-self.h * self.h, -self.h, u, out)
+        return out
+
+
+class BlockJacobi:
+    """r -> D^-1 r with the inverse 3 x 3 diagonal blocks ``inverse`` (n, 3, 3); a plain
+    callable (not a closure) so a bake's state can be saved and resumed."""
+
+    def __init__(self, inverse: np.ndarray):
+        self.inverse = inverse
+
+    def __call__(self, r: np.ndarray) -> np.ndarray:
+        return np.matmul(self.inverse, r[:, :, None])[:, :, 0]

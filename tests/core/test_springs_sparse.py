@@ -254,7 +254,7 @@ def test_matrix_free_product_equals_the_assembled_matrix():
     """A step with nothing free (every vertex pinned or held by static friction) multiplies by
     A from the Jacobian blocks without assembling it: the same products, to rounding."""
     from physanim.core.forces import ParticleView
-    from physanim.core.springs.implicit import MatrixFree
+    from physanim.core.springs.implicit_parts import MatrixFree
 
     model = _stiff_grid(12, 3e4)
     rng = np.random.default_rng(5)
