@@ -107,7 +107,10 @@ def find_contacts(bodies: Bodies, frame_dt: float, gravity: np.ndarray,
                   interval: float | None = None) -> Found:
     """Every contact point for the next ``frame_dt`` [s] (speculative ones included);
     ``interval`` [s]: until the next search (which points of a body against a surface matter
-    most: :func:`reduce_manifolds`), the whole duration when not given."""
+    most: :func:`reduce_manifolds`), the whole duration when not given. Two bodies' margin
+    covers how far they can approach each other: at their relative velocity within
+    ``frame_dt``, or by their own motions until the next search (one of them stopped by a
+    third), whichever is more; bodies falling side by side do not approach."""
     rot = quat.to_matrix(bodies.q)
     reach = _reach(bodies, frame_dt, gravity)
     ground = bodies.shape == HALF_SPACE
@@ -118,7 +121,7 @@ def find_contacts(bodies: Bodies, frame_dt: float, gravity: np.ndarray,
 
         parts.append(mesh_contacts(bodies, rot, reach, interval))
     i, j = _candidate_pairs(bodies, reach, ground | (bodies.shape == MESH))
-    margin = SPECULATIVE + reach[i] + reach[j]
+    margin = SPECULATIVE + _closing(bodies, i, j, frame_dt, interval, gravity)
     centre = bodies.centres(rot)
     for kinds, run in _KINDS:
         sel = _of_kind(bodies.shape, i, j, kinds)
@@ -139,6 +142,20 @@ def _reach(bodies: Bodies, frame_dt: float, gravity: np.ndarray) -> np.ndarray:
     speed = np.linalg.norm(bodies.v, axis=1) + np.linalg.norm(bodies.w, axis=1) * bodies.bound
     fall = np.where(bodies.dynamic, 0.5 * float(np.linalg.norm(gravity)) * frame_dt ** 2, 0.0)
     return speed * frame_dt + fall
+
+
+def _closing(bodies: Bodies, i: np.ndarray, j: np.ndarray, frame_dt: float, interval: float,
+             gravity: np.ndarray) -> np.ndarray:
+    """(k,) how far bodies i and j can approach each other [m]: within ``frame_dt`` at their
+    relative velocity (turning counts at their bounds; gravity between a dynamic body and one
+    it does not move), or within ``interval`` by their own motions, whichever is more."""
+    v = np.linalg.norm(bodies.v[i] - bodies.v[j], axis=1)
+    turn = np.linalg.norm(bodies.w[i], axis=1) * bodies.bound[i] + \
+        np.linalg.norm(bodies.w[j], axis=1) * bodies.bound[j]
+    fall = np.where(bodies.dynamic[i] != bodies.dynamic[j],
+                    0.5 * float(np.linalg.norm(gravity)) * frame_dt ** 2, 0.0)
+    own = _reach(bodies, interval, gravity)
+    return np.maximum((v + turn) * frame_dt + fall, own[i] + own[j])
 
 
 def _candidate_pairs(bodies: Bodies, reach: np.ndarray, ground: np.ndarray):
