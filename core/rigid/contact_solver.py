@@ -160,6 +160,20 @@ def _subset_masks(width: int) -> np.ndarray:
     return (np.arange(1 << width)[:, None] >> np.arange(width)) & 1 == 1
 
 
+_SUBSET_TABLES: dict = {}
+
+
+def _subset_table(width: int) -> tuple[np.ndarray, np.ndarray]:
+    """The subsets of ``width`` slots (:func:`_subset_masks`) and the order they are preferred
+    in when several are complementary (C,) > 0: more points first, then the lower index."""
+    table = _SUBSET_TABLES.get(width)
+    if table is None:
+        masks = _subset_masks(width)
+        table = _SUBSET_TABLES[width] = (masks, masks.sum(axis=1) * 64 - np.arange(len(masks))
+                                         + 64.0)
+    return table
+
+
 def subset_blocks(k: np.ndarray, block: np.ndarray) -> np.ndarray:
     """(g, 2^W, W, W): the pseudo-inverse of each coupling (g, S, S) restricted to each
     subset of its first W = min(S, 4) slots (zero outside the subset), so that a manifold
@@ -328,38 +342,37 @@ def _enumerated(cs, sc, m, rel, old) -> tuple[np.ndarray, np.ndarray]:
     points (the precomputed subset blocks); ``solved`` (g,) says which were."""
     w = cs.subsets.shape[2]
     valid = cs.valid[m]
-    solved = valid[:, w:].sum(axis=1) == 0 if valid.shape[1] > w else np.ones(len(m), bool)
     out = np.zeros_like(old)
-    g = np.nonzero(solved)[0]
-    if not len(g):
-        return out, solved
-    mg = m[g]
-    masks = _subset_masks(w)  # (C, w)
-    v = valid[g, :w]
-    act = masks[None] & v[:, None]  # (g, C, w)
-    allowed = ~(masks[None] & ~v[:, None]).any(axis=2)  # subsets of the valid points only
-    o, r = old[g, :w], rel[g, :w]
-    mass, bias, imp = sc.mass[mg, :w], sc.bias[mg, :w], sc.impulse[mg, :w]
-    k = cs.coupling[mg, :w, :w]
-    let_go = np.where(act, 0.0, -o[:, None])
-    rhs = mass[:, None] * (r[:, None] + np.einsum("gij,gcj->gci", k, let_go)) + bias[:, None]
-    new = np.where(act, o[:, None] - np.einsum("gcij,gcj->gci", cs.subsets[mg],
-                                               np.where(act, rhs, 0.0))
-                   - imp[:, None] * o[:, None], 0.0)
-    after = mass[:, None] * (r[:, None] + np.einsum("gij,gcj->gci", k, new - o[:, None])) + \
+    if valid.shape[1] > w:
+        solved = ~valid[:, w:].any(axis=1)
+        g = np.nonzero(solved)[0]
+        if not len(g):
+            return out, solved
+        m, valid, old, rel = m[g], valid[g, :w], old[g, :w], rel[g, :w]
+    else:
+        solved, g = np.ones(len(m), bool), slice(None)
+    masks, preference = _subset_table(w)  # (C, w), (C,)
+    v = valid[:, None]  # (g, 1, w)
+    act = masks & v  # (g, C, w)
+    allowed = ~(masks & ~v).any(axis=2)  # subsets of the valid points only
+    mass, bias, imp = sc.mass[m, :w][:, None], sc.bias[m, :w], sc.impulse[m, :w]
+    k = cs.coupling[m, :w, :w]
+    o = old[:, None]
+    rhs = mass * (rel[:, None] - np.einsum("gij,gcj->gci", k, np.where(act, 0.0, o))) + \
         bias[:, None]
-    scale = 1e-6 * (np.abs(r) + np.abs(bias) + 1e-3)[:, None]
+    new = np.where(act, o - np.einsum("gcij,gcj->gci", cs.subsets[m], np.where(act, rhs, 0.0))
+                   - imp[:, None] * o, 0.0)
+    after = mass * (rel[:, None] + np.einsum("gij,gcj->gci", k, new - o)) + bias[:, None]
+    scale = 1e-6 * (np.abs(rel) + np.abs(bias) + 1e-3)[:, None]
     tiny = 1e-9 * np.abs(new).max(axis=2, keepdims=True)
     # how far each subset's answer is from complementary: pull at its points (as the
     # velocity it makes) and approach at the others
     pull = np.where(act & (new < -tiny), -new, 0.0) * np.diagonal(k, axis1=1, axis2=2)[:, None]
-    approach = np.where(v[:, None] & ~act & (after < -scale), -after, 0.0)
+    approach = np.where(v & ~act & (after < -scale), -after, 0.0)
     wrong = np.where(allowed, (pull + approach).sum(axis=2), np.inf)
-    ok = wrong == 0.0
-    size = masks.sum(axis=1)
-    best = np.where(ok.any(axis=1), np.argmax(np.where(ok, size * 64 - np.arange(len(masks)), -1),
-                                              axis=1), np.argmin(wrong, axis=1))
-    out[g, :w] = np.maximum(new[np.arange(len(g)), best], 0.0)
+    # the most preferred complementary subset, else the least wrong one (the first of equals)
+    best = np.argmax(np.where(wrong == 0.0, preference, -wrong), axis=1)
+    out[g, :w] = np.maximum(new[np.arange(len(best)), best], 0.0)
     return out, solved
 
 
