@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..collision.broadphase import UniformGrid
+from ..collision.crossing import KeptPairs
 from . import narrow, narrow_hull
 from . import quaternion as quat
 from .hull_shape import HullSet
@@ -24,6 +25,9 @@ HALF_SPACE = 5  # a collider's code: the solid below a plane (normal = local +Z)
 SPECULATIVE = 0.02  # [m] contacts this far apart are always reported
 FEATURES = 4096  # feature ids per pair in a contact key
 SUPPORT_TOLERANCE = 0.25 * SPECULATIVE  # [m] see reduce_manifolds
+# candidate pairs kept between searches (:class:`KeptPairs`) are found for swept boxes grown by
+# this fraction of the bodies' median bound radius
+KEPT_PAIRS_FRACTION = 0.1
 BOX_CORNERS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)],
                        dtype=np.float64)
 
@@ -104,13 +108,15 @@ class Found:
 
 
 def find_contacts(bodies: Bodies, frame_dt: float, gravity: np.ndarray,
-                  interval: float | None = None) -> Found:
+                  interval: float | None = None, kept: KeptPairs | None = None) -> Found:
     """Every contact point for the next ``frame_dt`` [s] (speculative ones included);
     ``interval`` [s]: until the next search (which points of a body against a surface matter
     most: :func:`reduce_manifolds`), the whole duration when not given. Two bodies' margin
     covers how far they can approach each other: at their relative velocity within
     ``frame_dt``, or by their own motions until the next search (one of them stopped by a
-    third), whichever is more; bodies falling side by side do not approach."""
+    third), whichever is more; bodies falling side by side do not approach. ``kept``: the
+    candidate pairs of earlier searches (:func:`kept_pairs`), read again while every body's
+    swept box stays within the one they were found for."""
     rot = quat.to_matrix(bodies.q)
     reach = _reach(bodies, frame_dt, gravity)
     ground = bodies.shape == HALF_SPACE
@@ -120,7 +126,7 @@ def find_contacts(bodies: Bodies, frame_dt: float, gravity: np.ndarray,
         from .mesh_contacts import mesh_contacts  # it builds on this module
 
         parts.append(mesh_contacts(bodies, rot, reach, interval))
-    i, j = _candidate_pairs(bodies, reach, ground | (bodies.shape == MESH))
+    i, j = _candidate_pairs(bodies, reach, ground | (bodies.shape == MESH), kept)
     margin = SPECULATIVE + _closing(bodies, i, j, frame_dt, interval, gravity)
     centre = bodies.centres(rot)
     for kinds, run in _KINDS:
@@ -158,14 +164,31 @@ def _closing(bodies: Bodies, i: np.ndarray, j: np.ndarray, frame_dt: float, inte
     return np.maximum((v + turn) * frame_dt + fall, own[i] + own[j])
 
 
-def _candidate_pairs(bodies: Bodies, reach: np.ndarray, ground: np.ndarray):
-    """(i, j) index pairs of bodies whose swept boxes overlap, at least one of them dynamic."""
+def kept_pairs() -> KeptPairs:
+    """Candidate pairs to keep between searches (:func:`find_contacts`)."""
+    return KeptPairs(_grid_pairs, within=True)
+
+
+def _grid_pairs(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(i, j) the overlapping boxes, i < j, sorted (a uniform grid)."""
+    pairs = UniformGrid().pairs(lo, hi)
+    return pairs[:, 0], pairs[:, 1]
+
+
+def _candidate_pairs(bodies: Bodies, reach: np.ndarray, ground: np.ndarray,
+                     kept: KeptPairs | None = None):
+    """(i, j) index pairs of bodies whose swept boxes overlap, at least one of them dynamic
+    (the same pairs, in the same order, whether read from ``kept`` or searched)."""
     idx = np.nonzero(~ground)[0]
     if len(idx) < 2:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
     grow = (bodies.bound + reach + 0.5 * SPECULATIVE)[idx, None]
-    pairs = UniformGrid().pairs(bodies.x[idx] - grow, bodies.x[idx] + grow)
-    i, j = idx[pairs[:, 0]], idx[pairs[:, 1]]
+    lo, hi = bodies.x[idx] - grow, bodies.x[idx] + grow
+    if kept is None:
+        i, j = _grid_pairs(lo, hi)
+    else:
+        i, j = kept.pairs(KEPT_PAIRS_FRACTION * float(np.median(bodies.bound[idx])), lo, hi)
+    i, j = idx[i], idx[j]
     keep = bodies.dynamic[i] | bodies.dynamic[j]
     if bodies.sleeping is not None:  # a moving kinematic body or collider wakes sleepers
         wake = bodies.sleeping & ~bodies.dynamic

@@ -27,7 +27,7 @@ from . import joint_solver as js_
 from .joints import FRAME
 from . import quaternion as quat
 from .bodies import Posed, collider_bodies, frame_bodies, mesh_shapes
-from .collide import SPECULATIVE, Bodies, Found, find_contacts
+from .collide import SPECULATIVE, Bodies, Found, find_contacts, kept_pairs
 from .hull_shape import HullSet
 from .mesh_contacts import MeshCache
 from .model import HULL, RigidBodyModel, RigidBodyState
@@ -94,6 +94,7 @@ class RigidBodySolver:
         self.colliders = ColliderPaths() if colliders is None else colliders
         self.hulls = _hulls(model)
         self._meshes = MeshCache()  # meshes' hierarchies, kept between frames
+        self._pairs = kept_pairs()  # candidate pairs, kept between searches
 
     # -- the frame ------------------------------------------------------------------------------
     def advance(self, state: RigidBodyState, inputs: RigidFrameInputs) -> RigidReport:
@@ -201,7 +202,7 @@ class RigidBodySolver:
         if forced is not None:
             fresh |= forced
         b.fresh = fresh
-        found = find_contacts(b, duration, step.g, self.collide_every * step.h)
+        found = find_contacts(b, duration, step.g, self.collide_every * step.h, self._pairs)
         parts = [self._prepare(b, found, self._remembered(old))]
         if old is not None:
             a_, b_ = old.ab[:, 0], old.ab[:, 1]
