@@ -128,6 +128,10 @@ def find_contacts(bodies: Bodies, frame_dt: float, gravity: np.ndarray,
         parts.append(mesh_contacts(bodies, rot, reach, interval))
     i, j = _candidate_pairs(bodies, reach, ground | (bodies.shape == MESH), kept)
     margin = SPECULATIVE + _closing(bodies, i, j, frame_dt, interval, gravity)
+    # pairs whose bounding spheres are further apart than their margin have no point within it
+    gap = np.linalg.norm(bodies.x[i] - bodies.x[j], axis=1) - bodies.bound[i] - bodies.bound[j]
+    near = np.flatnonzero(gap <= margin)
+    i, j, margin = i[near], j[near], margin[near]
     centre = bodies.centres(rot)
     for kinds, run in _KINDS:
         sel = _of_kind(bodies.shape, i, j, kinds)

@@ -9,6 +9,7 @@ import pytest
 
 from physanim.core.contact import ColliderFrame
 from physanim.core.rigid import quaternion as quat
+from physanim.core.rigid.collide import SPECULATIVE
 from physanim.tests.core.rigid_helpers import DT, box, ground, run, sphere, world
 
 
@@ -348,3 +349,15 @@ def test_candidate_pairs_kept_between_searches_change_nothing_and_save_searches(
         searches.append(len(calls))
     assert np.array_equal(states[0][0], states[1][0]) and np.array_equal(states[0][1], states[1][1])
     assert 0 < searches[0] < 48  # (up to 4 a frame at the default 8 sub-steps; 12 measured)
+
+
+def test_boxes_corner_to_corner_beyond_the_margin_make_no_contacts():
+    """Two resting cubes 1.5 cm apart along each axis, their nearest corners 2.6 cm apart:
+    further than the 2 cm speculative margin, so no contact point (separating axes along the
+    faces alone see them 1.5 cm apart)."""
+    d = 0.5 + 0.015
+    model, solver, state = world(box("A", (0.25, 0.25, 0.25), (0.0, 0.0, 0.0)),
+                                 box("B", (0.25, 0.25, 0.25), (d, d, d)))
+    assert math.sqrt(3.0) * 0.015 > SPECULATIVE
+    reports = run(solver, state, 2, gravity=(0.0, 0.0, 0.0))
+    assert [r.contacts for r in reports] == [0, 0]
