@@ -37,8 +37,9 @@ PACKAGE = __name__.rsplit(".addon.", 1)[0]
 EVERY_SECONDS = 10.0
 #: Bumped when what a checkpoint holds changes shape (2: an emitter's particle constraints carry
 #: their wire; 3: a spring mesh's solver keeps its tearing lengths and its angular springs their
-#: last geometry), so an older checkpoint is not resumed but baked afresh.
-FORMAT = 3
+#: last geometry; 4: the rigid-body solver keeps its candidate pairs), so an older checkpoint is
+#: not resumed but baked afresh.
+FORMAT = 4
 
 
 def folder(scene) -> Path:

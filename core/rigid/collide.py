@@ -3,9 +3,13 @@ points with persistent keys (for warm starting).
 
 Bodies here are every body the contact solver sees (:class:`Bodies`): the rigid bodies, then
 the colliders of the frame as bodies that impulses do not move. Pairs are found by a uniform
-grid over boxes swept by each body's motion over the frame; a half-space (the ground) is
-tested against every body directly. Each pair gets a speculative margin that covers how far
-the two can approach within the frame, so the solver sees contacts before they happen.
+grid over boxes swept by each body's motion over the frame (its pairs kept between searches
+while every box stays within the one they were found for: :class:`KeptPairs`); a half-space
+(the ground) is tested against every body directly. Each pair gets a speculative margin that
+covers how far the two can approach: at their relative velocity within the frame, or by their
+own motions until the next search, whichever is more (a half-space's or a mesh's pairs: by
+the body's own motion within the frame), so the solver sees contacts before they happen.
+Pairs whose bounding spheres are further apart than their margin skip the narrow phase.
 """
 from __future__ import annotations
 
@@ -157,8 +161,9 @@ def _reach(bodies: Bodies, frame_dt: float, gravity: np.ndarray) -> np.ndarray:
 def _closing(bodies: Bodies, i: np.ndarray, j: np.ndarray, frame_dt: float, interval: float,
              gravity: np.ndarray) -> np.ndarray:
     """(k,) how far bodies i and j can approach each other [m]: within ``frame_dt`` at their
-    relative velocity (turning counts at their bounds; gravity between a dynamic body and one
-    it does not move), or within ``interval`` by their own motions, whichever is more."""
+    relative velocity (turning counts at their bounds; gravity counts when one of them falls
+    and the other does not: a collider, a kinematic or a sleeping body), or within
+    ``interval`` by their own motions, whichever is more."""
     v = np.linalg.norm(bodies.v[i] - bodies.v[j], axis=1)
     turn = np.linalg.norm(bodies.w[i], axis=1) * bodies.bound[i] + \
         np.linalg.norm(bodies.w[j], axis=1) * bodies.bound[j]

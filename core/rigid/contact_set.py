@@ -64,12 +64,16 @@ class ContactSet:
     coupling: np.ndarray | None = None
     block: np.ndarray | None = None
     subsets: np.ndarray | None = None
+    rows_buffer: tuple | None = None  # what :func:`.contact_solver.rows` keeps (not pickled)
 
     _PER_SLOT = ("valid", "place", "normal", "t1", "t2", "ra", "rb", "base", "friction",
                  "restitution", "relative", "impulse", "touched")
 
     def __len__(self) -> int:
         return len(self.ab)
+
+    def __getstate__(self):
+        return {**self.__dict__, "rows_buffer": None}
 
     @classmethod
     def of_points(cls, a, b, pair, *, place, normal, point, xa, xb, separation, friction,

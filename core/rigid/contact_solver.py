@@ -91,27 +91,33 @@ def rows(cs: ContactSet, inv_mass: np.ndarray, inv_inertia: np.ndarray, ra: np.n
     same point, so angular momentum is conserved). Sets the blocks of new manifolds.
 
     Every row of a manifold is built at once in one (M, 3 S, 12) array: the S normal rows,
-    then the 2 S tangent rows; the Rows are views of it."""
+    then the 2 S tangent rows; the Rows are views of it. The directions and the linear parts
+    do not change while the contacts are kept (for the same inverse masses): they are written
+    once into arrays ``cs`` keeps, and each call writes the angular parts over the last ones
+    (the last call's Rows are views of the same arrays)."""
     m, s = cs.valid.shape
     a, b = cs.ab[:, 0], cs.ab[:, 1]
-    slot = np.concatenate([np.arange(s), np.repeat(np.arange(s), 2)])
-    dirs = np.concatenate([cs.normal, np.stack([cs.t1, cs.t2], axis=2).reshape(m, 2 * s, 3)],
-                          axis=1)  # (M, 3 S, 3)
+    if cs.rows_buffer is None or cs.rows_buffer[0] is not inv_mass:
+        slot = np.concatenate([np.arange(s), np.repeat(np.arange(s), 2)])
+        dirs = np.concatenate([cs.normal, np.stack([cs.t1, cs.t2], axis=2).reshape(m, 2 * s, 3)],
+                              axis=1)  # (M, 3 S, 3)
+        ma, mb = inv_mass[a, None, None], inv_mass[b, None, None]
+        j, mj = np.empty((2, m, 3 * s, 12))
+        np.negative(dirs, out=j[..., :3])
+        j[..., 6:9] = dirs
+        np.multiply(-ma, dirs, out=mj[..., :3])
+        np.multiply(mb, dirs, out=mj[..., 6:9])
+        linear = (ma[..., 0] + mb[..., 0]) * cs.valid[:, slot]  # (unit directions; empty slots
+        cs.rows_buffer = (inv_mass, slot, dirs, j, mj, linear)  # have none)
+    _, slot, dirs, j, mj, linear = cs.rows_buffer
     ang_a, ang_b = _cross(np.take(ra, slot, axis=1), dirs), _cross(np.take(rb, slot, axis=1), dirs)
     # I^-1 (r x d) for every row at once (matmul: the tensors are symmetric)
     wa, wb = np.matmul(ang_a, take(inv_inertia, a)), np.matmul(ang_b, take(inv_inertia, b))
-    ma, mb = inv_mass[a, None, None], inv_mass[b, None, None]
-    j, mj = np.empty((2, m, 3 * s, 12))
-    np.negative(dirs, out=j[..., :3])
     np.negative(ang_a, out=j[..., 3:6])
-    j[..., 6:9] = dirs
     j[..., 9:] = ang_b
-    np.multiply(-ma, dirs, out=mj[..., :3])
     np.negative(wa, out=mj[..., 3:6])
-    np.multiply(mb, dirs, out=mj[..., 6:9])
     mj[..., 9:] = wb
-    k = (ma[..., 0] + mb[..., 0]) * cs.valid[:, slot] + np.einsum("mri,mri->mr", ang_a, wa) + \
-        np.einsum("mri,mri->mr", ang_b, wb)  # (unit directions; empty slots have none)
+    k = linear + np.einsum("mri,mri->mr", ang_a, wa) + np.einsum("mri,mri->mr", ang_b, wb)
     mass = np.where(k > 0.0, 1.0 / np.maximum(k, 1e-300), 0.0)
     jn, mn = j[:, :s], mj[:, :s]
     if cs.block is None:

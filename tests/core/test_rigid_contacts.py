@@ -3,12 +3,14 @@ on a slope, coming to rest, stacks, momentum, exchange of velocities, no tunnell
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from physanim.core.contact import ColliderFrame
 from physanim.core.rigid import quaternion as quat
+from physanim.core.rigid import collide
 from physanim.core.rigid.collide import SPECULATIVE
 from physanim.tests.core.rigid_helpers import DT, box, ground, run, sphere, world
 
@@ -352,12 +354,40 @@ def test_candidate_pairs_kept_between_searches_change_nothing_and_save_searches(
 
 
 def test_boxes_corner_to_corner_beyond_the_margin_make_no_contacts():
-    """Two resting cubes 1.5 cm apart along each axis, their nearest corners 2.6 cm apart:
-    further than the 2 cm speculative margin, so no contact point (separating axes along the
-    faces alone see them 1.5 cm apart)."""
+    """Two cubes at rest (no gravity) 1.5 cm apart along each axis, their nearest corners
+    2.6 cm apart: further than the 2 cm speculative margin, so no contact point (separating
+    axes along the faces alone see them 1.5 cm apart)."""
     d = 0.5 + 0.015
     model, solver, state = world(box("A", (0.25, 0.25, 0.25), (0.0, 0.0, 0.0)),
                                  box("B", (0.25, 0.25, 0.25), (d, d, d)))
     assert math.sqrt(3.0) * 0.015 > SPECULATIVE
     reports = run(solver, state, 2, gravity=(0.0, 0.0, 0.0))
     assert [r.contacts for r in reports] == [0, 0]
+
+
+def test_a_pairs_margin_bounds_how_far_the_two_can_approach_within_the_frame():
+    """For random pairs (dynamic, kinematic, sleeping, colliders) moving at constant velocity
+    and spin, the dynamic ones falling: within the frame no point of one comes nearer the
+    other by more than the pair's closing distance (each point moves with its centre, and
+    turning moves it at most |w| times the bound radius); and a body let fall from rest onto
+    one that does not fall closes by the fall, 0.5 g dt^2."""
+    rng = np.random.default_rng(11)
+    n, dt = 400, DT
+    g = np.array([0.0, 0.0, -9.81])
+    bodies = SimpleNamespace(v=rng.normal(size=(n, 3)) * rng.choice([0.0, 0.1, 3.0], (n, 1)),
+                             w=rng.normal(size=(n, 3)) * rng.choice([0.0, 2.0], (n, 1)),
+                             bound=rng.uniform(0.05, 1.0, n), dynamic=rng.random(n) < 0.6)
+    i, j = rng.integers(0, n, (2, 2000))
+    closing = collide._closing(bodies, i, j, dt, dt / 4, g)
+    t = np.linspace(0.0, dt, 33)[:, None, None]
+
+    def moved(k):  # each centre's displacement over the frame
+        return bodies.v[k] * t + np.where(bodies.dynamic[k, None], 0.5 * g * t ** 2, 0.0)
+    spin = (np.linalg.norm(bodies.w[i], axis=1) * bodies.bound[i]
+            + np.linalg.norm(bodies.w[j], axis=1) * bodies.bound[j]) * t[..., 0]
+    assert np.all(np.linalg.norm(moved(j) - moved(i), axis=2) + spin <= closing + 1e-12)
+    still = (bodies.dynamic[i] != bodies.dynamic[j]) & \
+        (np.abs(bodies.v[i] - bodies.v[j]).sum(axis=1) == 0.0) & \
+        (np.abs(bodies.w[i]).sum(axis=1) + np.abs(bodies.w[j]).sum(axis=1) == 0.0)
+    assert still.sum() > 10
+    assert np.allclose(closing[still], 0.5 * 9.81 * dt ** 2, rtol=1e-12)

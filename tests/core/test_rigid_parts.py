@@ -3,16 +3,19 @@ normal blocks of a manifold and their complementary solutions."""
 from __future__ import annotations
 
 import math
+import pickle
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
+from physanim.core.rigid import dynamics
 from physanim.core.rigid import quaternion as quat
 from physanim.core.colouring import colour
 from physanim.core.transforms import tangents
 from physanim.core.rigid import contact_solver as cs_
 from physanim.core.rigid.contact_solver import Softness
+from physanim.tests.core.rigid_helpers import box, ground, run, world
 
 
 def _random_q(rng, n):
@@ -182,3 +185,29 @@ def test_block_cyclic_reduction_solves_block_tridiagonal_systems(paths, length, 
         expected = np.linalg.solve(dense, b[c].reshape(-1, 2))
         np.testing.assert_allclose(x[c].reshape(-1, 2), expected, rtol=0,
                                    atol=1e-12 * np.abs(expected).max())
+
+
+def test_contact_rows_keep_their_fixed_parts_with_the_contacts_but_not_in_a_checkpoint():
+    """The rows' directions and linear parts, written once per contact set, give at new poses
+    the rows a fresh build gives; a pickled contact set (a resumable bake's state) leaves them
+    out."""
+    model, solver, state = world(*[box(f"B{k}", (0.25, 0.25, 0.25), (0.1 * k, 0.0, 0.3 + 0.6 * k))
+                                   for k in range(3)])
+    run(solver, state, 24, colliders=[ground()])
+    cs = state.contacts.contacts
+    inv_mass = np.concatenate([model.body_inv_mass, [0.0]])  # the bodies, then the ground
+    inertia = np.zeros((4, 3, 3))
+    inertia[:3] = dynamics.world_tensor(state.body_q, model.body_inv_inertia)
+    cs_.rows(cs, inv_mass, inertia, cs.ra, cs.rb)
+    assert cs.rows_buffer is not None
+    turn = quat.to_matrix(quat.normalized(np.array([[1.0, 0.1, -0.2, 0.05]])))[0]
+    ra, rb = cs.ra @ turn.T, cs.rb @ turn.T  # the bodies turned: new arms and inertias
+    inertia[:3] = dynamics.world_tensor(quat.multiply(np.array([0.9, 0.1, 0.3, 0.0]) /
+                                                      np.linalg.norm([0.9, 0.1, 0.3, 0.0]),
+                                                      state.body_q), model.body_inv_inertia)
+    kept = cs_.rows(cs, inv_mass, inertia, ra, rb)
+    fresh = pickle.loads(pickle.dumps(cs))
+    assert fresh.rows_buffer is None
+    built = cs_.rows(fresh, inv_mass, inertia, ra, rb)
+    for f in ("jn", "mn", "mass_n", "jt", "mt", "mass_t"):
+        assert np.array_equal(getattr(kept, f), getattr(built, f)), f
