@@ -32,7 +32,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..transforms import take
+from . import manifold_blocks as blocks
 from .contact_set import ContactSet, subset_width
+from .manifold_blocks import subset_blocks  # noqa: F401 (part of this module's interface)
 
 CONTACT_HERTZ = 30.0  # stiffness of the soft contact [Hz] (at most a quarter of the step rate)
 STATIC_HERTZ = 60.0  # against bodies that do not move under impulses: stiffer
@@ -126,9 +128,9 @@ def rows(cs: ContactSet, inv_mass: np.ndarray, inv_inertia: np.ndarray, ra: np.n
         cs.subsets = np.full((m, 1 << w, w, w), np.nan)
     new = np.nonzero(np.isnan(cs.block[:, 0, 0]))[0]
     if len(new):
-        cs.coupling[new] = _coupling(cs.valid[new], jn[new], mn[new])
-        cs.block[new] = _pinv(cs.coupling[new])
-        cs.subsets[new] = subset_blocks(cs.coupling[new], cs.block[new])
+        cs.coupling[new] = blocks.coupling(cs.valid[new], jn[new], mn[new])
+        cs.block[new] = blocks.pinv(cs.coupling[new])
+        cs.subsets[new] = blocks.subset_blocks(cs.coupling[new], cs.block[new])
     count = np.maximum(cs.valid.sum(axis=1), 1)[:, None]
     return Rows(jn, mn, mass[:, :s], j[:, s:], mj[:, s:], mass[:, s:] / count)
 
@@ -142,105 +144,6 @@ def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     np.subtract(u2 * v0, u0 * v2, out=out[..., 1])
     np.subtract(u0 * v1, u1 * v0, out=out[..., 2])
     return out
-
-
-def _coupling(valid: np.ndarray, jn: np.ndarray, mn: np.ndarray) -> np.ndarray:
-    """Per manifold, K_ij = J_i M^-1 J_j^T over its points' normal rows, empty slots as
-    decoupled unit rows. Four coplanar points of a face leave K rank 3; the minimum-norm
-    solution (its pseudo-inverse) then shares the load symmetrically, where point-by-point
-    Gauss-Seidel would favour whichever point comes first (and set a stack swaying)."""
-    return _restricted(np.einsum("mij,mkj->mik", jn, mn), valid)
-
-
-def _pinv(k: np.ndarray) -> np.ndarray:
-    """Pseudo-inverses of symmetric positive semi-definite matrices (g, S, S), eigenvalues
-    below 1e-10 of the largest taken as zero (numpy's pinv, without its per-call overhead)."""
-    value, vector = np.linalg.eigh(k)
-    keep = value > 1e-10 * value[:, -1:]
-    inverse = np.where(keep, 1.0 / np.where(keep, value, 1.0), 0.0)
-    return np.einsum("gik,gk,gjk->gij", vector, inverse, vector)
-
-
-def _subset_masks(width: int) -> np.ndarray:
-    """(2^width, width) bool: slot i is in subset c when bit i of c is set."""
-    return (np.arange(1 << width)[:, None] >> np.arange(width)) & 1 == 1
-
-
-_SUBSET_TABLES: dict = {}
-
-
-def _subset_table(width: int) -> tuple[np.ndarray, np.ndarray]:
-    """The subsets of ``width`` slots (:func:`_subset_masks`) and the order they are preferred
-    in when several are complementary (C,) > 0: more points first, then the lower index."""
-    table = _SUBSET_TABLES.get(width)
-    if table is None:
-        masks = _subset_masks(width)
-        table = _SUBSET_TABLES[width] = (masks, masks.sum(axis=1) * 64 - np.arange(len(masks))
-                                         + 64.0)
-    return table
-
-
-def subset_blocks(k: np.ndarray, block: np.ndarray) -> np.ndarray:
-    """(g, 2^W, W, W): the pseudo-inverse of each coupling (g, S, S) restricted to each
-    subset of its first W = min(S, 4) slots (zero outside the subset), so that a manifold
-    whose block solution would pull finds its complementary solution without a
-    factorisation (:func:`_enumerated`). ``block`` (g, S, S): the pseudo-inverses of the
-    whole couplings (the subset of all W slots when S = W). Subsets of up to three points are
-    inverted in closed form; singular ones (collinear points) through :func:`_pinv`."""
-    g, w = len(k), subset_width(k.shape[1])
-    masks = _subset_masks(w)
-    size = masks.sum(axis=1)
-    out = np.zeros((g, len(masks), w, w))
-    for n in range(1, w + 1):
-        which = np.nonzero(size == n)[0]
-        slots = np.array([np.nonzero(masks[c])[0] for c in which])  # (c, n)
-        if n == k.shape[1]:
-            inv = block[:, None]
-        else:
-            sub = k[:, slots[:, :, None], slots[:, None, :]]  # (g, c, n, n)
-            inv = _small_inverse(sub)
-        out[:, which[:, None, None], slots[:, :, None], slots[:, None, :]] = inv
-    return out
-
-
-def _small_inverse(k: np.ndarray) -> np.ndarray:
-    """Pseudo-inverses of symmetric positive semi-definite matrices (..., n, n), n <= 4: the
-    adjugate over the determinant for n <= 3 where the matrix is far from singular,
-    :func:`_pinv` otherwise."""
-    n = k.shape[-1]
-    shape = k.shape
-    flat = k.reshape(-1, n, n)
-    if n == 1:
-        d = flat[:, 0, 0]
-        return np.where(d > 0.0, 1.0 / np.where(d > 0.0, d, 1.0), 0.0).reshape(shape)
-    if n == 2:
-        a, b, d = flat[:, 0, 0], flat[:, 0, 1], flat[:, 1, 1]
-        det = a * d - b * b
-        adj = np.stack([d, -b, -b, a], axis=1).reshape(-1, 2, 2)
-        scale = a * d
-    elif n == 3:
-        a, b, c = flat[:, 0, 0], flat[:, 0, 1], flat[:, 0, 2]
-        d, e, f = flat[:, 1, 1], flat[:, 1, 2], flat[:, 2, 2]
-        ca, cb, cc = d * f - e * e, c * e - b * f, b * e - c * d
-        cd, ce, cf = a * f - c * c, b * c - a * e, a * d - b * b
-        det = a * ca + b * cb + c * cc
-        adj = np.stack([ca, cb, cc, cb, cd, ce, cc, ce, cf], axis=1).reshape(-1, 3, 3)
-        scale = a * d * f
-    else:
-        return _pinv(flat).reshape(shape)
-    good = det > 1e-8 * np.maximum(scale, 1e-300)
-    out = adj / np.where(good, det, 1.0)[:, None, None]
-    bad = np.nonzero(~good)[0]
-    if len(bad):
-        out[bad] = _pinv(flat[bad])
-    return out.reshape(shape)
-
-
-def _restricted(k: np.ndarray, rows_: np.ndarray) -> np.ndarray:
-    """K (g, S, S) with the rows and columns outside ``rows_`` (g, S) made unit rows."""
-    pair = rows_[:, :, None] & rows_[:, None, :]
-    eye = np.broadcast_to(np.eye(rows_.shape[1], dtype=bool), k.shape)
-    return np.where(pair, k, np.where(eye, 1.0, 0.0))
 
 
 @dataclass
@@ -357,7 +260,7 @@ def _enumerated(cs, sc, m, rel, old) -> tuple[np.ndarray, np.ndarray]:
         m, valid, old, rel = m[g], valid[g, :w], old[g, :w], rel[g, :w]
     else:
         solved, g = np.ones(len(m), bool), slice(None)
-    masks, preference = _subset_table(w)  # (C, w), (C,)
+    masks, preference = blocks.subset_table(w)  # (C, w), (C,)
     v = valid[:, None]  # (g, 1, w)
     act = masks & v  # (g, C, w)
     allowed = ~(masks & ~v).any(axis=2)  # subsets of the valid points only
@@ -404,7 +307,7 @@ def _active_set(cs, sc, m, rel, old, active) -> np.ndarray:
         some = np.nonzero(act.any(axis=1))[0]  # (all let go: nothing to solve)
         if len(some):
             a_, o_ = act[some], o[some]
-            inv = _pinv(_restricted(k[some], a_))
+            inv = blocks.pinv(blocks.restricted(k[some], a_))
             new[some] = np.where(a_, o_ - np.einsum("gij,gj->gi", inv, np.where(a_, rhs[some], 0.0))
                                  - sc.impulse[mt[some]] * o_, 0.0)
         after = sc.mass[mt] * (rel[todo] + np.einsum("gij,gj->gi", k, new - o)) + sc.bias[mt]
