@@ -41,7 +41,7 @@ class ContactSet:
             until then; kept with the manifold: they barely change).
         subsets: (M, 2^W, W, W), W = min(S, 4): the pseudo-inverse of the coupling restricted
             to each subset of the first W slots (bit i of the subset's index: slot i), set with
-            ``block`` (:func:`.contact_solver.subset_blocks`).
+            ``block`` (:func:`.manifold_blocks.subset_blocks`).
     """
 
     ab: np.ndarray

@@ -34,7 +34,6 @@ import numpy as np
 from ..transforms import take
 from . import manifold_blocks as blocks
 from .contact_set import ContactSet, subset_width
-from .manifold_blocks import subset_blocks  # noqa: F401 (part of this module's interface)
 
 CONTACT_HERTZ = 30.0  # stiffness of the soft contact [Hz] (at most a quarter of the step rate)
 STATIC_HERTZ = 60.0  # against bodies that do not move under impulses: stiffer

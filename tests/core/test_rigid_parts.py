@@ -15,6 +15,7 @@ from physanim.core.colouring import colour
 from physanim.core.transforms import tangents
 from physanim.core.rigid import contact_solver as cs_
 from physanim.core.rigid.contact_solver import Softness
+from physanim.core.rigid.manifold_blocks import subset_blocks
 from physanim.tests.core.rigid_helpers import box, ground, run, world
 
 
@@ -106,7 +107,7 @@ def _couplings(rng, g):
 def test_subset_blocks_are_the_pseudo_inverses_of_every_principal_sub_block():
     rng = np.random.default_rng(5)
     k = _couplings(rng, 30)
-    blocks = cs_.subset_blocks(k, np.linalg.pinv(k, rcond=1e-10, hermitian=True))
+    blocks = subset_blocks(k, np.linalg.pinv(k, rcond=1e-10, hermitian=True))
     assert blocks.shape == (30, 16, 4, 4)
     for c in range(16):
         slots = [i for i in range(4) if c >> i & 1]
@@ -123,7 +124,7 @@ def _lcp(k, rel, old, valid):
     enumeration."""
     g = len(k)
     block = np.linalg.pinv(k, rcond=1e-10, hermitian=True)
-    cs = SimpleNamespace(valid=valid, coupling=k, subsets=cs_.subset_blocks(k, block))
+    cs = SimpleNamespace(valid=valid, coupling=k, subsets=subset_blocks(k, block))
     sc = SimpleNamespace(mass=np.ones((g, 4)), bias=np.zeros((g, 4)), impulse=np.zeros((g, 4)))
     return cs_._enumerated(cs, sc, np.arange(g), rel, old)
 
