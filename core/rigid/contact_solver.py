@@ -231,11 +231,6 @@ def _normal(local, cs, r, sc, s, e) -> None:
     pulling = (new < 0.0).any(axis=1) & ~none
     hard = np.nonzero(mixed | pulling)[0]
     if len(hard):
-        if cs.valid.shape[1] <= cs.subsets.shape[2]:
-            act = cs.valid[hard + s] & np.where(mixed[hard, None], ~idle[hard], new[hard] >= 0.0)
-            new[hard], fits = _guessed(cs, sc, hard + s, rel[hard], old[hard], act)
-            hard = hard[~fits]
-    if len(hard):
         new[hard], solved = _enumerated(cs, sc, hard + s, rel[hard], old[hard])
         rest = hard[~solved]
         if len(rest):
@@ -243,29 +238,6 @@ def _normal(local, cs, r, sc, s, e) -> None:
             new[rest] = _active_set(cs, sc, rest + s, rel[rest], old[rest], start)
     local += np.einsum("ms,msj->mj", new - old, r.mn[s:e])
     cs.impulse[s:e, :, 0] = new
-
-
-def _guessed(cs, sc, m, rel, old, act) -> tuple[np.ndarray, np.ndarray]:
-    """Normal impulses (g, S) of manifolds m (of at most W points) solved with the points
-    ``act`` (g, S) pushing and the others let go, and (g,) whether that is the complementary
-    solution :func:`_enumerated` would choose (no point pulls, every point let go is left
-    separating): one subset block instead of every subset, for a good guess of the subset
-    (usually right)."""
-    w = cs.subsets.shape[2]
-    index = (act[:, :w] << np.arange(w)).sum(axis=1)
-    mass, bias, imp = sc.mass[m], sc.bias[m], sc.impulse[m]
-    k = cs.coupling[m]
-    let_go = np.where(act, 0.0, old)[:, :, None]
-    rhs = np.where(act, mass * (rel - np.matmul(k, let_go)[..., 0]) + bias, 0.0)
-    new = np.where(act, old - np.matmul(cs.subsets[m, index], rhs[:, :, None])[..., 0]
-                   - imp * old, 0.0)
-    after = mass * (rel + np.matmul(k, (new - old)[:, :, None])[..., 0]) + bias
-    scale = 1e-6 * (np.abs(rel) + np.abs(bias) + 1e-3)
-    tiny = 1e-9 * np.abs(new).max(axis=1, keepdims=True)
-    # a let-go point left exactly touching (within the tolerance) might push too: a larger
-    # subset could then be complementary as well, which the enumeration would prefer
-    wrong = (act & (new < -tiny)) | (cs.valid[m] & ~act & (after <= scale))
-    return np.maximum(new, 0.0), ~wrong.any(axis=1)
 
 
 def _enumerated(cs, sc, m, rel, old) -> tuple[np.ndarray, np.ndarray]:
@@ -294,11 +266,11 @@ def _enumerated(cs, sc, m, rel, old) -> tuple[np.ndarray, np.ndarray]:
     mass, bias, imp = sc.mass[m, :w][:, None], sc.bias[m, :w], sc.impulse[m, :w]
     k = cs.coupling[m, :w, :w]
     o = old[:, None]
-    # (x K = K x per subset row: the couplings are symmetric)
-    rhs = mass * (rel[:, None] - np.matmul(np.where(act, 0.0, o), k)) + bias[:, None]
-    new = np.where(act, o - np.matmul(cs.subsets[m], np.where(act, rhs, 0.0)[..., None])[..., 0]
+    rhs = mass * (rel[:, None] - np.einsum("gij,gcj->gci", k, np.where(act, 0.0, o))) + \
+        bias[:, None]
+    new = np.where(act, o - np.einsum("gcij,gcj->gci", cs.subsets[m], np.where(act, rhs, 0.0))
                    - imp[:, None] * o, 0.0)
-    after = mass * (rel[:, None] + np.matmul(new - o, k)) + bias[:, None]
+    after = mass * (rel[:, None] + np.einsum("gij,gcj->gci", k, new - o)) + bias[:, None]
     scale = 1e-6 * (np.abs(rel) + np.abs(bias) + 1e-3)[:, None]
     tiny = 1e-9 * np.abs(new).max(axis=2, keepdims=True)
     # how far each subset's answer is from complementary: pull at its points (as the

@@ -149,33 +149,6 @@ def test_enumerated_normal_impulses_are_complementary():
     assert np.abs(x * w)[valid].max() < 1e-9 * scale ** 2
 
 
-def test_a_guessed_subset_is_kept_exactly_when_it_is_the_complementary_solution():
-    """The solver first tries one subset of a manifold's points (those needing an impulse);
-    where that answer is complementary it is the enumeration's (unique: K positive definite
-    here), and where it is not, the guess says so and the enumeration takes over."""
-    rng = np.random.default_rng(11)
-    g = 400
-    j = _rows(rng, g)
-    k = np.einsum("gij,gkj->gik", j, j)
-    rel = np.einsum("gij,gj->gi", j, rng.normal(size=(g, 6)))
-    valid = np.arange(4) < rng.integers(1, 5, g)[:, None]
-    k = np.where(valid[:, :, None] & valid[:, None, :], k, np.eye(4))
-    old = np.where(valid, np.maximum(rng.normal(size=(g, 4)), 0.0), 0.0)
-    want, _ = _lcp(k, rel, old, valid)
-    act = valid & (rng.random((g, 4)) < 0.6)
-    block = np.linalg.pinv(k, rcond=1e-10, hermitian=True)
-    cs = SimpleNamespace(valid=valid, coupling=k, subsets=subset_blocks(k, block))
-    sc = SimpleNamespace(mass=np.ones((g, 4)), bias=np.zeros((g, 4)), impulse=np.zeros((g, 4)))
-    x, fits = cs_._guessed(cs, sc, np.arange(g), rel, old, act)
-    assert 0.1 * g < fits.sum() < 0.9 * g  # some guesses are right, some wrong
-    scale = np.abs(rel).max() + np.abs(k).max() * np.abs(want).max()
-    assert np.abs(x[fits] - want[fits]).max() < 1e-9 * scale
-    w = rel + np.einsum("gij,gj->gi", k, x - old)
-    held = ~valid | ((x >= 0.0) & (w > -1e-9 * scale) & (np.abs(x * w) < 1e-9 * scale ** 2))
-    assert held[fits].all()  # every kept answer is complementary
-    assert not held[~fits].all(axis=1).all()  # and wrong guesses were rejected
-
-
 def test_a_symmetric_load_on_four_coplanar_points_is_shared_equally():
     """A box resting flat: four points of one face, the load pressing the middle and the
     corner rows rank 3 — the four impulses come out equal (a point-by-point pass would
