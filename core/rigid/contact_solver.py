@@ -266,11 +266,11 @@ def _enumerated(cs, sc, m, rel, old) -> tuple[np.ndarray, np.ndarray]:
     mass, bias, imp = sc.mass[m, :w][:, None], sc.bias[m, :w], sc.impulse[m, :w]
     k = cs.coupling[m, :w, :w]
     o = old[:, None]
-    rhs = mass * (rel[:, None] - np.einsum("gij,gcj->gci", k, np.where(act, 0.0, o))) + \
-        bias[:, None]
-    new = np.where(act, o - np.einsum("gcij,gcj->gci", cs.subsets[m], np.where(act, rhs, 0.0))
+    # (x K = K x per subset row: the couplings are symmetric)
+    rhs = mass * (rel[:, None] - np.matmul(np.where(act, 0.0, o), k)) + bias[:, None]
+    new = np.where(act, o - np.matmul(cs.subsets[m], np.where(act, rhs, 0.0)[..., None])[..., 0]
                    - imp[:, None] * o, 0.0)
-    after = mass * (rel[:, None] + np.einsum("gij,gcj->gci", k, new - o)) + bias[:, None]
+    after = mass * (rel[:, None] + np.matmul(new - o, k)) + bias[:, None]
     scale = 1e-6 * (np.abs(rel) + np.abs(bias) + 1e-3)[:, None]
     tiny = 1e-9 * np.abs(new).max(axis=2, keepdims=True)
     # how far each subset's answer is from complementary: pull at its points (as the
