@@ -157,8 +157,9 @@ class ContactSet:
         (N, 3, 3) since the reference orientations (so the current ones become the
         reference); separations are unchanged."""
         a, b = self.ab[:, 0], self.ab[:, 1]
-        self.ra = np.matmul(self.ra, turn[a].transpose(0, 2, 1))
-        self.rb = np.matmul(self.rb, turn[b].transpose(0, 2, 1))
+        turn_t = turn.transpose(0, 2, 1)  # (gathered contiguous: faster products)
+        self.ra = np.matmul(self.ra, turn_t[a])
+        self.rb = np.matmul(self.rb, turn_t[b])
         return self
 
     def world_impulses(self) -> np.ndarray:

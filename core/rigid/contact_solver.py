@@ -111,14 +111,15 @@ def rows(cs: ContactSet, inv_mass: np.ndarray, inv_inertia: np.ndarray, ra: np.n
         linear = (ma[..., 0] + mb[..., 0]) * cs.valid[:, slot]  # (unit directions; empty slots
         cs.rows_buffer = (inv_mass, slot, dirs, j, mj, linear)  # have none)
     _, slot, dirs, j, mj, linear = cs.rows_buffer
-    ang_a, ang_b = _cross(np.take(ra, slot, axis=1), dirs), _cross(np.take(rb, slot, axis=1), dirs)
-    # I^-1 (r x d) for every row at once (matmul: the tensors are symmetric)
-    wa, wb = np.matmul(ang_a, take(inv_inertia, a)), np.matmul(ang_b, take(inv_inertia, b))
-    np.negative(ang_a, out=j[..., 3:6])
-    j[..., 9:] = ang_b
-    np.negative(wa, out=mj[..., 3:6])
-    mj[..., 9:] = wb
-    k = linear + np.einsum("mri,mri->mr", ang_a, wa) + np.einsum("mri,mri->mr", ang_b, wb)
+    # written in place (copies into the interleaved rows cost more than the products):
+    # -(r_a x d) = d x r_a, r_b x d, and I^-1 times each (matmul: the tensors are symmetric)
+    ang_a, ang_b = j[..., 3:6], j[..., 9:]
+    _cross(dirs, np.take(ra, slot, axis=1), out=ang_a)
+    _cross(np.take(rb, slot, axis=1), dirs, out=ang_b)
+    np.matmul(ang_a, take(inv_inertia, a), out=mj[..., 3:6])
+    np.matmul(ang_b, take(inv_inertia, b), out=mj[..., 9:])
+    k = linear + np.einsum("mri,mri->mr", ang_a, mj[..., 3:6]) + \
+        np.einsum("mri,mri->mr", ang_b, mj[..., 9:])
     mass = np.where(k > 0.0, 1.0 / np.maximum(k, 1e-300), 0.0)
     jn, mn = j[:, :s], mj[:, :s]
     if cs.block is None:
@@ -134,11 +135,13 @@ def rows(cs: ContactSet, inv_mass: np.ndarray, inv_inertia: np.ndarray, ra: np.n
     return Rows(jn, mn, mass[:, :s], j[:, s:], mj[:, s:], mass[:, s:] / count)
 
 
-def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """u x v over the last axis (numpy's cross, without its broadcasting copies)."""
+def _cross(u: np.ndarray, v: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """u x v over the last axis (numpy's cross, without its broadcasting copies), into
+    ``out`` when given."""
     u0, u1, u2 = u[..., 0], u[..., 1], u[..., 2]
     v0, v1, v2 = v[..., 0], v[..., 1], v[..., 2]
-    out = np.empty(np.broadcast_shapes(u.shape, v.shape))
+    if out is None:
+        out = np.empty(np.broadcast_shapes(u.shape, v.shape))
     np.subtract(u1 * v2, u2 * v1, out=out[..., 0])
     np.subtract(u2 * v0, u0 * v2, out=out[..., 1])
     np.subtract(u0 * v1, u1 * v0, out=out[..., 2])

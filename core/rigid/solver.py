@@ -338,11 +338,11 @@ class RigidBodySolver:
         they have moved apart along the normal, and both impulses act at their midpoint. The
         manifold blocks are kept from the contact search (they barely change)."""
         cs, b = step.contacts, step.bodies
-        turn = self._turn(step)
+        turn_t = self._turn(step).transpose(0, 2, 1)  # (gathered contiguous: faster products)
         a, bb = cs.ab[:, 0], cs.ab[:, 1]
         xa, xb = take(b.x, a)[:, None], take(b.x, bb)[:, None]
-        pa = xa + np.matmul(cs.ra, take(turn, a).transpose(0, 2, 1))
-        pb = xb + np.matmul(cs.rb, take(turn, bb).transpose(0, 2, 1))
+        pa = xa + np.matmul(cs.ra, take(turn_t, a))
+        pb = xb + np.matmul(cs.rb, take(turn_t, bb))
         step.separation = cs.base + np.einsum("msi,msi->ms", cs.normal, pb - pa)
         mid = 0.5 * (pa + pb)
         step.rows = cs_.rows(cs, step.inv_mass, self._inverse_inertia(step, b.q),
