@@ -286,16 +286,21 @@ class KeptPairs:
         return {"find": self.find, "within": self.within, "_grown": None, "_pairs": None}
 
     def pairs(self, margin: float, lo_a: np.ndarray, hi_a: np.ndarray,
-              lo_b: np.ndarray | None = None, hi_b: np.ndarray | None = None
-              ) -> tuple[np.ndarray, np.ndarray]:
+              lo_b: np.ndarray | None = None, hi_b: np.ndarray | None = None,
+              only: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The overlapping pairs (i into A, j into B; within one set: i < j) of these boxes,
-        (n, 3) each; B is A for a search within one set."""
+        (n, 3) each; B is A for a search within one set. ``only`` (bool over A's boxes, a
+        search within one set): just the pairs with at least one of them (the same pairs as
+        filtering the result, tested fewer)."""
         boxes = (lo_a, hi_a) if self.within else (lo_a, hi_a, lo_b, hi_b)
         if not self._holds(boxes):
             self._grown = tuple(b - margin if k % 2 == 0 else b + margin
                                 for k, b in enumerate(boxes))
             self._pairs = self.find(*self._grown)
         i, j = self._pairs
+        if only is not None and self.within:
+            keep = np.flatnonzero(only[i] | only[j])
+            i, j = i[keep], j[keep]
         lo_b, hi_b = boxes[-2:]
         for a in range(3):  # axis by axis, the pairs compacted after each (1-D gathers)
             if not len(i):

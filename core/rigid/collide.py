@@ -30,8 +30,9 @@ SPECULATIVE = 0.02  # [m] contacts this far apart are always reported
 FEATURES = 4096  # feature ids per pair in a contact key
 SUPPORT_TOLERANCE = 0.25 * SPECULATIVE  # [m] see reduce_manifolds
 # candidate pairs kept between searches (:class:`KeptPairs`) are found for swept boxes grown by
-# this fraction of the bodies' median bound radius
-KEPT_PAIRS_FRACTION = 0.1
+# this fraction of the bodies' median bound radius (a search then reads them for the fresh bodies
+# only, so a wider margin costs little and saves grid searches)
+KEPT_PAIRS_FRACTION = 0.25
 BOX_CORNERS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)],
                        dtype=np.float64)
 
@@ -196,7 +197,8 @@ def _candidate_pairs(bodies: Bodies, reach: np.ndarray, ground: np.ndarray,
     if kept is None:
         i, j = _grid_pairs(lo, hi)
     else:
-        i, j = kept.pairs(KEPT_PAIRS_FRACTION * float(np.median(bodies.bound[idx])), lo, hi)
+        i, j = kept.pairs(KEPT_PAIRS_FRACTION * float(np.median(bodies.bound[idx])), lo, hi,
+                          only=None if bodies.fresh is None else bodies.fresh[idx])
     i, j = idx[i], idx[j]
     keep = bodies.dynamic[i] | bodies.dynamic[j]
     if bodies.sleeping is not None:  # a moving kinematic body or collider wakes sleepers

@@ -99,10 +99,18 @@ def clip_face(corners: np.ndarray, half: np.ndarray, ref_face: np.ndarray):
     labels[:, :4] = np.arange(4)
     edges = labels.copy()
     rows = np.arange(m)
+    slot = np.arange(CAPACITY)
     for k in range(4):
         axis = PLANE_AXIS[ref_face, k]
-        poly, count, labels, edges = _clip_plane(poly, count, labels, edges, axis,
-                                                 PLANE_SIGN[ref_face, k], half[rows, axis], k)
+        sign, limit = PLANE_SIGN[ref_face, k], half[rows, axis]
+        # only the polygons with a corner beyond the plane change (the others' corners all
+        # count as inside: the same tolerance as in _clip_plane)
+        d = sign[:, None] * poly[rows[:, None], slot, axis[:, None]] - limit[:, None]
+        out = np.flatnonzero(((d > 1e-6 * limit[:, None]) & (slot < count[:, None])).any(axis=1))
+        if not len(out):
+            continue
+        poly[out], count[out], labels[out], edges[out] = _clip_plane(
+            poly[out], count[out], labels[out], edges[out], axis[out], sign[out], limit[out], k)
     return poly, count, labels
 
 

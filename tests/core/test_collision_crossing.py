@@ -211,6 +211,13 @@ def test_kept_pairs_equal_a_fresh_search_as_the_boxes_move(within):
         assert len(want[0]) > 20
         np.testing.assert_array_equal(got[0], want[0])
         np.testing.assert_array_equal(got[1], want[1])
+        if within:  # only the pairs with a chosen box: the same as filtering afterwards
+            only = rng.random(len(c)) < 0.2
+            some = kept.pairs(margin, lo, hi, only=only)
+            with_one = only[want[0]] | only[want[1]]
+            assert 0 < with_one.sum() < len(want[0])
+            np.testing.assert_array_equal(some[0], want[0][with_one])
+            np.testing.assert_array_equal(some[1], want[1][with_one])
         searches.append(kept._grown)
 
     check(centres)

@@ -398,3 +398,40 @@ def test_spheres_and_capsules_against_boxes_match_exact_distances():
     s = sphere_box(cc, r, cb, rb_, hb, 10.0)
     assert np.abs(s.separation - (_box_sdf(cc, cb, rb_, hb)[0] - r)).max() < TOL
     assert np.allclose(np.linalg.norm(s.normal, axis=1), 1.0)
+
+
+def test_clipping_skips_only_the_faces_a_side_plane_does_not_cut():
+    # clip_face clips each side plane only where a corner lies beyond it; every face it skips
+    # is one that plane leaves as it is: the same polygons, counts and labels as clipping all
+    from physanim.core.rigid.narrow_clip import (CAPACITY, PLANE_AXIS, PLANE_SIGN, _clip_plane,
+                                                 clip_face)
+
+    rng = np.random.default_rng(4)
+    m = 500
+    half = rng.uniform(0.2, 0.6, (m, 3))
+    ref_face = rng.integers(0, 6, m)
+    centre = rng.uniform(-0.5, 0.5, (m, 3))
+    spin = rng.uniform(0.0, 2.0 * np.pi, m)
+    square = np.stack([np.cos(spin + k * np.pi / 2) for k in range(4)], 1)[..., None] * \
+        np.array([1.0, 0.0, 0.0]) + np.stack([np.sin(spin + k * np.pi / 2)
+                                              for k in range(4)], 1)[..., None] * \
+        np.array([0.0, 1.0, 0.0])
+    corners = centre[:, None] + rng.uniform(0.05, 0.7, (m, 1, 1)) * square
+    corners[: m // 4] = 0.3 * half[: m // 4, None] * np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0],
+                                                               [-1, 1, 0]])  # inside: no cut
+    poly, count, labels = clip_face(corners, half, ref_face)
+    want = np.zeros((m, CAPACITY, 3))
+    want[:, :4] = corners
+    w_count, w_labels = np.full(m, 4), np.zeros((m, CAPACITY), np.int64)
+    w_labels[:, :4] = np.arange(4)
+    edges = w_labels.copy()
+    for k in range(4):
+        axis = PLANE_AXIS[ref_face, k]
+        want, w_count, w_labels, edges = _clip_plane(want, w_count, w_labels, edges, axis,
+                                                     PLANE_SIGN[ref_face, k],
+                                                     half[np.arange(m), axis], k)
+    assert (count != 4).sum() > m // 4  # many were cut
+    np.testing.assert_array_equal(count, w_count)
+    live = np.arange(CAPACITY) < count[:, None]
+    np.testing.assert_array_equal(poly[live], want[live])
+    np.testing.assert_array_equal(labels[live], w_labels[live])
