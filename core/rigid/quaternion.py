@@ -29,17 +29,17 @@ def normalized(q: np.ndarray) -> np.ndarray:
 def to_matrix(q: np.ndarray) -> np.ndarray:
     """(n, 3, 3) rotation matrices of (n, 4) unit quaternions (column vectors: x' = R x)."""
     w, x, y, z = np.moveaxis(np.asarray(q, dtype=np.float64), -1, 0)
-    r = np.empty(np.shape(w) + (3, 3))
-    r[..., 0, 0] = 1 - 2 * (y * y + z * z)
-    r[..., 0, 1] = 2 * (x * y - z * w)
-    r[..., 0, 2] = 2 * (x * z + y * w)
-    r[..., 1, 0] = 2 * (x * y + z * w)
-    r[..., 1, 1] = 1 - 2 * (x * x + z * z)
-    r[..., 1, 2] = 2 * (y * z - x * w)
-    r[..., 2, 0] = 2 * (x * z - y * w)
-    r[..., 2, 1] = 2 * (y * z + x * w)
-    r[..., 2, 2] = 1 - 2 * (x * x + y * y)
-    return r
+    r = np.empty((9,) + np.shape(w))  # entry by entry (contiguous writes), then rows
+    r[0] = 1 - 2 * (y * y + z * z)
+    r[1] = 2 * (x * y - z * w)
+    r[2] = 2 * (x * z + y * w)
+    r[3] = 2 * (x * y + z * w)
+    r[4] = 1 - 2 * (x * x + z * z)
+    r[5] = 2 * (y * z - x * w)
+    r[6] = 2 * (x * z - y * w)
+    r[7] = 2 * (y * z + x * w)
+    r[8] = 1 - 2 * (x * x + y * y)
+    return np.ascontiguousarray(np.moveaxis(r, 0, -1)).reshape(np.shape(w) + (3, 3))
 
 
 def from_matrix(r: np.ndarray) -> np.ndarray:
