@@ -75,8 +75,9 @@ def recall(memory: Remembered, pair: np.ndarray, local: np.ndarray,
         return out
     start = np.searchsorted(memory.pair, pair, side="left")
     count = np.minimum(np.searchsorted(memory.pair, pair, side="right") - start, MAX_PER_PAIR)
-    slots = start[:, None] + np.arange(MAX_PER_PAIR)[None, :]
-    valid = np.arange(MAX_PER_PAIR)[None, :] < count[:, None]
+    width = max(int(count.max()), 1)  # (as many slots as the fullest pair needs)
+    slots = start[:, None] + np.arange(width)[None, :]
+    valid = np.arange(width)[None, :] < count[:, None]
     slots = np.where(valid, slots, 0)
     dist = np.linalg.norm(memory.local[slots] - local[:, None, :], axis=2)
     dist = np.where(valid, dist, np.inf)
