@@ -158,8 +158,8 @@ class ContactSet:
         reference); separations are unchanged."""
         a, b = self.ab[:, 0], self.ab[:, 1]
         turn_t = turn.transpose(0, 2, 1)  # (gathered contiguous: faster products)
-        self.ra = np.matmul(self.ra, turn_t[a])
-        self.rb = np.matmul(self.rb, turn_t[b])
+        self.ra = np.matmul(self.ra, np.take(turn_t, a, axis=0))
+        self.rb = np.matmul(self.rb, np.take(turn_t, b, axis=0))
         return self
 
     def world_impulses(self) -> np.ndarray:
