@@ -17,6 +17,8 @@ from __future__ import annotations
 import numpy as np
 
 CAPACITY = 8  # a rectangle clipped by four planes has at most 8 corners
+# a corner within this fraction of the half extent of a side plane counts as on it (inside)
+ON_PLANE = 1e-6
 
 # feature id ranges: (vertex of A, face of B), (face of A, vertex of B), (edge of A, edge of B)
 VERTEX_FACE, FACE_VERTEX, EDGE_EDGE = 0, 48, 96
@@ -104,9 +106,10 @@ def clip_face(corners: np.ndarray, half: np.ndarray, ref_face: np.ndarray):
         axis = PLANE_AXIS[ref_face, k]
         sign, limit = PLANE_SIGN[ref_face, k], half[rows, axis]
         # only the polygons with a corner beyond the plane change (the others' corners all
-        # count as inside: the same tolerance as in _clip_plane)
+        # count as inside, as in _clip_plane)
         d = sign[:, None] * poly[rows[:, None], slot, axis[:, None]] - limit[:, None]
-        out = np.flatnonzero(((d > 1e-6 * limit[:, None]) & (slot < count[:, None])).any(axis=1))
+        beyond = d > ON_PLANE * limit[:, None]
+        out = np.flatnonzero((beyond & (slot < count[:, None])).any(axis=1))
         if not len(out):
             continue
         poly[out], count[out], labels[out], edges[out] = _clip_plane(
@@ -122,10 +125,10 @@ def _clip_plane(poly, count, labels, edges, axis, sign, limit, plane):
     live = slot < count[:, None]
     nxt = (slot + 1) % np.maximum(count, 1)[:, None]
     d = sign[:, None] * poly[np.arange(m)[:, None], slot, axis[:, None]] - limit[:, None]
-    # a corner within a millionth of the half extent counts as inside: an incident edge lying
+    # a corner within ON_PLANE of the half extent counts as inside: an incident edge lying
     # on the plane (aligned boxes in a stack) is kept whole instead of being cut at a point
     # that rounding places anywhere along it
-    d = np.where(np.abs(d) <= 1e-6 * limit[:, None], 0.0, d)
+    d = np.where(np.abs(d) <= ON_PLANE * limit[:, None], 0.0, d)
     d_next = np.take_along_axis(d, nxt, axis=1)
     inside = d <= 0.0
     keep = live & inside
