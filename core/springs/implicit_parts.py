@@ -155,6 +155,8 @@ class NewtonResult:
         residual: (n, 3) A dv - rhs of the last solve [N s]: its constraints' impulses.
         last: the last linearisation (None: no solve). energy: the energy at the step's end
             when the Newton check computed it and accepted the step there, else None [J].
+        scale: the size of the step's right-hand side [N s] its solves were relative to (the
+            tolerance times this is the step's accuracy).
     """
 
     dv: np.ndarray
@@ -163,6 +165,7 @@ class NewtonResult:
     residual: np.ndarray | None = None
     last: Linearisation | None = None
     energy: float | None = None
+    scale: float = 0.0
 
 
 class SolvePattern(NamedTuple):

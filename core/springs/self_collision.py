@@ -82,10 +82,12 @@ class SelfCollision:
         respond(pairs, v, inv_mass, pairs.normal, np.zeros_like(pairs.normal), self.friction,
                 0.0, rest_speed, coloured=None)
         if not settled:
-            self._fail_safe(x0, x1, v)
+            self.fail_safe(x0, x1, v)
         return len(shares(pairs, inv_mass)[2])
 
-    def _fail_safe(self, x0, x1, v) -> None:
+    def fail_safe(self, x0, x1, v) -> None:
+        """Step 4 of the module docstring: the points of pairs that crossed between x0 (a
+        state in which nothing crossed) and x1 go back to x0 (x1 and v in place)."""
         for _ in range(ROUNDS):
             stuck = self._crossed(x0, x1)
             if not len(stuck):
