@@ -234,7 +234,18 @@ class BaraffWitkin(Integrator):
                 if e_end <= e0 + slack:
                     out.energy = e_end  # the step already lost energy: no need to re-linearise
                     break
-            blocks, rhs = self._linearize(system, t, h, x0, v0, f0, out.dv, first)
+                rhs = self._newton_rhs(system, t, h, x0, v0, out.dv)
+                b = constraints.project(rhs.copy())
+                if np.vdot(b, b) <= (self.tolerance * floor) ** 2:
+                    # the step's end solves the implicit equations within the tolerance
+                    # already: a linearisation there would only confirm it (its solve takes
+                    # no iteration), and so would the next ones
+                    out.residual, out.energy = -rhs, e_end
+                    break
+            if first:
+                blocks, rhs = self._linearize(system, t, h, x0, v0, f0)
+            else:  # Newton: linearised at the step's end
+                blocks = system.linearize(t + h, x0 + h * (v0 + out.dv), v0 + out.dv)
             linear = self._linear_system(system, h, blocks, rhs, constraints)
             known = out.dv if first else np.zeros_like(out.dv)
             start = self._first_guess(out.dv.shape, t) if first else None
@@ -253,20 +264,23 @@ class BaraffWitkin(Integrator):
 
     @staticmethod
     def _linearize(system: BaraffWitkinSystem, t: float, h: float, x0: np.ndarray,
-                   v0: np.ndarray, f0: np.ndarray, dv: np.ndarray, first: bool):
-        """Jacobian blocks and right-hand side (n, 3) [N s] of one Newton iteration."""
-        if first:  # Baraff & Witkin: linearise at (x0, v0), rhs h (f0 + h df/dx v0)
-            blocks = system.linearize(t, x0, v0)
-            rhs = f0.copy()
-            for blk in blocks:
-                blk.product(h, 0.0, v0, rhs)
-            rhs *= h
-            return blocks, rhs
-        # Newton on g(dv) = M dv - h f(x0 + h (v0 + dv), v0 + dv)
+                   v0: np.ndarray, f0: np.ndarray):
+        """Jacobian blocks and right-hand side (n, 3) [N s] of the first Newton iteration,
+        Baraff & Witkin's: linearised at (x0, v0), rhs h (f0 + h df/dx v0)."""
+        blocks = system.linearize(t, x0, v0)
+        rhs = f0.copy()
+        for blk in blocks:
+            blk.product(h, 0.0, v0, rhs)
+        rhs *= h
+        return blocks, rhs
+
+    @staticmethod
+    def _newton_rhs(system: BaraffWitkinSystem, t: float, h: float, x0: np.ndarray,
+                    v0: np.ndarray, dv: np.ndarray) -> np.ndarray:
+        """-g(dv) (n, 3) [N s] for Newton on g(dv) = M dv - h f(x0 + h (v0 + dv), v0 + dv):
+        the right-hand side of a later Newton iteration."""
         v1 = v0 + dv
-        x1 = x0 + h * v1
-        blocks = system.linearize(t + h, x1, v1)
-        return blocks, h * system.forces_at(t + h, x1, v1) - system.mass[:, None] * dv
+        return h * system.forces_at(t + h, x0 + h * v1, v1) - system.mass[:, None] * dv
 
     def _linear_system(self, system: BaraffWitkinSystem, h: float, blocks: list,
                        rhs: np.ndarray, constraints: VelocityFilter) -> Linearisation:
