@@ -207,7 +207,8 @@ class BlockMatrix:
         # into an output buffer is twice as slow
         np.take(np.ascontiguousarray(u).ravel(), p.flat_neighbours, out=self._gathered,
                 mode="clip")
-        return np.matmul(self.data, self._gathered[:, :, None])[:, :, 0]
+        # einsum: a quarter faster than matmul on these many small rows (n of 3 x 3 width)
+        return np.einsum("nik,nk->ni", self.data, self._gathered)
 
     def diagonal(self) -> np.ndarray:
         """(n, 3, 3) diagonal blocks."""
