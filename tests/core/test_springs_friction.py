@@ -92,3 +92,39 @@ def test_cloth_at_rest_on_the_ground_at_the_defaults_costs_no_solve():
     assert state.x[:, 2].max() < 0.01
     assert np.abs(state.v).max() < 1e-6
     assert max(iterations) == 0
+
+
+
+def test_a_newton_iteration_whose_start_solves_the_step_builds_nothing():
+    """A cloth at the defaults lying 2 mm inside the ground: the contacts push it out, its
+    steps gain that energy, and a Newton iteration looks again at each one's end. Where the
+    end already solves the step, no linearisation, matrix or preconditioner is built only for
+    a solve that takes no CG iteration (40 % of a cloth's linearisations on Suzanne)."""
+    x, edges, tris, ls, lt, lv = _grid(11, 11, 1.0)
+    model = SpringMeshBuilder(SpringMeshSettings("Sheet"), x - [0.5, 0.5, 0.0], edges, tris,
+                              ls, lt, lv).finalize(1)
+    m = np.eye(4)
+    m[2, 3] = 0.002
+    ground = ColliderFrame("Ground", "HALF_SPACE", m, m)
+    solver = SpringMeshSolver(model, "IMPLICIT", 2, frame_dt=DT, frame=1)
+    integrator = solver.integrator
+    later, checks = [], []
+    solve, newton_rhs = integrator._solve, integrator._newton_rhs
+
+    def counted(linear, known, constraints, start, floor):
+        out = solve(linear, known, constraints, start, floor)
+        if not np.any(known) and start is None:  # a later Newton iteration's solve
+            later.append(out[1])
+        return out
+
+    def checked(*args):
+        checks.append(1)
+        return newton_rhs(*args)
+
+    integrator._solve, integrator._newton_rhs = counted, checked
+    state = model.state()
+    for frame in range(1, 97):
+        solver.advance(state, SpringFrameInputs(frame, frame * DT, DT, colliders=[ground]))
+    assert checks, "no step looked again at its end: the scene does not test it"
+    assert all(iterations > 0 for iterations in later)
+    assert state.x[:, 2].min() >= 0.002 - 1e-6  # pushed out onto the surface
