@@ -118,7 +118,7 @@ class BaraffWitkin(Integrator):
             slipping, leaving = np.union1d(slipping, more[0]), np.union1d(leaving, more[1])
             constraints = self._constraints(system, t, h, v0, f0, slipping, leaving)
             spent = newton.iterations
-            newton = self._newton(system, t, h, x0, v0, f0, constraints, floor)
+            newton = self._newton(system, t, h, x0, v0, f0, constraints, floor, newton.first)
             newton.iterations += spent
         v1, iterations = v0 + newton.dv, newton.iterations
         residual = newton.residual
@@ -219,10 +219,11 @@ class BaraffWitkin(Integrator):
 
     def _newton(self, system: BaraffWitkinSystem, t: float, h: float, x0: np.ndarray,
                 v0: np.ndarray, f0: np.ndarray, constraints: VelocityFilter,
-                floor: float) -> NewtonResult:
+                floor: float, first_linear: tuple | None = None) -> NewtonResult:
         """Baraff & Witkin's linearised step, then, while the step gains energy, Newton
         iterations that re-linearise at its end: linearise -> assemble and precondition ->
-        first guess -> solve."""
+        first guess -> solve. ``first_linear``: the step's first linearisation from an earlier
+        solve of it (:attr:`NewtonResult.first`; the filter and preconditioner are new)."""
         e0 = self._start_energy(system, x0, v0)
         slack = 0.5 * float(system.mass[system.free].sum()) * self.ENERGY_SPEED ** 2 + \
             self.ENERGY_ROUNDING * abs(e0)
@@ -242,11 +243,19 @@ class BaraffWitkin(Integrator):
                     # no iteration), and so would the next ones
                     out.residual, out.energy = -rhs, e_end
                     break
-            if first:
+            matrix = None
+            if first and first_linear is not None:
+                blocks, rhs, matrix = first_linear
+            elif first:
                 blocks, rhs = self._linearize(system, t, h, x0, v0, f0)
             else:  # Newton: linearised at the step's end
                 blocks = system.linearize(t + h, x0 + h * (v0 + out.dv), v0 + out.dv)
-            linear = self._linear_system(system, h, blocks, rhs, constraints)
+                if out.first[2] is not None:  # kept: this one's assembly reuses its buffer
+                    kept = out.first[2]
+                    out.first = (*out.first[:2], BlockMatrix(kept.pattern, kept.data.copy()))
+            linear = self._linear_system(system, h, blocks, rhs, constraints, matrix)
+            if first:
+                out.first = (blocks, rhs, linear.matrix)
             known = out.dv if first else np.zeros_like(out.dv)
             start = self._first_guess(out.dv.shape, t) if first else None
             delta, iterations, residual, scale = self._solve(linear, known, constraints, start,
@@ -283,18 +292,22 @@ class BaraffWitkin(Integrator):
         return h * system.forces_at(t + h, x0 + h * v1, v1) - system.mass[:, None] * dv
 
     def _linear_system(self, system: BaraffWitkinSystem, h: float, blocks: list,
-                       rhs: np.ndarray, constraints: VelocityFilter) -> Linearisation:
-        """Assemble A and its preconditioner — rebuilt for every linearisation: a stiff mesh
-        turning within the step changes its matrix enough that the first one's preconditioner
-        would cost hundreds of iterations in the later Newton iterations."""
+                       rhs: np.ndarray, constraints: VelocityFilter,
+                       matrix: BlockMatrix | None = None) -> Linearisation:
+        """Assemble A (unless ``matrix`` is these blocks' already) and its preconditioner —
+        rebuilt for every linearisation: a stiff mesh turning within the step changes its
+        matrix enough that the first one's preconditioner would cost hundreds of iterations in
+        the later Newton iterations."""
         sliding, free = constraints.sliding, constraints.free
         if not free.any():  # every vertex pinned or stuck: dv is given, only products remain
             # (and the filter leaves nothing to precondition)
             return Linearisation(rhs, MatrixFree(blocks, system.mass, h), np.zeros_like)
-        matrix = self._assemble(blocks, system.mass, h)
+        if matrix is None:
+            matrix = self._assemble(blocks, system.mass, h)
         filtered = self._filtered(matrix, free, constraints.pressed[sliding],
                                   constraints.normal[sliding], constraints.diagonal)
-        return Linearisation(rhs, matrix.__matmul__, self._preconditioner(filtered, free))
+        return Linearisation(rhs, matrix.__matmul__, self._preconditioner(filtered, free),
+                             matrix)
 
     def _solve(self, linear: Linearisation, known: np.ndarray, constraints: VelocityFilter,
                start: np.ndarray | None, floor: float):

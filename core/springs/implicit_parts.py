@@ -138,11 +138,13 @@ def diagonal_filter(free: np.ndarray, pressed: np.ndarray,
 @dataclass(frozen=True)
 class Linearisation:
     """One linearisation of a step: ``A = M - h df/dv - h^2 df/dx`` (as its product), the
-    right-hand side ``rhs`` (n, 3) [N s] and the preconditioner CG solves it with."""
+    right-hand side ``rhs`` (n, 3) [N s], the preconditioner CG solves it with and the
+    assembled matrix (a :class:`~.sparse.BlockMatrix`; None when A is only a product)."""
 
     rhs: np.ndarray
     apply_a: Product
     precondition: Product
+    matrix: object | None = None
 
 
 @dataclass
@@ -157,6 +159,8 @@ class NewtonResult:
             when the Newton check computed it and accepted the step there, else None [J].
         scale: the size of the step's right-hand side [N s] its solves were relative to (the
             tolerance times this is the step's accuracy).
+        first: the first linearisation's (Jacobian blocks, right-hand side, assembled matrix
+            or None): the same for a step solved again with other constraints.
     """
 
     dv: np.ndarray
@@ -166,6 +170,7 @@ class NewtonResult:
     last: Linearisation | None = None
     energy: float | None = None
     scale: float = 0.0
+    first: tuple | None = None
 
 
 class SolvePattern(NamedTuple):
