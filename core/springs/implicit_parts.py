@@ -12,7 +12,7 @@ import numpy as np
 from ..integrators import System
 from ..integrators.krylov import Product
 from .multigrid import AggregationHierarchy
-from .sparse import BlockPattern, MatrixBuilder
+from .sparse import BlockMatrix, BlockPattern, MatrixBuilder
 
 if TYPE_CHECKING:
     from ..contact import Contacts
@@ -230,3 +230,51 @@ class BlockJacobi:
 
     def __call__(self, r: np.ndarray) -> np.ndarray:
         return np.einsum("nij,nj->ni", self.inverse, r)  # twice as fast as matmul here
+
+
+def filtered_diagonal(matrix, diagonal, constrained):
+    """The implicit step's filtered matrix S A S + (I - S) (``BaraffWitkin._filtered``) for a
+    diagonal S (``diagonal`` (n, 3)): (S_r B S_c)_ij = d_r,i B_ij d_c,j, two passes over the
+    matrix."""
+    p = matrix.pattern
+    blocks = matrix.data.reshape(p.n, 3, p.width, 3) * diagonal[:, :, None, None]
+    blocks *= diagonal[p.neighbours][:, None, :, :]
+    fixed = np.nonzero(constrained)[0]
+    slot = p.diagonal_slot[fixed] % p.width
+    for i in range(3):  # + (I - S) on the constrained vertices' diagonal blocks
+        blocks[fixed, i, slot, i] += 1.0 - diagonal[fixed, i]
+    return BlockMatrix(p, blocks.reshape(matrix.data.shape))
+
+def filtered_one_normal(matrix, free, pressed, n, constrained):
+    """``BaraffWitkin._filtered`` when every pressed vertex has the same normal ``n`` (3,): with
+    S = f I - p n n^T per vertex (f: free, p: pressed), S_r B S_c = f_r f_c B
+    - f_c p_r n (n^T B) - f_r p_c (B n) n^T + p_r p_c (n^T B n) n n^T, a few passes over
+    the whole matrix instead of two 3 x 3 products per block (a third of the time)."""
+    p = matrix.pattern
+    if not len(pressed):  # pins only: S = 0 on them, I elsewhere; only their rows and
+        data = matrix.data.copy()  # columns change (to zero, their diagonal blocks to I)
+        blocks = data.reshape(p.n, 3, p.width, 3)
+        row, col = np.nonzero(constrained[:, None] | constrained[p.neighbours])
+        blocks[row, :, col, :] = 0.0
+        fixed = np.nonzero(constrained)[0]
+        blocks[fixed, :, p.diagonal_slot[fixed] % p.width, :] = np.eye(3)
+        return BlockMatrix(p, data)
+    f = free.astype(np.float64)
+    pr = np.zeros(p.n)
+    pr[pressed] = 1.0
+    data = matrix.data.copy()
+    blocks = data.reshape(p.n, 3, p.width, 3)  # [row, i, slot, j]
+    fc, pc = f[p.neighbours], pr[p.neighbours]  # (n, width): each slot's column vertex
+    nb = np.einsum("i,risj->rsj", n, blocks)  # n^T B
+    bn = np.einsum("risj,j->ris", blocks, n)  # B n
+    nbn = np.einsum("rsj,j->rs", nb, n) * (pr[:, None] * pc)
+    nb *= (fc * pr[:, None])[:, :, None]
+    bn *= (f[:, None] * pc)[:, None, :]
+    blocks *= (f[:, None] * fc)[:, None, :, None]
+    blocks -= n[None, :, None, None] * nb[:, None, :, :]
+    blocks -= bn[:, :, :, None] * n[None, None, None, :]
+    blocks += nbn[:, None, :, None] * np.outer(n, n)[None, :, None, :]
+    fixed = np.nonzero(constrained)[0]
+    s_fixed = f[fixed, None, None] * np.eye(3) - pr[fixed, None, None] * np.outer(n, n)
+    blocks[fixed, :, p.diagonal_slot[fixed] % p.width, :] += np.eye(3) - s_fixed
+    return BlockMatrix(p, data)
