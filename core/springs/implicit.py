@@ -251,8 +251,8 @@ class BaraffWitkin(Integrator):
                 blocks, rhs = self._linearize(system, t, h, x0, v0, f0)
             else:  # Newton: linearised at the step's end
                 blocks = system.linearize(t + h, x0 + h * (v0 + out.dv), v0 + out.dv)
-                if out.first[2] is not None:  # kept: this one's assembly reuses its buffer
-                    kept = out.first[2]
+                kept = out.first[2]
+                if kept is not None:  # the assembly below overwrites its buffer: keep a copy
                     out.first = (*out.first[:2], BlockMatrix(kept.pattern, kept.data.copy()))
             linear = self._linear_system(system, h, blocks, rhs, constraints, matrix)
             if first:
@@ -328,9 +328,9 @@ class BaraffWitkin(Integrator):
         drags its neighbours along instead of stretching the springs to them. The correction is
         solved to the step's own accuracy (the tolerance times the step's right-hand side), not
         to a thousandth of itself: the step is only as exact as its main solve, and friction's
-        small impulses solved that finely took a quarter of a draped cloth's iterations. Returns the new
-        velocities (n, 3) [m/s], the CG iterations spent and the impulses (n, 3) [N s] the
-        step's residual gains (friction's on the pressed vertices)."""
+        small impulses solved that finely took a quarter of a draped cloth's iterations.
+        Returns the new velocities (n, 3) [m/s], the CG iterations spent and the impulses
+        (n, 3) [N s] the step's residual gains (friction's on the pressed vertices)."""
         mass = system.mass[:, None]
         sliding = constraints.sliding  # (the stuck ones' friction was in the solve)
         stop = self._friction(v1, constraints.pressed[sliding], constraints.normal[sliding],
@@ -425,8 +425,7 @@ class BaraffWitkin(Integrator):
             return filtered_diagonal(matrix, diagonal, constrained)
         if not len(pressed) or (normal == normal[0]).all():  # pins only, or a flat ground
             return filtered_one_normal(matrix, free, pressed,
-                                                     normal[0] if len(pressed) else np.zeros(3),
-                                                     constrained)
+                                       normal[0] if len(pressed) else np.zeros(3), constrained)
         p = matrix.pattern
         s = np.where(free[:, None, None], np.eye(3), 0.0)
         if len(pressed):

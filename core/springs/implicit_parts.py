@@ -11,6 +11,7 @@ import numpy as np
 
 from ..integrators import System
 from ..integrators.krylov import Product
+from ..transforms import transform_vectors
 from .multigrid import AggregationHierarchy
 from .sparse import BlockMatrix, BlockPattern, MatrixBuilder
 
@@ -144,7 +145,7 @@ class Linearisation:
     rhs: np.ndarray
     apply_a: Product
     precondition: Product
-    matrix: object | None = None
+    matrix: BlockMatrix | None = None
 
 
 @dataclass
@@ -229,7 +230,7 @@ class BlockJacobi:
         self.inverse = inverse
 
     def __call__(self, r: np.ndarray) -> np.ndarray:
-        return np.einsum("nij,nj->ni", self.inverse, r)  # twice as fast as matmul here
+        return transform_vectors(self.inverse, r)
 
 
 def filtered_diagonal(matrix, diagonal, constrained):
@@ -244,6 +245,7 @@ def filtered_diagonal(matrix, diagonal, constrained):
     for i in range(3):  # + (I - S) on the constrained vertices' diagonal blocks
         blocks[fixed, i, slot, i] += 1.0 - diagonal[fixed, i]
     return BlockMatrix(p, blocks.reshape(matrix.data.shape))
+
 
 def filtered_one_normal(matrix, free, pressed, n, constrained):
     """``BaraffWitkin._filtered`` when every pressed vertex has the same normal ``n`` (3,): with

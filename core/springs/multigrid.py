@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..transforms import inverse3
+from ..transforms import inverse3, transform_vectors
 from .sparse import BlockMatrix, BlockPattern
 
 COARSEST = 120  # vertices: below this a level is solved directly (dense inverse, 360 x 360)
@@ -125,23 +125,18 @@ class VCycle:
         levels, inverses = self.levels, self.inverses
         if depth == len(levels):
             if self.inverse is None:
-                return _blocks_times(inverses[depth], r)
+                return transform_vectors(inverses[depth], r)
             return (self.inverse @ r.ravel()).reshape(r.shape)
         a, level = self.matrices[depth], levels[depth]
-        jacobi = _blocks_times(inverses[depth], r)
+        jacobi = transform_vectors(inverses[depth], r)
         if depth == 0:  # additive: Jacobi + coarse correction, no product with A
             return jacobi + np.take(self._cycle(1, self._restrict(level, r)), level.owner,
                                     axis=0, mode="clip")
         x = SMOOTHING * jacobi
         x += np.take(self._cycle(depth + 1, self._restrict(level, r - a @ x)), level.owner,
                      axis=0, mode="clip")
-        x += SMOOTHING * _blocks_times(inverses[depth], r - a @ x)
+        x += SMOOTHING * transform_vectors(inverses[depth], r - a @ x)
         return x
-
-
-def _blocks_times(blocks: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """(n, 3, 3) blocks times (n, 3) rows: einsum, twice as fast as matmul on 3 x 3 blocks."""
-    return np.einsum("nij,nj->ni", blocks, r)
 
 
 def _dense(matrix: BlockMatrix) -> np.ndarray:
