@@ -319,6 +319,82 @@ class KeptPairs:
                    for k, (b, g) in enumerate(zip(boxes, grown)))
 
 
+class KeptTests:
+    """The continuous tests of the last detection, kept for the next: a sub-step detects again
+    after each round of separating pushes, which move a few of the points, and a pair none of
+    whose points (or features) moved since gives the same :class:`Separation`. Only the other
+    pairs are tested again; each pair's test reads its own points only, so the result is a
+    fresh detection's to the bit. Nothing is kept when pickled.
+
+    A detection calls :meth:`begin` with its inputs, then :meth:`separations` per kind of
+    pair; a kind the last detection did not test is tested afresh."""
+
+    def __init__(self):
+        self._inputs: tuple = ()
+        self._kept: dict[str, tuple[int, np.ndarray, Separation]] = {}
+        self._detection = 0
+
+    def __getstate__(self):
+        return {"_inputs": (), "_kept": {}, "_detection": 0}
+
+    def begin(self, *groups: tuple[np.ndarray, ...]) -> list[np.ndarray]:
+        """A detection from these inputs: per group of arrays (each (n, ...), n the group's
+        count of points or features), (n,) bool: the rows that differ from the last
+        detection's (every row when there was none, or another shape)."""
+        last = self._inputs
+        out = []
+        for k, arrays in enumerate(groups):
+            n = len(arrays[0])
+            before = last[k] if len(last) == len(groups) else None
+            if not n:
+                out.append(np.zeros(0, bool))
+                continue
+            if before is None or any(a.shape != b.shape for a, b in zip(arrays, before)):
+                out.append(np.ones(n, bool))
+                continue
+            moved = np.zeros(n, bool)
+            for a, b in zip(arrays, before):
+                moved |= np.any((a != b).reshape(n, -1), axis=1)
+            out.append(moved)
+        self._inputs = tuple(tuple(a.copy() for a in arrays) for arrays in groups)
+        self._detection += 1
+        return out
+
+    def separations(self, kind: str, keys: np.ndarray, stale: np.ndarray, test) -> Separation:
+        """The separations of the pairs ``keys`` (c,) (int64, one per pair of this ``kind``):
+        the last detection's for pairs not ``stale`` (c,) (none of their points or features
+        moved since) that it tested, ``test(rows)`` (rows: indices into keys) for the
+        others."""
+        last = self._kept.get(kind)
+        reuse = np.zeros(len(keys), bool)
+        if last is not None and last[0] == self._detection - 1 and len(last[1]) and len(keys):
+            at = np.minimum(np.searchsorted(last[1], keys), len(last[1]) - 1)
+            reuse = ~stale & (last[1][at] == keys)
+        fresh = np.flatnonzero(~reuse)
+        if len(fresh) == len(keys):
+            out = test(fresh)
+        else:
+            new = test(fresh) if len(fresh) else None
+            old = at[reuse]
+
+            def merged(field):
+                before = getattr(last[2], field)
+                out = np.empty((len(keys),) + before.shape[1:], before.dtype)
+                out[reuse] = before[old]
+                if new is not None:
+                    out[fresh] = getattr(new, field)
+                return out
+
+            out = Separation(*(merged(f) for f in Separation._fields))
+        if np.all(keys[1:] > keys[:-1]):
+            self._kept[kind] = (self._detection, keys, out)
+        else:
+            order = np.argsort(keys, kind="stable")
+            self._kept[kind] = (self._detection, keys[order],
+                                Separation(*(x[order] for x in out)))
+        return out
+
+
 def _across_cells(lo, hi, count_a: int, cell_lo, extent, dims) -> tuple[np.ndarray, np.ndarray]:
     """Box pairs across the sets A (the first ``count_a`` boxes of lo, hi) and B (the rest)
     through one uniform grid of B's boxes, looked up by A's: no pair within a set is ever

@@ -33,7 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..collision.crossing import (KeptPairs, box_pairs, element_boxes, segment_segment,
+from ..collision.crossing import (KeptPairs, KeptTests, box_pairs, element_boxes,
+                                  segment_segment,
                                   triangle_point)
 from ..transforms import dot_rows, norm_rows
 from .contacts import Contacts
@@ -231,19 +232,33 @@ def _detect(path: ColliderPath, f: Features, faces: FaceSet, x0, x1, s0: float,
     found = (near.pairs(path, faces, x0, boxes) if near is not None else
              [box_pairs(*b) for b in boxes])
 
+    tests = near.tests(path) if near is not None else None
+    moved = tests.begin((l0, l1), (f.points0, f.points1, f.radius),
+                        (f.segments0, f.segments1)) if tests is not None else None
+
+    def separations(kind, i, j, count, ids, own, test):
+        """``test(rows)`` of pairs (i, j) (elements ``ids`` of the mesh, features of group
+        ``own``), through the kept tests where there are."""
+        if tests is None:
+            return test(np.arange(len(i)))
+        stale = moved[0][ids].reshape(len(i), -1).any(axis=1) | moved[own][j]
+        return tests.separations(kind, i * count + j, stale, test)
+
     i, j = found[0]
     if len(i):
         tri = faces.triangles[i]
-        sep = triangle_point(l0[tri], l1[tri], f.points0[j], f.points1[j])
+        sep = separations("faces", i, j, len(f.points0), tri, 1, lambda r: triangle_point(
+            l0[tri[r]], l1[tri[r]], f.points0[j[r]], f.points1[j[r]]))
         r = f.radius[j]
         point = f.points1[j] + r[:, None] * sep.normal
         keep(sep.gap - r, tri, sep.weight, sep.normal, point, (sep.gap < 0.0) & (r > 0.0))
-    for (ends0, ends1, radius, edges), (i, j) in zip(ends, found[1:]):
+    for (ends0, ends1, radius, edges), (i, j), kind, own in zip(ends, found[1:],
+                                                               ("edges", "loose"), (2, 1)):
         if not len(i):
             continue
         a, b = edges[i, 0], edges[i, 1]
-        sep = segment_segment(l0[a], l0[b], ends0[j, 0], ends0[j, 1],
-                              l1[a], l1[b], ends1[j, 0], ends1[j, 1])
+        sep = separations(kind, i, j, len(ends0), edges[i], own,
+                          _segment_test(l0, l1, a, b, ends0[j], ends1[j]))
         r = radius[j]
         point = np.einsum("ck,ckj->cj", sep.other, ends1[j]) + r[:, None] * sep.normal
         ids = np.stack([a, b, a], axis=1)
@@ -253,6 +268,13 @@ def _detect(path: ColliderPath, f: Features, faces: FaceSet, x0, x1, s0: float,
         return None
     return PointPairs(np.concatenate(vertex), np.concatenate(weight), np.concatenate(normal),
                       np.concatenate(anchor), np.concatenate(depth), gap)
+
+
+def _segment_test(l0, l1, a, b, ends0, ends1):
+    """The continuous test of mesh edges a-b (points l0 -> l1) against the segments ends0 ->
+    ends1 (c, 2, 3), for the pairs ``rows``."""
+    return lambda r: segment_segment(l0[a[r]], l0[b[r]], ends0[r, 0], ends0[r, 1], l1[a[r]],
+                                     l1[b[r]], ends1[r, 0], ends1[r, 1])
 
 
 class NearPairs:
@@ -265,7 +287,13 @@ class NearPairs:
 
     def __init__(self):
         self._kept: dict[tuple[str, int], KeptPairs] = {}
+        self._tests: dict[str, KeptTests] = {}  # per collider: the last detection's tests
         self._margin: float | None = None  # [m] (:meth:`FaceSet.margin`)
+
+    def tests(self, path: ColliderPath) -> KeptTests:
+        """The continuous tests kept between detections on ``path`` (the same results as
+        testing every pair)."""
+        return self._tests.setdefault(path.frame.name, KeptTests())
 
     def pairs(self, path: ColliderPath, faces: FaceSet, x0: np.ndarray, boxes: list) -> list:
         """:func:`box_pairs` of each of ``boxes`` (lo_a, hi_a, lo_b, hi_b) of a detection on

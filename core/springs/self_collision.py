@@ -25,7 +25,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..collision.broadphase_grid import UniformGrid
-from ..collision.crossing import KeptPairs, element_boxes, segment_segment, triangle_point
+from ..collision.crossing import (KeptPairs, KeptTests, element_boxes, segment_segment,
+                                  triangle_point)
 from ..contact.features import FaceSet
 from ..contact.pair_solve import PointPairs, respond, separate, shares
 
@@ -52,6 +53,7 @@ class SelfCollision:
         # the candidate pairs, kept between detections (the same pairs as a fresh search)
         self._faces_points = KeptPairs()
         self._edges = KeptPairs(_pairs_within, within=True)
+        self._tests = KeptTests()  # and their tests, for the pairs whose points did not move
         self._margin: float | None = None
 
     def keep_apart(self, x0: np.ndarray, x1: np.ndarray, v: np.ndarray, rest_speed: float,
@@ -118,12 +120,15 @@ class SelfCollision:
         if self._margin is None:
             self._margin = self.faces.margin(x0)
         vertex, weight, normal, depth = [], [], [], []
+        moved, = self._tests.begin((x0, x1))
         if len(tris):
             i, j = self._faces_points.pairs(self._margin, *element_boxes(lo, hi, tris), lo, hi)
             keep = ~np.any(tris[i] == j[:, None], axis=1)
             i, j = i[keep], j[keep]
             if len(i):
-                sep = triangle_point(x0[tris[i]], x1[tris[i]], x0[j], x1[j])
+                sep = self._tests.separations(
+                    "faces", i * len(x0) + j, moved[tris[i]].any(axis=1) | moved[j],
+                    lambda r: triangle_point(x0[tris[i[r]]], x1[tris[i[r]]], x0[j[r]], x1[j[r]]))
                 near = sep.gap < d
                 vertex.append(np.concatenate([tris[i], j[:, None]], axis=1)[near])
                 weight.append(np.concatenate([sep.weight, -np.ones((len(i), 1))], axis=1)[near])
@@ -135,8 +140,12 @@ class SelfCollision:
             keep = ~np.any(a[:, :, None] == b[:, None, :], axis=(1, 2))
             a, b = a[keep], b[keep]
             if len(a):
-                sep = segment_segment(x0[a[:, 0]], x0[a[:, 1]], x0[b[:, 0]], x0[b[:, 1]],
-                                      x1[a[:, 0]], x1[a[:, 1]], x1[b[:, 0]], x1[b[:, 1]])
+                sep = self._tests.separations(
+                    "edges", i[keep] * len(edges) + j[keep],
+                    moved[a].any(axis=1) | moved[b].any(axis=1),
+                    lambda r: segment_segment(x0[a[r, 0]], x0[a[r, 1]], x0[b[r, 0]], x0[b[r, 1]],
+                                              x1[a[r, 0]], x1[a[r, 1]], x1[b[r, 0]],
+                                              x1[b[r, 1]]))
                 near = sep.gap < d
                 vertex.append(np.concatenate([a, b], axis=1)[near])
                 weight.append(np.concatenate([sep.weight, -sep.other], axis=1)[near])

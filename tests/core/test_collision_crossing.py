@@ -10,8 +10,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from physanim.core.collision.crossing import (KeptPairs, box_pairs, closest_on_segments,
-                                              segment_segment, triangle_point)
+from physanim.core.collision.crossing import (KeptPairs, KeptTests, box_pairs,
+                                              closest_on_segments, segment_segment,
+                                              triangle_point)
 from physanim.core.collision.mesh import TriangleMesh
 from physanim.core.collision.shapes import box_mesh, cylinder_mesh
 from physanim.core.colouring import colour
@@ -230,3 +231,59 @@ def test_kept_pairs_equal_a_fresh_search_as_the_boxes_move(within):
     assert searches[-1] is not searches[-2]
     restored = pickle.loads(pickle.dumps(kept))
     assert restored._grown is None and restored._pairs is None and restored.within == within
+
+
+def test_kept_tests_equal_testing_every_pair_and_test_only_the_moved_ones():
+    # A detection after a separating round (some end points moved, the starts the same) gives
+    # the same separations as testing every pair, to the bit, and tests only the pairs with
+    # a moved point; a kind the detection before did not test, or another start, is tested
+    # afresh; pickled, it keeps nothing.
+    import pickle
+
+    rng = np.random.default_rng(5)
+    n, tris = 300, rng.integers(0, 300, (400, 3))
+    x0 = rng.uniform(0.0, 1.0, (n, 3))
+    x1 = x0 + rng.normal(0.0, 0.05, (n, 3))
+    i, j = np.nonzero(rng.random((len(tris), n)) < 0.02)  # pairs sorted by i, then j
+    keys = i * n + j
+    kept, tested = KeptTests(), []
+
+    def detect(x0, x1, kind="faces", skip=False):
+        moved, = kept.begin((x0, x1))
+        tested.append(0)
+        if skip:
+            return None
+
+        def test(rows):
+            tested[-1] += len(rows)
+            return triangle_point(x0[tris[i[rows]]], x1[tris[i[rows]]], x0[j[rows]], x1[j[rows]])
+
+        got = kept.separations(kind, keys, moved[tris[i]].any(axis=1) | moved[j], test)
+        want = triangle_point(x0[tris[i]], x1[tris[i]], x0[j], x1[j])
+        for a, b in zip(got, want):
+            np.testing.assert_array_equal(a, b)
+        return got
+
+    detect(x0, x1)
+    assert tested[-1] == len(keys)
+    for _ in range(3):  # rounds: a few end points pushed
+        x1 = x1.copy()
+        x1[rng.choice(n, 10, replace=False)] += rng.normal(0.0, 0.01, (10, 3))
+        detect(x0, x1)
+        assert 0 < tested[-1] < 0.5 * len(keys)
+    detect(x0, x1)  # nothing moved: nothing tested
+    assert tested[-1] == 0
+    x1 = x1 + 0.01  # every point moved: every pair
+    detect(x0, x1)
+    assert tested[-1] == len(keys)
+    x2 = x1.copy()
+    x2[:150] += 0.02
+    detect(x0, x2, skip=True)  # a detection that tests nothing of this kind, then one from
+    detect(x0, x2)  # the same points: tested afresh (the kept tests are from older points)
+    assert tested[-1] == len(keys)
+    detect(x0, x2, kind="edges")  # another kind: its own
+    assert tested[-1] == len(keys)
+    detect(x0 + 0.01, x2 + 0.01)  # another start: every pair
+    assert tested[-1] == len(keys)
+    restored = pickle.loads(pickle.dumps(kept))
+    assert restored._kept == {} and restored._inputs == ()
