@@ -8,7 +8,8 @@ Per collider, in its local frame (a moving collider becomes a still one, as for 
 
 1. detect: pairs (corner or sphere, triangle) and (crease, edge) whose boxes over the
    sub-step overlap, then those apart by less than the contact gap at its end or that
-   crossed during it (continuous tests, :mod:`..collision.crossing`);
+   crossed during it (continuous tests, :mod:`..collision.crossing`; with :class:`NearPairs`,
+   a detection after a separating round tests again only the pairs with a moved point);
 2. separate: each pair's gap restored by moving the mesh's corners along the pair's normal,
    in proportion to their inverse mass and their weight in the nearest point (the impulse
    that moves the nearest point by exactly the shortfall); Gauss-Seidel passes over groups
@@ -34,8 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..collision.crossing import (KeptPairs, KeptTests, box_pairs, element_boxes,
-                                  segment_segment,
-                                  triangle_point)
+                                  segment_segment, triangle_point)
 from ..transforms import dot_rows, norm_rows
 from .contacts import Contacts
 from .pair_solve import PointPairs, respond, separate, shares

@@ -9,7 +9,8 @@ Per sub-step, after the step and the colliders (positions x0 -> x1):
    are kept between detections while the boxes move less than a margin,
    :class:`~..collision.crossing.KeptPairs`), then those nearer than the distance at the end
    or that crossed during the step (continuous tests, :mod:`..collision.crossing`: the side
-   each came from);
+   each came from; a detection after a separating round tests again only the pairs with a
+   moved point, :class:`~..collision.crossing.KeptTests`);
 2. separate: each pair's weighted points pushed apart along its normal, in proportion to
    their inverse masses (:mod:`..contact.pair_solve`: Gauss-Seidel over coloured pairs, or
    relaxed Jacobi passes where a heap crowds dozens of pairs on a point), then detect again,
