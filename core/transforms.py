@@ -223,6 +223,45 @@ def row_indices(rows) -> np.ndarray:
     return np.nonzero(rows)[0] if rows.dtype == bool else rows
 
 
+# Reductions across a few narrow columns: numpy 1.26 runs ``a.min(axis=0)``, ``a.max(axis=1)``,
+# ``m.any(axis=1)`` and the like element by element for (n, 3) arrays — 10 to 20 x slower than
+# one reduction or one element-wise pass per column (4,096 rows: 124 us against 8 us). The
+# results are the same values (min, max, any and all are exact).
+
+def column_min(a: np.ndarray) -> np.ndarray:
+    """(k,) the least value of each column of (n, k) ``a`` (n >= 1): ``a.min(axis=0)``."""
+    return np.array([a[:, c].min() for c in range(a.shape[1])], dtype=a.dtype)
+
+
+def column_max(a: np.ndarray) -> np.ndarray:
+    """(k,) the greatest value of each column of (n, k) ``a`` (n >= 1): ``a.max(axis=0)``."""
+    return np.array([a[:, c].max() for c in range(a.shape[1])], dtype=a.dtype)
+
+
+def row_max(a: np.ndarray) -> np.ndarray:
+    """(n,) the greatest value of each row of (n, k) ``a`` (k >= 1): ``a.max(axis=1)``."""
+    out = a[:, 0].copy()
+    for c in range(1, a.shape[1]):
+        np.maximum(out, a[:, c], out=out)
+    return out
+
+
+def row_any(m: np.ndarray) -> np.ndarray:
+    """(n,) whether any value of each row of (n, k) bool ``m`` is set: ``m.any(axis=1)``."""
+    out = np.zeros(len(m), bool)
+    for c in range(m.shape[1]):
+        out |= m[:, c]
+    return out
+
+
+def row_all(m: np.ndarray) -> np.ndarray:
+    """(n,) whether every value of each row of (n, k) bool ``m`` is set: ``m.all(axis=1)``."""
+    out = np.ones(len(m), bool)
+    for c in range(m.shape[1]):
+        out &= m[:, c]
+    return out
+
+
 def norm_rows(a: np.ndarray) -> np.ndarray:
     """Euclidean norm of each row of (n, k) ``a``."""
     return np.sqrt(np.einsum("ij,ij->i", a, a))

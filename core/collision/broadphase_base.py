@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import PhysanimError
+from ..transforms import column_max, column_min, row_all
 
 AXIS_NAMES = "xyz"
 # Candidate pairs handled per vectorised batch. A batch's temporaries (a dozen int64/bool arrays
@@ -86,7 +87,7 @@ def check_boxes(lo, hi) -> tuple[np.ndarray, np.ndarray]:
     if lo.ndim != 2 or lo.shape[1:] != (3,) or lo.shape != hi.shape:
         raise PhysanimError(
             f"box bounds lo and hi must both have shape (n, 3) (got {lo.shape} and {hi.shape})")
-    finite = np.isfinite(lo).all(axis=1) & np.isfinite(hi).all(axis=1)
+    finite = row_all(np.isfinite(lo)) & row_all(np.isfinite(hi))
     if not finite.all():
         k = int(np.argmin(finite))
         raise PhysanimError(
@@ -100,7 +101,7 @@ def check_boxes(lo, hi) -> tuple[np.ndarray, np.ndarray]:
             f"hi = {float(hi[k, a])!r}")
     if len(lo):
         with np.errstate(over="ignore"):
-            span = hi.max(axis=0) - lo.min(axis=0)
+            span = column_max(hi) - column_min(lo)
         if not np.isfinite(span).all():
             raise PhysanimError(
                 f"the boxes span more than the float64 range (from {_fmt(lo.min(axis=0))} to "

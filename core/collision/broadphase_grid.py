@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import PhysanimError
+from ..transforms import column_max, column_min, row_max
 from .broadphase_base import (AXIS_NAMES, BroadPhase, BroadPhaseStats, concat_pairs, iter_ranges,
                               keep_overlapping, transposed)
 
@@ -82,7 +83,7 @@ class UniformGrid(BroadPhase):
         lo_t, hi_t = transposed(lo, hi)
         found, candidates = _large_box_pairs(lo_t, hi_t, large)
         box, cell = _entries(np.flatnonzero(~large), cell_lo, extent)
-        key, hashed = _keys(cell, dims=cell_hi.max(axis=0) + 1)
+        key, hashed = _keys(cell, dims=column_max(cell_hi) + 1)
         box, cell, count, cells = _by_cell(box, cell, key)
         candidates += int(count.sum())
         found += _cell_pairs(lo_t, hi_t, np.ascontiguousarray(cell_lo.T), box, cell, count,
@@ -101,8 +102,8 @@ def _auto_cell_size(lo: np.ndarray, hi: np.ndarray) -> float:
     go to the large-box pass), at least 2**-20 of the scene; for points, ~one point per cell."""
     if len(lo) == 0:
         return 1.0
-    span = float((hi.max(axis=0) - lo.min(axis=0)).max())
-    size = AUTO_CELL_FACTOR * float(np.median((hi - lo).max(axis=1)))
+    span = float((column_max(hi) - column_min(lo)).max())
+    size = AUTO_CELL_FACTOR * float(np.median(row_max(hi - lo)))
     if size == 0:
         size = span / np.cbrt(len(lo))
     return float(max(size, span / 2**20)) if span > 0 else 1.0
@@ -110,7 +111,7 @@ def _auto_cell_size(lo: np.ndarray, hi: np.ndarray) -> float:
 
 def _cell_ranges(lo: np.ndarray, hi: np.ndarray, size: float) -> tuple[np.ndarray, np.ndarray]:
     """(n, 3) int64 first and last cell of every box along each axis."""
-    origin = lo.min(axis=0)
+    origin = column_min(lo)
     with np.errstate(over="ignore"):  # an overflow to inf is caught just below
         cell_lo = np.floor((lo - origin) / size)
         cell_hi = np.floor((hi - origin) / size)

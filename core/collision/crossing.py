@@ -22,7 +22,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..transforms import dot_rows, norm_rows
+from ..transforms import column_max, dot_rows, norm_rows, row_any, row_max
 from .broadphase_base import keep_overlapping, transposed
 from .broadphase_grid import UniformGrid, _auto_cell_size, _cell_ranges, _entries, _keys
 from .distance import closest_on_triangles
@@ -134,7 +134,7 @@ def _first_crossing(times: np.ndarray, signs: np.ndarray, valid: np.ndarray, k):
     """Per pair: whether any root is a crossing (``valid``), and the sign (+1/-1) of f before
     the first (for a pair that never crossed: at the end, else at the start, else +1)."""
     valid = valid & np.isfinite(times)
-    ever = valid.any(axis=1)
+    ever = row_any(valid)
     before = signs[np.arange(len(times)), np.argmax(valid, axis=1)]
     end, start = np.sign(sum(k)), np.sign(k[0])
     side = np.where(ever, before, np.where(end != 0.0, end, start))
@@ -156,7 +156,7 @@ def triangle_point(t0: np.ndarray, t1: np.ndarray, p0: np.ndarray,
         point = p0[row] + at * (p1[row] - p0[row])
         # on the closed triangle (a root is exact to rounding: through an edge or a corner
         # counts, for every triangle there)
-        size = np.sqrt(np.einsum("ckj,ckj->ck", tri - tri[:, :1], tri - tri[:, :1]).max(axis=1))
+        size = np.sqrt(row_max(np.einsum("ckj,ckj->ck", tri - tri[:, :1], tri - tri[:, :1])))
         inside[row, r] = closest_on_triangles(point, tri)[1] <= (MEET * size) ** 2
     ever, side = _first_crossing(times, signs, inside, k)
     n1, _ = _unit(np.cross(t1[:, 1] - t1[:, 0], t1[:, 2] - t1[:, 0]))
@@ -246,7 +246,7 @@ def box_pairs(lo_a: np.ndarray, hi_a: np.ndarray, lo_b: np.ndarray,
     lo, hi = np.concatenate([lo_a, lo_b]), np.concatenate([hi_a, hi_b])
     cell_lo, cell_hi = _cell_ranges(lo, hi, _auto_cell_size(lo, hi))
     return _across_cells(lo, hi, len(lo_a), cell_lo, cell_hi - cell_lo + 1,
-                         cell_hi.max(axis=0) + 1)
+                         column_max(cell_hi) + 1)
 
 
 def element_boxes(low: np.ndarray, high: np.ndarray, ids: np.ndarray
@@ -354,7 +354,7 @@ class KeptTests:
                 continue
             moved = np.zeros(n, bool)
             for a, b in zip(arrays, before):
-                moved |= np.any((a != b).reshape(n, -1), axis=1)
+                moved |= row_any((a != b).reshape(n, -1))
             out.append(moved)
         self._inputs = tuple(tuple(a.copy() for a in arrays) for arrays in groups)
         self._detection += 1

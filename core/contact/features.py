@@ -36,7 +36,7 @@ import numpy as np
 
 from ..collision.crossing import (KeptPairs, KeptTests, box_pairs, element_boxes,
                                   segment_segment, triangle_point)
-from ..transforms import dot_rows, norm_rows
+from ..transforms import column_max, column_min, dot_rows, norm_rows, row_any
 from .contacts import Contacts
 from .pair_solve import PointPairs, respond, separate, shares
 from .path import CONTACT_DISTANCE, SKIN, ColliderPath, Features
@@ -241,7 +241,7 @@ def _detect(path: ColliderPath, f: Features, faces: FaceSet, x0, x1, s0: float,
         ``own``), through the kept tests where there are."""
         if tests is None:
             return test(np.arange(len(i)))
-        stale = moved[0][ids].reshape(len(i), -1).any(axis=1) | moved[own][j]
+        stale = row_any(moved[0][ids].reshape(len(i), -1)) | moved[own][j]
         return tests.separations(kind, i * count + j, stale, test)
 
     i, j = found[0]
@@ -312,13 +312,16 @@ def _within_reach(f: Features, l0: np.ndarray, l1: np.ndarray, near: float) -> b
     box of its own."""
     if not len(l0):
         return False
-    lo = np.minimum(l0.min(0), l1.min(0))
-    hi = np.maximum(l0.max(0), l1.max(0))
+    lo = np.minimum(column_min(l0), column_min(l1))
+    hi = np.maximum(column_max(l0), column_max(l1))
     grow = (f.radius + near)[:, None]
     boxes = [(np.minimum(f.points0, f.points1) - grow, np.maximum(f.points0, f.points1) + grow)]
     if len(f.segments0):
-        boxes.append((np.minimum(f.segments0.min(1), f.segments1.min(1)) - near,
-                      np.maximum(f.segments0.max(1), f.segments1.max(1)) + near))
+        s0, s1 = f.segments0, f.segments1  # (each segment's ends: element-wise, not reduced)
+        boxes.append((np.minimum(np.minimum(s0[:, 0], s0[:, 1]),
+                                 np.minimum(s1[:, 0], s1[:, 1])) - near,
+                      np.maximum(np.maximum(s0[:, 0], s0[:, 1]),
+                                 np.maximum(s1[:, 0], s1[:, 1])) + near))
     return any(bool(np.any(np.all((b_lo <= hi) & (b_hi >= lo), axis=1))) for b_lo, b_hi in boxes)
 
 

@@ -30,6 +30,7 @@ from ..collision.crossing import (KeptPairs, KeptTests, element_boxes, segment_s
                                   triangle_point)
 from ..contact.features import FaceSet
 from ..contact.pair_solve import PointPairs, respond, separate, shares
+from ..transforms import row_any
 
 ROUNDS = 8  # detections per sub-step
 GROUNDED_SHARE = 0.01  # of the inverse mass a point touching a collider keeps here
@@ -124,11 +125,11 @@ class SelfCollision:
         moved, = self._tests.begin((x0, x1))
         if len(tris):
             i, j = self._faces_points.pairs(self._margin, *element_boxes(lo, hi, tris), lo, hi)
-            keep = ~np.any(tris[i] == j[:, None], axis=1)
+            keep = ~row_any(tris[i] == j[:, None])
             i, j = i[keep], j[keep]
             if len(i):
                 sep = self._tests.separations(
-                    "faces", i * len(x0) + j, moved[tris[i]].any(axis=1) | moved[j],
+                    "faces", i * len(x0) + j, row_any(moved[tris[i]]) | moved[j],
                     lambda r: triangle_point(x0[tris[i[r]]], x1[tris[i[r]]], x0[j[r]], x1[j[r]]))
                 near = sep.gap < d
                 vertex.append(np.concatenate([tris[i], j[:, None]], axis=1)[near])
@@ -138,12 +139,13 @@ class SelfCollision:
         if len(edges):
             i, j = self._edges.pairs(self._margin, *element_boxes(lo, hi, edges))
             a, b = edges[i], edges[j]
-            keep = ~np.any(a[:, :, None] == b[:, None, :], axis=(1, 2))
+            keep = ~row_any(np.stack([a[:, 0] == b[:, 0], a[:, 0] == b[:, 1], a[:, 1] == b[:, 0],
+                                     a[:, 1] == b[:, 1]], axis=1))
             a, b = a[keep], b[keep]
             if len(a):
                 sep = self._tests.separations(
                     "edges", i[keep] * len(edges) + j[keep],
-                    moved[a].any(axis=1) | moved[b].any(axis=1),
+                    row_any(moved[a]) | row_any(moved[b]),
                     lambda r: segment_segment(x0[a[r, 0]], x0[a[r, 1]], x0[b[r, 0]], x0[b[r, 1]],
                                               x1[a[r, 0]], x1[a[r, 1]], x1[b[r, 0]],
                                               x1[b[r, 1]]))

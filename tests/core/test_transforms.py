@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from physanim.core.transforms import (
-    TransformPath, compose, decompose, matrix_to_quaternion, quaternion_to_matrix, slerp,
+    TransformPath, column_max, column_min, compose, decompose, matrix_to_quaternion,
+    quaternion_to_matrix, row_all, row_any, row_max, slerp,
 )
 
 
@@ -222,3 +223,23 @@ def test_matrix_rotation_vector_inverts_rotation_vector_matrix():
                                    atol=1e-12)
     half_turn = matrix_rotation_vector(np.diag([1.0, -1.0, -1.0]))
     np.testing.assert_allclose(np.abs(half_turn), [np.pi, 0.0, 0.0], atol=1e-12)
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 3), (7, 1), (500, 3), (400, 4), (4096, 3)])
+def test_narrow_reductions_equal_numpys(shape):
+    # column_min/column_max/row_max/row_any/row_all give numpy's axis reductions value for
+    # value (dtype too), NaN and infinities included, for floats and integers
+    rng = np.random.default_rng(shape[0])
+    a = rng.normal(0.0, 1e3, shape)
+    a[rng.random(shape) < 0.01] = np.inf
+    a[rng.random(shape) < 0.01] = -np.inf
+    whole = (np.nan_to_num(a, posinf=1e6, neginf=-1e6) * 7).astype(np.int64)
+    for x in (a, np.where(rng.random(shape) < 0.02, np.nan, a), whole):
+        for got, want in ((column_min(x), x.min(axis=0)), (column_max(x), x.max(axis=0)),
+                          (row_max(x), x.max(axis=1))):
+            assert got.dtype == want.dtype
+            np.testing.assert_array_equal(got, want)
+    m = rng.random(shape) < 0.3
+    for got, want in ((row_any(m), m.any(axis=1)), (row_all(~m), (~m).all(axis=1))):
+        assert got.dtype == bool
+        np.testing.assert_array_equal(got, want)
