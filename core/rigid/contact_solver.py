@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..transforms import take
+from ..transforms import row_all, row_any, row_max, take
 from . import manifold_blocks as blocks
 from .contact_set import ContactSet, subset_width
 
@@ -228,10 +228,10 @@ def _normal(local, cs, r, sc, s, e) -> None:
     want = sc.mass[s:e] * rel + sc.bias[s:e]
     idle = cs.valid[s:e] & (old == 0.0) & (want >= 0.0)
     new = old - np.einsum("mij,mj->mi", cs.block[s:e], want) - sc.impulse[s:e] * old
-    none = (idle | ~cs.valid[s:e]).all(axis=1)
+    none = row_all(idle | ~cs.valid[s:e])
     new[none] = 0.0
-    mixed = idle.any(axis=1) & ~none
-    pulling = (new < 0.0).any(axis=1) & ~none
+    mixed = row_any(idle) & ~none
+    pulling = row_any(new < 0.0) & ~none
     hard = np.nonzero(mixed | pulling)[0]
     if len(hard):
         new[hard], solved = _enumerated(cs, sc, hard + s, rel[hard], old[hard])
@@ -265,7 +265,8 @@ def _enumerated(cs, sc, m, rel, old) -> tuple[np.ndarray, np.ndarray]:
     masks, preference = blocks.subset_table(w)  # (C, w), (C,)
     v = valid[:, None]  # (g, 1, w)
     act = masks & v  # (g, C, w)
-    allowed = ~(masks & ~v).any(axis=2)  # subsets of the valid points only
+    allowed = ~row_any((masks & ~v).reshape(-1, w)).reshape(len(v), -1)  # subsets of the
+    # valid points only
     mass, bias, imp = sc.mass[m, :w][:, None], sc.bias[m, :w], sc.impulse[m, :w]
     k = cs.coupling[m, :w, :w]
     o = old[:, None]
@@ -275,7 +276,7 @@ def _enumerated(cs, sc, m, rel, old) -> tuple[np.ndarray, np.ndarray]:
                    - imp[:, None] * o, 0.0)
     after = mass * (rel[:, None] + np.matmul(new - o, k)) + bias[:, None]
     scale = 1e-6 * (np.abs(rel) + np.abs(bias) + 1e-3)[:, None]
-    tiny = 1e-9 * np.abs(new).max(axis=2, keepdims=True)
+    tiny = 1e-9 * row_max(np.abs(new).reshape(-1, w)).reshape(new.shape[:2] + (1,))
     # how far each subset's answer is from complementary: pull at its points (as the
     # velocity it makes) and approach at the others
     pull = np.where(act & (new < -tiny), -new, 0.0) * np.diagonal(k, axis1=1, axis2=2)[:, None]
