@@ -6,8 +6,9 @@ import numpy as np
 
 def multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton products a b of (n, 4) (or (4,)) quaternions: the rotation b, then a."""
-    aw, ax, ay, az = np.moveaxis(np.asarray(a, dtype=np.float64), -1, 0)
-    bw, bx, by, bz = np.moveaxis(np.asarray(b, dtype=np.float64), -1, 0)
+    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    aw, ax, ay, az = a[..., 0], a[..., 1], a[..., 2], a[..., 3]  # (views: no moveaxis call)
+    bw, bx, by, bz = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
     return np.stack([aw * bw - ax * bx - ay * by - az * bz,
                      aw * bx + ax * bw + ay * bz - az * by,
                      aw * by - ax * bz + ay * bw + az * bx,
@@ -28,7 +29,8 @@ def normalized(q: np.ndarray) -> np.ndarray:
 
 def to_matrix(q: np.ndarray) -> np.ndarray:
     """(n, 3, 3) rotation matrices of (n, 4) unit quaternions (column vectors: x' = R x)."""
-    w, x, y, z = np.moveaxis(np.asarray(q, dtype=np.float64), -1, 0)
+    q = np.asarray(q, dtype=np.float64)
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     r = np.empty((9,) + np.shape(w))  # entry by entry (contiguous writes), then rows
     r[0] = 1 - 2 * (y * y + z * z)
     r[1] = 2 * (x * y - z * w)
@@ -39,7 +41,7 @@ def to_matrix(q: np.ndarray) -> np.ndarray:
     r[6] = 2 * (x * z - y * w)
     r[7] = 2 * (y * z + x * w)
     r[8] = 1 - 2 * (x * x + y * y)
-    return np.ascontiguousarray(np.moveaxis(r, 0, -1)).reshape(np.shape(w) + (3, 3))
+    return np.ascontiguousarray(r.reshape(9, -1).T).reshape(np.shape(w) + (3, 3))
 
 
 def from_matrix(r: np.ndarray) -> np.ndarray:
