@@ -22,7 +22,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..transforms import column_max, dot_rows, norm_rows, row_any, row_max
+from ..transforms import column_max, cross, dot_rows, norm_rows, row_any, row_max
 from .broadphase_base import keep_overlapping, transposed
 from .broadphase_grid import UniformGrid, _auto_cell_size, _cell_ranges, _entries, _keys
 from .distance import closest_on_triangles
@@ -82,8 +82,8 @@ def _direction(diff: np.ndarray, fallback: np.ndarray) -> tuple[np.ndarray, np.n
 
 def _cubic(r0, dr, u0, du, w0, dw) -> tuple[np.ndarray, ...]:
     """Coefficients (k0, k1, k2, k3) of f(t) = r(t) . (u(t) x w(t)) for r = r0 + t dr etc."""
-    c0, c2 = np.cross(u0, w0), np.cross(du, dw)
-    c1 = np.cross(u0, dw) + np.cross(du, w0)
+    c0, c2 = cross(u0, w0), cross(du, dw)
+    c1 = cross(u0, dw) + cross(du, w0)
     return (dot_rows(r0, c0), dot_rows(r0, c1) + dot_rows(dr, c0),
             dot_rows(r0, c2) + dot_rows(dr, c1), dot_rows(dr, c2))
 
@@ -159,7 +159,7 @@ def triangle_point(t0: np.ndarray, t1: np.ndarray, p0: np.ndarray,
         size = np.sqrt(row_max(np.einsum("ckj,ckj->ck", tri - tri[:, :1], tri - tri[:, :1])))
         inside[row, r] = closest_on_triangles(point, tri)[1] <= (MEET * size) ** 2
     ever, side = _first_crossing(times, signs, inside, k)
-    n1, _ = _unit(np.cross(t1[:, 1] - t1[:, 0], t1[:, 2] - t1[:, 0]))
+    n1, _ = _unit(cross(t1[:, 1] - t1[:, 0], t1[:, 2] - t1[:, 0]))
     z1 = sum(k)  # f(1): the point's side of the triangle's winding at the end
     crossed = ever & (np.sign(z1) != side)
     q, _, _ = closest_on_triangles(p1, t1)
@@ -216,7 +216,7 @@ def segment_segment(a0, b0, c0, d0, a1, b1, c1, d1) -> Separation:
         meet[row, r] = gap <= MEET * scale
     ever, before = _first_crossing(times, signs, meet, k)
     side = -before
-    m1, length = _unit(np.cross(b1 - a1, d1 - c1))
+    m1, length = _unit(cross(b1 - a1, d1 - c1))
     reliable = length > PARALLEL * norm_rows(b1 - a1) * norm_rows(d1 - c1)
     crossed = ever & reliable & (-np.sign(sum(k)) != side)
     s, t = closest_on_segments(a1, b1, c1, d1)

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..transforms import take, transform_points, transform_vectors
+from ..transforms import cross, take, transform_points, transform_vectors
 from .bounding import PAD_REL, similarity_scale, world_frame
 from .bvh import BVH
 from .cells import TriangleCells
@@ -121,11 +121,11 @@ def closest_on_triangles(p: np.ndarray, tri: np.ndarray):
         best_q = np.where(better[:, None], q, best_q)
         feature = np.where(better, code, feature).astype(np.int8)
     a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
-    n = np.cross(b - a, c - a)
+    n = cross(b - a, c - a)
     nn = np.einsum("ij,ij->i", n, n)
     inside = nn > 0.0
     for v, w in ((a, b), (b, c), (c, a)):
-        inside &= np.einsum("ij,ij->i", n, np.cross(w - v, p - v)) >= 0.0
+        inside &= np.einsum("ij,ij->i", n, cross(w - v, p - v)) >= 0.0
     h = np.einsum("ij,ij->i", n, p - a) / np.where(inside, nn, 1.0)
     face_q = p - h[:, None] * n
     face_d2 = h * h * nn

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..transforms import cross
 from .mesh import check_points
 
 TOLERANCE_REL = 256 * 2.0 ** -52
@@ -44,7 +45,7 @@ class ConvexHull:
     def area(self) -> float:
         """Surface area [m^2] (one side of a flat hull)."""
         t = self.points[self.triangles]
-        return float(0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]),
+        return float(0.5 * np.linalg.norm(cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]),
                                           axis=1).sum())
 
     @property
@@ -53,7 +54,7 @@ class ConvexHull:
         if self.dimension < 3:
             return 0.0
         t = self.points[self.triangles] - self.points[self.vertices[0]]
-        return float(np.einsum("ij,ij->i", t[:, 0], np.cross(t[:, 1], t[:, 2])).sum() / 6.0)
+        return float(np.einsum("ij,ij->i", t[:, 0], cross(t[:, 1], t[:, 2])).sum() / 6.0)
 
 
 def convex_hull(points, tolerance: float | None = None) -> ConvexHull:
@@ -93,7 +94,7 @@ def _initial_simplex(q: np.ndarray, tol: float) -> tuple[int, list[int]]:
     c = int(np.argmax(np.einsum("ij,ij->i", off, off)))
     if np.linalg.norm(off[c]) <= tol:
         return 1, [a, b]
-    normal = np.cross(q[b] - q[a], q[c] - q[a])
+    normal = cross(q[b] - q[a], q[c] - q[a])
     normal /= np.linalg.norm(normal)
     height = rel @ normal
     e = int(np.argmax(np.abs(height)))
@@ -106,9 +107,9 @@ def _flat_hull(q: np.ndarray, simplex: list[int], tol: float) -> np.ndarray:
     """Fan triangulation of the 2D hull of coplanar points (Andrew's monotone chain)."""
     a, b, c = simplex
     u = (q[b] - q[a]) / np.linalg.norm(q[b] - q[a])
-    n = np.cross(q[b] - q[a], q[c] - q[a])
+    n = cross(q[b] - q[a], q[c] - q[a])
     n /= np.linalg.norm(n)
-    v = np.cross(n, u)
+    v = cross(n, u)
     xy = np.stack([(q - q[a]) @ u, (q - q[a]) @ v], axis=1)
     order = np.lexsort((xy[:, 1], xy[:, 0]))
 
@@ -146,7 +147,7 @@ class _Quickhull:
         self.edge: dict[tuple[int, int], int] = {}
         self.outside: dict[int, np.ndarray] = {}
         a, b, c, d = simplex
-        if np.dot(np.cross(q[b] - q[a], q[c] - q[a]), q[d] - q[a]) > 0.0:
+        if np.dot(cross(q[b] - q[a], q[c] - q[a]), q[d] - q[a]) > 0.0:
             b, c = c, b  # make (a, b, c) face away from d
         faces = [self._add(a, b, c), self._add(a, d, b), self._add(b, d, c), self._add(c, d, a)]
         rest = np.setdiff1d(np.arange(len(q)), simplex)

@@ -18,6 +18,7 @@ from functools import cached_property
 
 import numpy as np
 
+from ..transforms import cross
 from ..errors import PhysanimError
 from .tritri import normal_signs
 
@@ -136,7 +137,7 @@ class TriangleMesh:
             Zero vectors where only zero-area faces meet.
         """
         tri = self.triangle_vertices
-        face = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        face = cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
         face = _unit(face)
         ids = self.welded[self.triangles]
         weight = np.empty((len(tri), 3))  # the face angle at each corner

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..transforms import cross
 from .bounding import BoundingVolume, Groups, gather, linear_part, similarity_scale, slab_interval
 from .hull import convex_hull
 from .sat import obb_overlap
@@ -71,7 +72,7 @@ def surface_covariance(tri: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray
     """
     groups = Groups(tri[:, 0], offsets)
     q = tri - groups.spread(tri[offsets[:-1], 0])[:, None, :]
-    cr = np.cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0])
+    cr = cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0])
     area = 0.5 * np.sqrt(np.einsum("ij,ij->i", cr, cr))
     cen = q.mean(axis=1)
     moment = (9.0 * cen[:, :, None] * cen[:, None, :]

@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..transforms import cross
+
 _EPS = 2.0 ** -53
 # Rounding-error bounds relative to the "permanent" (the determinant with every product made
 # positive). Shewchuk's bounds are (3 + 16 eps) eps and (7 + 56 eps) eps; these round them up.
@@ -87,7 +89,7 @@ def orient3d_value(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray) -
     """Floating-point value of det[b - a, c - a, d - a] (n,), for interpolation after the exact
     sign has decided the topology."""
     u, v, w = b - a, c - a, d - a
-    return np.einsum("ij,ij->i", u, np.cross(v, w))
+    return np.einsum("ij,ij->i", u, cross(v, w))
 
 
 # --- exact fallback ----------------------------------------------------------------------------

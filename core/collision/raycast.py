@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..transforms import norm_rows, take, transform_points, transform_vectors
+from ..transforms import cross, norm_rows, take, transform_points, transform_vectors
 from .bounding import PAD_REL, world_frame
 from .bvh import BVH
 from .cells import TriangleCells
@@ -245,7 +245,7 @@ def _report(bvh, p0, p1, t, tri_id, n_v, n_p, matrix, reach) -> SegmentHits:
             point[idx] = transform_points(m, point[idx])
             tv = transform_points(m, tv.reshape(-1, 3)).reshape(-1, 3, 3)
             d = transform_vectors(m[:3, :3], d)
-        face = np.cross(tv[:, 1] - tv[:, 0], tv[:, 2] - tv[:, 0])
+        face = cross(tv[:, 1] - tv[:, 0], tv[:, 2] - tv[:, 0])
         face /= norm_rows(face)[:, None]
         front[idx] = np.einsum("ij,ij->i", face, d) < 0.0
         normal[idx] = np.where(front[idx, None], face, -face)

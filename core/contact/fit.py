@@ -13,13 +13,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..transforms import cross
+
 # relative to the mesh's size: what counts as "flat" and as "on a corner"
 FIT_TOLERANCE = 1e-6
 
 
 def _area(verts: np.ndarray, tris: np.ndarray) -> float:
     a, b, c = verts[tris[:, 0]], verts[tris[:, 1]], verts[tris[:, 2]]
-    return 0.5 * float(np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
+    return 0.5 * float(np.linalg.norm(cross(b - a, c - a), axis=1).sum())
 
 
 def fit_analytic_shape(verts: np.ndarray, tris: np.ndarray) -> tuple[str, np.ndarray]:

@@ -38,7 +38,7 @@ from ..collision.crossing import barycentric
 from ..collision.distance import CORNER, EDGE, closest_on_triangles, closest_points
 from ..collision.mesh import TriangleMesh
 from ..collision.raycast import segment_hits
-from ..transforms import inverse_affine, norm_rows, take, transform_vectors
+from ..transforms import cross, inverse_affine, norm_rows, take, transform_vectors
 from .frame import ColliderFrame
 from .path import CONTACT_DISTANCE, ColliderPath, Features, Hits, SurfacePoints
 
@@ -132,7 +132,7 @@ class MeshPath(ColliderPath):
             q, _, feature = closest_on_triangles(l, corners)
         else:
             corners = take(bvh.mesh.triangle_vertices, tri)
-        face = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        face = cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
         face /= np.maximum(norm_rows(face), 1e-300)[:, None]
         diff = l - q
         dist = norm_rows(diff)
@@ -218,7 +218,7 @@ class MeshPath(ColliderPath):
         (an open boundary) — on the hit triangle's own plane. Modifies ``found`` in place."""
         g = np.nonzero(found.hit)[0]
         c = self._corners(found.triangle[g], sa[g])
-        face = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
+        face = cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
         plane = np.sign(np.einsum("ij,ij->i", l0[g] - c[:, 0], face))
         near = (side0[g] != 0.0) & self._touching(tri0[g], found.triangle[g])
         side = np.where(near, side0[g], plane)

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..transforms import dot_rows, norm_rows, tangents
+from ..transforms import cross, dot_rows, norm_rows, tangents
 
 NO_POINT = -1  # a row's second point when it touches only one
 
@@ -245,7 +245,7 @@ class OnCurves:
         n1 = (1.0 - w) * self._across[a] + w * self._across[b]
         n1 -= dot_rows(n1, along)[:, None] * along
         n1 /= norm_rows(n1)[:, None]
-        n2 = np.cross(along, n1)
+        n2 = cross(along, n1)
         normals = np.stack([n1, n2], axis=1).reshape(-1, 3)  # a bead's two rows side by side
         bead = np.repeat(np.arange(len(self.i)), 2)
         speed = dot_rows(along, rel)[bead]
@@ -273,7 +273,7 @@ def _wire_frames(pts: np.ndarray, cyclic: bool) -> tuple[np.ndarray, np.ndarray]
                        after)
     chord = norm_rows(before * length_in[:, None] + after * length[:, None])
     turn = after - before  # points into the bend, |turn| = 2 sin(angle / 2)
-    sine = norm_rows(np.cross(before, after))
+    sine = norm_rows(cross(before, after))
     ok = (length_in > 0.0) & (length > 0.0) & (chord > 0.0)
     kappa = np.where(ok, 2.0 * sine / np.where(ok, chord, 1.0), 0.0)
     t_norm = norm_rows(turn)
@@ -293,11 +293,11 @@ def _transported(pts: np.ndarray, tangent: np.ndarray, cyclic: bool) -> np.ndarr
         across[k] = n / size if size > 1e-9 else tangents(tangent[k:k + 1])[0][0]
     if cyclic:
         back = across[-1] - (across[-1] @ tangent[0]) * tangent[0]  # carried round to vertex 0
-        twist = math.atan2(np.cross(across[0], back) @ tangent[0], across[0] @ back)
+        twist = math.atan2(cross(across[0], back) @ tangent[0], across[0] @ back)
         run = np.concatenate([[0.0], np.cumsum(norm_rows(np.diff(pts, axis=0)))])
         total = run[-1] + float(np.linalg.norm(pts[0] - pts[-1]))
         angle = -twist * run / total  # turn each back about its tangent
-        side = np.cross(tangent, across)
+        side = cross(tangent, across)
         across = np.cos(angle)[:, None] * across + np.sin(angle)[:, None] * side
     return across
 

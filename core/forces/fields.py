@@ -14,6 +14,7 @@ from typing import Protocol
 
 import numpy as np
 
+from ..transforms import cross
 from ..validate import finite, non_negative
 
 
@@ -180,6 +181,6 @@ class Vortex:
     def apply(self, p: ParticleView, f_out: np.ndarray) -> None:
         a = np.asarray(self.axis)
         r = p.x - np.asarray(self.center)
-        tangent = np.cross(a, r)
+        tangent = cross(a, r)
         n = np.linalg.norm(tangent, axis=1)
         f_out += (self.strength / np.where(n > 1e-9, n, np.inf))[:, None] * tangent

@@ -6,15 +6,17 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..transforms import cross
+
 WINDING_CHUNK = 2_000_000  # max points x triangles per winding-number batch (memory bound)
 
 
 def triangle_areas_normals(verts: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Areas (m,) [m^2] and unit normals (m, 3) of triangles (m, 3) over vertices (n, 3)."""
     a, b, c = verts[tris[:, 0]], verts[tris[:, 1]], verts[tris[:, 2]]
-    cross = np.cross(b - a, c - a)
-    norm = np.linalg.norm(cross, axis=1)
-    normals = cross / np.where(norm > 0.0, norm, 1.0)[:, None]
+    doubled = cross(b - a, c - a)
+    norm = np.linalg.norm(doubled, axis=1)
+    normals = doubled / np.where(norm > 0.0, norm, 1.0)[:, None]
     return 0.5 * norm, normals
 
 
@@ -23,9 +25,9 @@ def vertex_normals(verts: np.ndarray, tris: np.ndarray) -> np.ndarray:
     n = np.zeros_like(verts)
     if len(tris):
         a, b, c = verts[tris[:, 0]], verts[tris[:, 1]], verts[tris[:, 2]]
-        cross = np.cross(b - a, c - a)
+        doubled = cross(b - a, c - a)
         for k in range(3):
-            np.add.at(n, tris[:, k], cross)
+            np.add.at(n, tris[:, k], doubled)
     length = np.linalg.norm(n, axis=1)
     n[length == 0.0] = (0.0, 0.0, 1.0)
     length[length == 0.0] = 1.0
@@ -46,7 +48,7 @@ def enclosed_volume(verts: np.ndarray, tris: np.ndarray) -> float:
     """Signed volume [m^3] of a closed triangle mesh (divergence theorem); negative if the mesh
     is inside-out (normals pointing inwards)."""
     a, b, c = verts[tris[:, 0]], verts[tris[:, 1]], verts[tris[:, 2]]
-    return float(np.einsum("ij,ij->", a, np.cross(b, c)) / 6.0)
+    return float(np.einsum("ij,ij->", a, cross(b, c)) / 6.0)
 
 
 def winding_number(points: np.ndarray, verts: np.ndarray, tris: np.ndarray) -> np.ndarray:
@@ -65,7 +67,7 @@ def winding_number(points: np.ndarray, verts: np.ndarray, tris: np.ndarray) -> n
         b = tri[None, :, 1, :] - p[:, None, :]
         c = tri[None, :, 2, :] - p[:, None, :]
         la, lb, lc = (np.linalg.norm(q, axis=2) for q in (a, b, c))
-        num = np.einsum("kmi,kmi->km", a, np.cross(b, c))
+        num = np.einsum("kmi,kmi->km", a, cross(b, c))
         den = (la * lb * lc + np.einsum("kmi,kmi->km", a, b) * lc
                + np.einsum("kmi,kmi->km", b, c) * la + np.einsum("kmi,kmi->km", c, a) * lb)
         out[lo:lo + step] = np.arctan2(num, den).sum(axis=1) / (2.0 * np.pi)
@@ -140,9 +142,9 @@ def cone_directions(rng: np.random.Generator, axis: np.ndarray, half_angle: floa
     phi = rng.random(n) * 2.0 * np.pi
     # orthonormal basis per axis: pick the helper least parallel to it
     helper = np.where(np.abs(axis[:, 0:1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    e1 = np.cross(axis, helper)
+    e1 = cross(axis, helper)
     e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
-    e2 = np.cross(axis, e1)
+    e2 = cross(axis, e1)
     return (cos_t[:, None] * axis + (sin_t * np.cos(phi))[:, None] * e1
             + (sin_t * np.sin(phi))[:, None] * e2)
 

@@ -33,7 +33,8 @@ import numpy as np
 
 from ..forces import Pins
 from ..transforms import (
-    TransformPath, inverse_affine, matrix_rotation_vector, rotation_vector_matrix, transform_points,
+    TransformPath, cross, inverse_affine, matrix_rotation_vector, rotation_vector_matrix,
+    transform_points,
 )
 from ..world import BodyInertia, Reaction, merged
 
@@ -169,7 +170,7 @@ class TieFrame:
                 p1 = body.point(local, s1)
                 u = body.velocity(s1)
                 r = p1 - body.centre(s1) - body.shift
-                tied.append((i, p1, u[:3] + np.cross(u[3:], r), self.coupled[c.name]))
+                tied.append((i, p1, u[:3] + cross(u[3:], r), self.coupled[c.name]))
         if not tied:
             return pins, None
         names = list(dict.fromkeys(b for *_, b in tied))
@@ -276,7 +277,7 @@ class BodyTies:
         anchor's centripetal acceleration, w x (w x r), taken off)."""
         rows = Pins(self.i, self.anchor, self.anchor_v, t).rows(x, v, t)
         w = self.spin[self.body]
-        rows.jdot_v = -np.cross(w, np.cross(w, self.anchor - self.centre[self.body])).ravel()
+        rows.jdot_v = -cross(w, cross(w, self.anchor - self.centre[self.body])).ravel()
         return rows
 
     def columns(self) -> np.ndarray:
@@ -308,7 +309,7 @@ class BodyTies:
         particles (the bodies took the opposite)."""
         d = du.reshape(-1, 6)
         r = self.anchor - self.centre[self.body]
-        self.anchor_v = self.anchor_v + d[self.body, :3] + np.cross(d[self.body, 3:], r)
+        self.anchor_v = self.anchor_v + d[self.body, :3] + cross(d[self.body, 3:], r)
         self.impulse -= impulse.reshape(-1, 3)
         for name, step in zip(self.names, d):
             self.frame.bodies[name].du += step

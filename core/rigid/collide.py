@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..transforms import cross
 from ..collision.broadphase import UniformGrid
 from ..collision.crossing import KeptPairs
 from . import narrow, narrow_hull
@@ -353,7 +354,7 @@ def approach(bodies: Bodies, owner: np.ndarray, other, p: np.ndarray,
     normals n (3,) or (k, 3) of body ``other``'s surface (one body, or one per point) (< 0:
     into it)."""
     def velocity(rows):
-        return bodies.v[rows] + np.cross(bodies.w[rows], p - bodies.x[rows])
+        return bodies.v[rows] + cross(bodies.w[rows], p - bodies.x[rows])
     return np.einsum("ki,ki->k", velocity(owner) - velocity(np.broadcast_to(other, owner.shape)),
                      np.broadcast_to(n, p.shape))
 
@@ -384,7 +385,7 @@ def reduce_manifolds(owner: np.ndarray, p: np.ndarray, sep: np.ndarray) -> np.nd
     far = np.linalg.norm(q - q[rows, pick[0]][:, None], axis=2)
     pick.append(np.argmax(np.where(valid, far, -1.0), axis=1))
     axis = q[rows, pick[1]] - q[rows, pick[0]]
-    side = np.cross(axis[:, None, :], q - q[rows, pick[0]][:, None])
+    side = cross(axis[:, None, :], q - q[rows, pick[0]][:, None])
     ref = side[rows, np.argmax(np.where(valid, np.linalg.norm(side, axis=2), -1.0), axis=1)]
     signed = np.einsum("gki,gi->gk", side, ref)
     pick.append(np.argmax(np.where(valid, signed, -np.inf), axis=1))

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..transforms import row_all, row_any, row_max, take
+from ..transforms import cross, row_all, row_any, row_max, take
 from . import manifold_blocks as blocks
 from .contact_set import ContactSet, subset_width
 
@@ -114,8 +114,8 @@ def rows(cs: ContactSet, inv_mass: np.ndarray, inv_inertia: np.ndarray, ra: np.n
     # written in place (copies into the interleaved rows cost more than the products):
     # -(r_a x d) = d x r_a, r_b x d, and I^-1 times each (matmul: the tensors are symmetric)
     ang_a, ang_b = j[..., 3:6], j[..., 9:]
-    _cross(dirs, np.take(ra, slot, axis=1), out=ang_a)
-    _cross(np.take(rb, slot, axis=1), dirs, out=ang_b)
+    cross(dirs, np.take(ra, slot, axis=1), out=ang_a)
+    cross(np.take(rb, slot, axis=1), dirs, out=ang_b)
     np.matmul(ang_a, take(inv_inertia, a), out=mj[..., 3:6])
     np.matmul(ang_b, take(inv_inertia, b), out=mj[..., 9:])
     k = linear + np.einsum("mri,mri->mr", ang_a, mj[..., 3:6]) + \
@@ -134,18 +134,6 @@ def rows(cs: ContactSet, inv_mass: np.ndarray, inv_inertia: np.ndarray, ra: np.n
     count = np.maximum(cs.valid.sum(axis=1), 1)[:, None]
     return Rows(jn, mn, mass[:, :s], j[:, s:], mj[:, s:], mass[:, s:] / count)
 
-
-def _cross(u: np.ndarray, v: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-    """u x v over the last axis (numpy's cross, without its broadcasting copies), into
-    ``out`` when given."""
-    u0, u1, u2 = u[..., 0], u[..., 1], u[..., 2]
-    v0, v1, v2 = v[..., 0], v[..., 1], v[..., 2]
-    if out is None:
-        out = np.empty(np.broadcast_shapes(u.shape, v.shape))
-    np.subtract(u1 * v2, u2 * v1, out=out[..., 0])
-    np.subtract(u2 * v0, u0 * v2, out=out[..., 1])
-    np.subtract(u0 * v1, u1 * v0, out=out[..., 2])
-    return out
 
 
 @dataclass

@@ -18,6 +18,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from ..transforms import cross
 from ..collision.hull import convex_hull
 from ..errors import PhysanimError
 from ..validate import frozen
@@ -73,7 +74,7 @@ class HullShape:
         corners = p[hull.vertices]
         size = float(np.ptp(corners, axis=0).max())
         t = p[hull.triangles]
-        n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+        n = cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
         proj = (n / np.linalg.norm(n, axis=1)[:, None]) @ corners.T
         if np.ptp(proj, axis=1).min() < FLAT_REL * size:
             _flat(name, f"is flat (thinner than {FLAT_REL:g} of its size)")
@@ -101,7 +102,7 @@ def _flat(name: str, what: str):
 
 def _newell(loop: np.ndarray) -> np.ndarray:
     """Unit normal of a (c, 3) polygon, counter-clockwise seen from its front (Newell)."""
-    n = np.cross(loop, np.roll(loop, -1, axis=0)).sum(axis=0)
+    n = cross(loop, np.roll(loop, -1, axis=0)).sum(axis=0)
     return n / np.linalg.norm(n)
 
 
@@ -109,7 +110,7 @@ def _merged_loops(p: np.ndarray, tris: np.ndarray, tol: float) -> list[np.ndarra
     """Corner loops of the faces made by merging coplanar hull triangles (region growing
     from the largest triangle; build time, so plain Python)."""
     t = p[tris]
-    n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+    n = cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
     area = np.linalg.norm(n, axis=1)
     n /= area[:, None]
     owner = {(int(a), int(b)): f for f, tri in enumerate(tris)
@@ -216,7 +217,7 @@ class HullBatch:
         normal . x <= offset) and counts (k,) (beyond the count: zero, true for every x)."""
         corner, count = self.polygon(face)  # padded with the first corner: zero sides
         n = self.normal[np.arange(len(face)), face]
-        side = np.cross(np.roll(corner, -1, axis=1) - corner, n[:, None])
+        side = cross(np.roll(corner, -1, axis=1) - corner, n[:, None])
         side /= np.maximum(np.linalg.norm(side, axis=2), 1e-300)[..., None]
         return side, np.einsum("kli,kli->kl", side, corner), count
 

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..transforms import cross
 from .joint_chains import ChainSolver, chains
 from .joints import CONE_TWIST, FRAME, HINGE, ROWS, SLIDER, SPRING_JOINT, JointModel
 
@@ -104,7 +105,7 @@ def rows(model: JointModel, joints: np.ndarray, ab: np.ndarray, x: np.ndarray,
         j[:, i] = _linear(u, ra, rb)
         c[:, i] = np.einsum("ji,ji->j", u, gap)
     turn = _rotation_vector(wb @ wa.transpose(0, 2, 1))
-    swing = np.cross(axis_a, axis_b)
+    swing = cross(axis_a, axis_b)
     hinge = kind == HINGE
     for i in range(3):  # turning about the joint's axes
         u = wa[:, :, i]
@@ -198,14 +199,14 @@ def _twist(wa, wb, axis_b, normal, phi) -> np.ndarray:
     k = -normal  # the swing turns A's axis to B's about +normal: undo it
     x = wb[:, :, 0]
     cos, sin = np.cos(phi)[:, None], np.sin(phi)[:, None]
-    back = x * cos + np.cross(k, x) * sin + k * np.einsum("ji,ji->j", k, x)[:, None] * (1 - cos)
+    back = x * cos + cross(k, x) * sin + k * np.einsum("ji,ji->j", k, x)[:, None] * (1 - cos)
     return np.arctan2(np.einsum("ji,ji->j", back, wa[:, :, 1]),
                       np.einsum("ji,ji->j", back, wa[:, :, 0]))
 
 
 def _linear(u, ra, rb) -> np.ndarray:
     """(J, 12) rows along u (J, 3) with lever arms ra, rb."""
-    return np.concatenate([-u, -np.cross(ra, u), u, np.cross(rb, u)], axis=1)
+    return np.concatenate([-u, -cross(ra, u), u, cross(rb, u)], axis=1)
 
 
 def _angular(u) -> np.ndarray:
@@ -394,7 +395,7 @@ class _Rows:
         move = np.zeros((self.count, 6))
         _apply(move, self.r, mu * self.use, slice(None))
         if self.groups:
-            move[self.rows, :3] += self.w[:, None] * np.cross(nu[self.member], self.p)
+            move[self.rows, :3] += self.w[:, None] * cross(nu[self.member], self.p)
         return move
 
     def __call__(self, x):
@@ -403,7 +404,7 @@ class _Rows:
             self.soft * self.split(x)[0]
         group = np.zeros((self.groups, 3))
         if self.groups:
-            np.add.at(group, self.member, np.cross(self.p, move[self.rows, :3]))
+            np.add.at(group, self.member, cross(self.p, move[self.rows, :3]))
         return self.pack(joint, group.ravel())
 
     def precondition(self, x):

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..transforms import cross
 from ..collision.build import build_bvh
 from ..collision.distance import closest_points
 from ..collision.mesh import TriangleMesh
@@ -100,7 +101,7 @@ def watertight(vertices: np.ndarray, triangles: np.ndarray) -> bool:
     if len(np.unique(code)) != len(code) or not np.isin(reverse, code).all():
         return False
     a, b, c = (np.asarray(vertices, np.float64)[t[:, k]] for k in range(3))
-    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum()) > 0.0
+    return float(np.einsum("ij,ij->i", a, cross(b, c)).sum()) > 0.0
 
 
 def _points(bodies, rot: np.ndarray, idx: np.ndarray):

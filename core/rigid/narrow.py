@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..transforms import cross
 from .narrow_base import (PARALLEL_SQ, PairContacts, as_margin, closest_segments, collect, dot,
                           local, perpendicular, region, round_pair, unit, world)
 from .narrow_box import box_box
@@ -139,8 +140,8 @@ def capsule_capsule(ca, Ra, ra, la, cb, Rb, rb, lb, margin) -> PairContacts:
     a, b = Ra[:, :, 2], Rb[:, :, 2]
     s, t = closest_segments(ca, a, la, cb, b, lb)
     pa, pb = ca + s[:, None] * a, cb + t[:, None] * b
-    cross, sine = unit(np.cross(a, b), _UP)
-    fallback = np.where((sine > np.sqrt(PARALLEL_SQ))[:, None], cross, perpendicular(a))
+    across, sine = unit(cross(a, b), _UP)
+    fallback = np.where((sine > np.sqrt(PARALLEL_SQ))[:, None], across, perpendicular(a))
     fallback *= np.where(dot(cb - ca, fallback) < 0.0, -1.0, 1.0)[:, None]
     n, sep, point = round_pair(pa, ra, pb, rb, fallback)
     feature = 3 * region(s, la) + region(t, lb)

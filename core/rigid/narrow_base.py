@@ -10,6 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..transforms import cross
+
 # Below this squared sine of the angle between two directions they count as parallel: their
 # cross product then carries rounding rather than direction.
 PARALLEL_SQ = 1e-12
@@ -92,7 +94,7 @@ def unit(v: np.ndarray, fallback: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def perpendicular(v: np.ndarray) -> np.ndarray:
     """(m, 3) unit vectors perpendicular to the unit vectors v (m, 3)."""
     helper = np.where((np.abs(v[:, 0]) < 0.57)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-    p = np.cross(v, helper)
+    p = cross(v, helper)
     return p / np.linalg.norm(p, axis=1)[:, None]
 
 

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..transforms import cross
 from .narrow_base import PairContacts, as_margin, closest_segments, collect, unit, world
 from .narrow_clip import (CAPACITY, EDGE_EDGE, FACE_CORNERS, clip_face, edge_id, point_ids,
                           reduce_points)
@@ -146,7 +147,7 @@ def _edge_contacts(idx, ca, Ra, ha, hb, rel, t, axis, sep):
     i, j = axis // 3, axis % 3
     dir_a = np.eye(3)[i]
     dir_b = rel[rows, :, j]
-    n, _ = unit(np.cross(dir_a, dir_b), dir_a)
+    n, _ = unit(cross(dir_a, dir_b), dir_a)
     n *= np.where(np.einsum("mi,mi->m", n, t) < 0.0, -1.0, 1.0)[:, None]  # from A towards B
     sign_a = np.where(n < 0.0, -1.0, 1.0)  # A's edge farthest along n
     sign_a[rows, i] = 0.0

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..transforms import cross
 from .narrow_base import (PairContacts, as_margin, closest_segments, collect, local, region,
                           unit, world)
 from .narrow_box import EDGE_SLACK, EDGE_SLACK_ABS, PARALLEL_EDGES
@@ -114,7 +115,7 @@ def _push_out(p0, d, half, h, size):
     m = len(p0)
     rows = np.arange(m)
     face = np.abs(p0) - half[:, None] * np.abs(d) - h
-    axes = np.cross(d[:, None, :], np.eye(3)[None])  # (m, 3 edge axes, 3)
+    axes = cross(d[:, None, :], np.eye(3)[None])  # (m, 3 edge axes, 3)
     length = np.linalg.norm(axes, axis=2)
     ok = length > PARALLEL_EDGES
     along = np.einsum("mki,mi->mk", axes, p0)

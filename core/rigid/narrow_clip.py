@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..transforms import cross
+
 CAPACITY = 8  # a rectangle clipped by four planes has at most 8 corners
 # a corner within this fraction of the half extent of a side plane counts as on it (inside)
 ON_PLANE = 1e-6
@@ -203,7 +205,7 @@ def reduce_points(p: np.ndarray, sep: np.ndarray, valid: np.ndarray, axis: np.nd
     p2 = p[rows, second][:, None]
 
     def area(u, v):  # signed areas (m, 8) of triangles (u, v, p) about the axis
-        return np.cross(v - u, p - u)[rows, :, axis]
+        return cross(v - u, p - u)[rows, :, axis]
 
     a12 = area(p1, p2)
     third = _first_largest(np.abs(a12), valid & ~chosen)

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..transforms import cross
 from .hull_shape import HullBatch, HullSet, HullShape
 from .narrow_base import FEATURE_COUNT as FEATURES
 from .narrow_base import PairContacts, as_margin, closest_segments, local, world
@@ -194,7 +195,7 @@ def _edge_query(a: HullBatch, b: HullBatch):
     (-inf without any), edges of a and b (k,) and the axis (k, 3), from a towards b."""
     a1, a2 = (np.take_along_axis(a.normal, a.edge_face[..., s:s + 1], 1) for s in (0, 1))
     b1, b2 = (np.take_along_axis(b.normal, b.edge_face[..., s:s + 1], 1) for s in (0, 1))
-    u, w = np.cross(a1, a2), np.cross(b1, b2)
+    u, w = cross(a1, a2), cross(b1, b2)
     bu1, bu2 = np.matmul(u, b1.transpose(0, 2, 1)), np.matmul(u, b2.transpose(0, 2, 1))
     aw1, aw2 = np.matmul(a1, w.transpose(0, 2, 1)), np.matmul(a2, w.transpose(0, 2, 1))
     arcs = (bu1 * bu2 < 0.0) & (aw1 * aw2 < 0.0)  # each arc crosses the other's great circle
@@ -202,7 +203,7 @@ def _edge_query(a: HullBatch, b: HullBatch):
     p, i, j = np.nonzero(arcs)
     pa, da = _edge_points(a, p, i)
     pb, db = _edge_points(b, p, j)
-    axis = np.cross(da, db)
+    axis = cross(da, db)
     length = np.linalg.norm(axis, axis=1)
     ok = length > PARALLEL_REL * np.linalg.norm(da, axis=1) * np.linalg.norm(db, axis=1)
     axis /= np.maximum(length, 1e-300)[:, None]
@@ -226,7 +227,7 @@ def _area(h: HullBatch, face: np.ndarray) -> np.ndarray:
     """Twice the areas (k,) [m^2] of faces ``face`` (k,) (loops are padded with their first
     corner, which adds nothing to the fan from it)."""
     d = h.polygon(face)[0] - h.polygon(face)[0][:, :1]
-    return np.linalg.norm(np.cross(d[:, :-1], d[:, 1:]).sum(axis=1), axis=1)
+    return np.linalg.norm(cross(d[:, :-1], d[:, 1:]).sum(axis=1), axis=1)
 
 
 def _face_contacts(ref: HullBatch, face: np.ndarray, inc: HullBatch, margin, scale):
@@ -313,7 +314,7 @@ def _spread(p, sep, ok, n, eps):
     far = np.einsum("kmi,kmi->km", d, d)
     i1 = _first(far, ok, 1e-9 * far.max(axis=1, keepdims=True))
     length = np.sqrt(far[r, i1])
-    area = np.einsum("kmi,ki->km", np.cross(d[r, i1][:, None], d), n)
+    area = np.einsum("kmi,ki->km", cross(d[r, i1][:, None], d), n)
     i2, i3 = (_first(a, ok, 1e-9 * np.abs(area).max(axis=1, keepdims=True)) for a in (area, -area))
     has1 = ok.any(axis=1) & (length > eps)
     kept = np.stack([ok.any(axis=1), has1, has1 & (area[r, i2] > eps * length),

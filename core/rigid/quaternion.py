@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..transforms import cross
+
 
 def multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton products a b of (n, 4) (or (4,)) quaternions: the rotation b, then a."""
@@ -80,5 +82,5 @@ def rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Vectors v (n, 3) rotated by unit quaternions q (n, 4) (or one of either)."""
     q = np.asarray(q, dtype=np.float64)
     w, u = q[..., :1], q[..., 1:]
-    t = 2.0 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
+    t = 2.0 * cross(u, v)
+    return v + w * t + cross(u, t)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..transforms import cross
 from ..world import BodyInertia
 from . import dynamics
 from . import quaternion as quat
@@ -37,7 +38,7 @@ def absorb(model: RigidBodyModel, state: RigidBodyState, reactions) -> None:
         if i is None or model.body_kinematic[i]:
             continue
         state.body_P[i] += r.impulse.sum(axis=0)
-        state.body_L[i] += np.cross(r.point - state.body_x[i], r.impulse).sum(axis=0)
+        state.body_L[i] += cross(r.point - state.body_x[i], r.impulse).sum(axis=0)
         state.body_x[i] += r.move[:3]
         state.body_q[i] = quat.normalized(quat.multiply(
             quat.from_rotation_vector(r.move[3:]), state.body_q[i]))

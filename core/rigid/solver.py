@@ -16,7 +16,7 @@ import numpy as np
 from ..bounds import DEFAULT_BOUNDS, StateBounds
 from ..contact import ColliderPaths
 from ..errors import SimulationError
-from ..transforms import TransformPath, take, tangents
+from ..transforms import TransformPath, cross, take, tangents
 from ..world import SolverSystem, World, WorldFrame
 from .frame_inputs import RigidFrameInputs, RigidPaths, RigidReport
 from . import contact_solver as cs_
@@ -254,8 +254,8 @@ class RigidBodySolver:
         a, b, n = found.a, found.b, found.normal
         pair, local = warm.places(a, b, found.point, bodies.x, bodies.q, len(bodies))
         ra, rb = found.point - bodies.x[a], found.point - bodies.x[b]
-        rel = np.einsum("ki,ki->k", n, (bodies.v[b] + np.cross(bodies.w[b], rb))
-                        - (bodies.v[a] + np.cross(bodies.w[a], ra)))
+        rel = np.einsum("ki,ki->k", n, (bodies.v[b] + cross(bodies.w[b], rb))
+                        - (bodies.v[a] + cross(bodies.w[a], ra)))
         size = np.where(bodies.dynamic, bodies.bound, np.inf)  # a collider's size says nothing
         tolerance = warm.MATCH_FRACTION * np.minimum(size[a], size[b])
         p = warm.recall(memory, pair, local, tolerance)  # world impulse vectors

@@ -41,7 +41,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import PhysanimError
-from ..transforms import TransformPath, inverse_affine, rotation_vector_matrix, transform_points
+from ..transforms import TransformPath, cross, inverse_affine, rotation_vector_matrix, transform_points
 from ..world import Reaction
 from .model import SpringMeshModel, SpringMeshState
 
@@ -146,7 +146,7 @@ def _centre(held: Held, body: str, s: float) -> np.ndarray:
 
 def _point_velocity(du: np.ndarray, r: np.ndarray) -> np.ndarray:
     """(k, 3) velocities v + w x r of points at ``r`` from the centre for du = [v, w]."""
-    return du[:3] + np.cross(du[3:], r)
+    return du[:3] + cross(du[3:], r)
 
 
 def couple(model: SpringMeshModel, held: Held, integrator, pressed: dict,
@@ -230,7 +230,7 @@ def _g_transpose(r: np.ndarray) -> np.ndarray:
     g = np.zeros((6, k, 3))
     for j in range(3):
         g[j, :, j] = 1.0
-        g[3 + j] = np.cross(np.eye(3)[j], r)  # (r x f)_j = f . (e_j x r)
+        g[3 + j] = cross(np.eye(3)[j], r)  # (r x f)_j = f . (e_j x r)
     return g
 
 

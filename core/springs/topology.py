@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..transforms import cross
+
 
 def unique_pairs(pairs: np.ndarray) -> np.ndarray:
     """Sorted, de-duplicated vertex pairs (m, 2) with a < b; pairs with a == b are dropped."""
@@ -68,14 +70,6 @@ def distance2_pairs(hinge: np.ndarray) -> np.ndarray:
     return unique_pairs(hinge[:, 2:4]) if len(hinge) else np.zeros((0, 2), np.int64)
 
 
-def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise cross product of (m, 3) arrays (np.cross has a large fixed cost)."""
-    out = np.empty_like(a)
-    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
-    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
-    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
-    return out
-
 
 def hinge_geometry(x: np.ndarray, hinge: np.ndarray):
     """Per hinge: corners x0..x3 (e0, e1, w0, w1), edge e = x1 - x0, its length, the face
@@ -86,9 +80,9 @@ def hinge_geometry(x: np.ndarray, hinge: np.ndarray):
     x0 = corners[0]
     e = corners[1] - x0
     length = np.sqrt(np.einsum("ij,ij->i", e, e))
-    n1 = cross_rows(e, corners[2] - x0)
-    n2 = cross_rows(corners[3] - x0, e)
-    sin = np.einsum("ij,ij->i", cross_rows(n1, n2), e) / np.where(length > 0, length, 1.0)
+    n1 = cross(e, corners[2] - x0)
+    n2 = cross(corners[3] - x0, e)
+    sin = np.einsum("ij,ij->i", cross(n1, n2), e) / np.where(length > 0, length, 1.0)
     theta = np.arctan2(sin, np.einsum("ij,ij->i", n1, n2))
     return corners, e, length, n1, n2, theta
 
@@ -103,8 +97,8 @@ def vertex_areas(x: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     tris = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
     area = np.zeros(len(x))
     if len(tris):
-        cross = np.cross(x[tris[:, 1]] - x[tris[:, 0]], x[tris[:, 2]] - x[tris[:, 0]])
-        third = np.linalg.norm(cross, axis=1) / 6.0
+        doubled = cross(x[tris[:, 1]] - x[tris[:, 0]], x[tris[:, 2]] - x[tris[:, 0]])
+        third = np.linalg.norm(doubled, axis=1) / 6.0
         for k in range(3):
             area += np.bincount(tris[:, k], weights=third, minlength=len(x))
     return area
@@ -115,4 +109,4 @@ def signed_volume(x: np.ndarray, triangles: np.ndarray) -> float:
     when the normals point outwards; negative when it turned inside out)."""
     tris = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
     a, b, c = x[tris[:, 0]], x[tris[:, 1]], x[tris[:, 2]]
-    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
+    return float(np.einsum("ij,ij->i", a, cross(b, c)).sum() / 6.0)

@@ -5,6 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..transforms import cross
 from ..forces import ParticleView, Wind
 from ..forces.springs import scatter_add
 
@@ -24,14 +25,14 @@ class FaceWind:
     def apply(self, p: ParticleView, f_out: np.ndarray) -> None:
         tri = self.triangles
         a, b, c = p.x[tri[:, 0]], p.x[tri[:, 1]], p.x[tri[:, 2]]
-        cross = np.cross(b - a, c - a)  # |cross| = 2 A, direction = normal
+        doubled = cross(b - a, c - a)  # |doubled| = 2 A, direction = normal
         w = self.wind
-        pressure = np.broadcast_to(np.asarray(w.direction) * w.strength, cross.shape)
+        pressure = np.broadcast_to(np.asarray(w.direction) * w.strength, doubled.shape)
         if w.noise:
             pressure = pressure + (w.strength * w.noise) * w.field((a + b + c) / 3.0, p.t)
-        norm = np.sqrt(np.einsum("ij,ij->i", cross, cross))
+        norm = np.sqrt(np.einsum("ij,ij->i", doubled, doubled))
         area = 0.5 * norm
-        n = cross / np.where(norm > 0, norm, 1.0)[:, None]
+        n = doubled / np.where(norm > 0, norm, 1.0)[:, None]
         normal = np.einsum("ij,ij->i", pressure, n)[:, None] * n
         f = (area / 3.0)[:, None] * (normal + self.SKIN_FRICTION * (pressure - normal))
         for k in range(3):

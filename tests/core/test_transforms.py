@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from physanim.core.transforms import (
-    TransformPath, column_max, column_min, compose, decompose, matrix_to_quaternion,
+    TransformPath, column_max, column_min, compose, cross, decompose, matrix_to_quaternion,
     quaternion_to_matrix, row_all, row_any, row_max, slerp,
 )
 
@@ -243,3 +243,26 @@ def test_narrow_reductions_equal_numpys(shape):
     for got, want in ((row_any(m), m.any(axis=1)), (row_all(~m), (~m).all(axis=1))):
         assert got.dtype == bool
         np.testing.assert_array_equal(got, want)
+
+
+def test_cross_equals_numpys_bit_for_bit():
+    # the same values as np.cross (bit for bit: the same products and differences), dtype and
+    # broadcasting included, into a given output too; 2-vectors are np.cross's own
+    rng = np.random.default_rng(3)
+    u, v = rng.normal(0.0, 1e3, (500, 3)), rng.normal(0.0, 1e-3, (500, 3))
+    w = rng.normal(size=(7, 1, 3))
+    cases = [(u, v), (u[0], v), (u, v[0]), (w, u[:5]), (u[0], v[0]), ((0.0, 0.0, 1.0), u),
+             (rng.integers(-9, 9, (50, 3)), rng.integers(-9, 9, (50, 3))),
+             (rng.integers(-9, 9, (50, 3)), v[:50]), (u[:, :2], v[:, :2])]
+    for a, b in cases:
+        got, want = cross(a, b), np.cross(a, b)
+        assert got.shape == want.shape and got.dtype == want.dtype
+        np.testing.assert_array_equal(got, want)
+    out = np.empty((500, 3))
+    assert cross(u, v, out=out) is out
+    np.testing.assert_array_equal(out, np.cross(u, v))
+    # as a cross product: orthogonal to both, |u x v| = |u| |v| sin, and anti-symmetric
+    c = cross(u, v)
+    np.testing.assert_allclose(np.einsum("ij,ij->i", c, u) / (np.linalg.norm(c, axis=1)
+                               * np.linalg.norm(u, axis=1)), 0.0, atol=1e-12)
+    np.testing.assert_array_equal(cross(v, u), -c)
