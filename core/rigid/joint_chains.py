@@ -85,24 +85,11 @@ class ChainSolver:
         self.index = np.full((len(paths), length), -1, np.int64)
         for c, p in enumerate(paths):
             self.index[c, :len(p)] = p
-        idx, pad = np.maximum(self.index, 0), self.index < 0
-        use = op.use[idx] & ~pad[..., None]  # (C, L, R): each path's joints by position
-        j, mj = r.j[idx][..., :rows, :], r.mj[idx][..., :rows, :]
-        diag = np.einsum("clri,clsi->clrs", j, mj) + np.eye(rows) * op.soft[idx][..., None, :]
-        pair = use[..., :, None] & use[..., None, :]
-        eye = np.eye(rows, dtype=bool)
-        self.d = np.where(pair, diag, np.where(eye, 1.0, 0.0))
-        ab = r.ab[idx]  # (C, L, 2)
-        upper = np.zeros((len(paths), max(length - 1, 0), rows, rows))
-        for sa in range(2):  # the bodies a joint shares with the next along the path
-            for sb in range(2):
-                shared = ab[:, :-1, sa] == ab[:, 1:, sb]  # (a body impulses do not move
-                # has zero inverse masses: its block is zero)
-                block = np.einsum("clri,clsi->clrs", j[:, :-1, :, 6 * sa:6 * sa + 6],
-                                  mj[:, 1:, :, 6 * sb:6 * sb + 6])
-                upper += np.where(shared[..., None, None], block, 0.0)
-        self.u = upper * (use[:, :-1, :, None] & use[:, 1:, None, :])
-        self._factor()
+        key = (op.use.tobytes(), op.soft.tobytes())  # (the rows and paths are r's)
+        factors = r.factors.get(key)
+        if factors is None:
+            factors = r.factors[key] = self._factor(r, op, rows, length, len(paths))
+        self.levels, self.inv = factors
         self.groups = op.groups
         if self.groups:  # the groups' rows: their coupling to the joints (B) and each other
             unit = np.eye(3 * self.groups)
@@ -115,8 +102,35 @@ class ChainSolver:
             self.schur = self.c_ - self.b_.T @ inner
             self.a_inv_b = inner
 
-    def _factor(self) -> None:
-        self.levels, self.inv = reduce(self.d, self.u)
+    def _factor(self, r, op, rows: int, length: int, count: int) -> tuple[list, np.ndarray]:
+        """The block-tridiagonal system along the paths (each joint's rows in use, the
+        springs' softness on the diagonal, unused rows identity), reduced (:func:`reduce`)."""
+        idx, pad = np.maximum(self.index, 0), self.index < 0
+        use = op.use[idx] & ~pad[..., None]  # (C, L, R): each path's joints by position
+        j, mj = r.j[idx][..., :rows, :], r.mj[idx][..., :rows, :]
+        diag = np.einsum("clri,clsi->clrs", j, mj) + np.eye(rows) * op.soft[idx][..., None, :]
+        pair = use[..., :, None] & use[..., None, :]
+        eye = np.eye(rows, dtype=bool)
+        d = np.where(pair, diag, np.where(eye, 1.0, 0.0))
+        ab = r.ab[idx]  # (C, L, 2)
+        upper = np.zeros((count, max(length - 1, 0), rows, rows))
+        # the bodies a joint shares with the next along the path: side sa of one, sb of the
+        # next (a body impulses do not move has zero inverse masses: its block is zero)
+        shared = ab[:, :-1, :, None] == ab[:, 1:, None, :]  # (C, L - 1, sa, sb)
+        if (shared.sum(axis=(2, 3)) <= 1).all():  # one body at most (a chain): one product
+            side = np.argmax(shared.reshape(*shared.shape[:2], 4), axis=2)
+            pick = (side // 2)[..., None, None, None], (side % 2)[..., None, None, None]
+            ja = np.take_along_axis(j[:, :-1].reshape(*upper.shape[:3], 2, 6), pick[0], 3)
+            mb = np.take_along_axis(mj[:, 1:].reshape(*upper.shape[:3], 2, 6), pick[1], 3)
+            block = np.einsum("clri,clsi->clrs", ja[..., 0, :], mb[..., 0, :])
+            upper += np.where(shared.any(axis=(2, 3))[..., None, None], block, 0.0)
+        else:
+            for sa in range(2):
+                for sb in range(2):
+                    block = np.einsum("clri,clsi->clrs", j[:, :-1, :, 6 * sa:6 * sa + 6],
+                                      mj[:, 1:, :, 6 * sb:6 * sb + 6])
+                    upper += np.where(shared[..., sa, sb, None, None], block, 0.0)
+        return reduce(d, upper * (use[:, :-1, :, None] & use[:, 1:, None, :]))
 
     def _joint_solve(self, b: np.ndarray) -> np.ndarray:
         """A^-1 b for packed joint parts b (J * R, m)."""

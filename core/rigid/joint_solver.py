@@ -18,7 +18,7 @@ between the two the bodies are put back on their joints (:func:`displacement`).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -50,7 +50,8 @@ class JointRows:
         joint: (J,) model index of each. ab: (J, 2) rows of its two sides in the velocity
             array.
         j, mj: (J, ROWS, 12) rows and the same times the inverse masses.
-        holds: (J, EQ) active equality rows. block: (J, EQ, EQ) the inverse of their coupling.
+        holds: (J, EQ) active equality rows. block: (J, EQ, EQ) the inverse of their coupling
+            (found when first asked for: only conjugate gradients' preconditioner uses it).
         c: (J, ROWS) position errors: equality rows' drift [m], [rad]; a limit's gap (>= 0:
             within it); a spring's stretch.
         mass: (J, ROWS) 1 / (J M^-1 J^T) of each row (0 for an empty one).
@@ -64,7 +65,6 @@ class JointRows:
     j: np.ndarray
     mj: np.ndarray
     holds: np.ndarray
-    block: np.ndarray
     c: np.ndarray
     mass: np.ndarray
     kind: np.ndarray
@@ -73,9 +73,22 @@ class JointRows:
     gamma: np.ndarray
     beta: np.ndarray
     paths: list | None = None  # the joints along chains (a direct solve), None: not chains
+    # the chains' factorisations of these rows, by the rows in use and softness
+    # (:class:`.joint_chains.ChainSolver`): a sub-step's passes solve the same system again
+    factors: dict = field(default_factory=dict)
+    _block: np.ndarray | None = field(default=None, repr=False)
 
     def __len__(self) -> int:
         return len(self.joint)
+
+    @property
+    def block(self) -> np.ndarray:
+        if self._block is None:
+            holds = self.holds
+            coupling = np.einsum("jri,jsi->jrs", self.j[:, :EQ], self.mj[:, :EQ])
+            pair = holds[:, :, None] & holds[:, None, :]
+            self._block = _pinv(np.where(pair, coupling, np.eye(EQ))) * pair
+        return self._block
 
 
 def rows(model: JointModel, joints: np.ndarray, ab: np.ndarray, x: np.ndarray,
@@ -126,11 +139,8 @@ def rows(model: JointModel, joints: np.ndarray, ab: np.ndarray, x: np.ndarray,
     mj[..., 9:] = np.einsum("jrk,jik->jri", j[..., 9:], inv_inertia[b])
     k = np.einsum("jri,jri->jr", j, mj)
     mass = np.where(k > 1e-300, 1.0 / np.maximum(k, 1e-300), 0.0)
-    coupling = np.einsum("jri,jsi->jrs", j[:, :EQ], mj[:, :EQ])
-    block = _pinv(np.where(holds[:, :, None] & holds[:, None, :], coupling, np.eye(EQ))) * \
-        (holds[:, :, None] & holds[:, None, :])
     moved = np.stack([inv_mass[a] > 0.0, inv_mass[b] > 0.0], axis=1)
-    return JointRows(joints, ab, j, mj, holds, block, c, mass, *clamped[2:],
+    return JointRows(joints, ab, j, mj, holds, c, mass, *clamped[2:],
                      chains(ab, moved))
 
 

@@ -35,6 +35,7 @@ class JointStep:
     x: np.ndarray  # (F, 3), (F, 3, 3): their poses now
     rot: np.ndarray
     solve: js_.JointRows | None = None
+    posed_at: tuple | None = None  # what ``solve`` was built from (:func:`pose`)
 
 
 def begin(model, step, live: np.ndarray, framed: np.ndarray) -> None:
@@ -66,12 +67,21 @@ def order(model, step, live: np.ndarray) -> None:
 
 
 def pose(model, step, inverse_inertia) -> None:
-    """The joints' rows at the bodies' current poses."""
+    """The joints' rows at the bodies' current poses: built again only when a pose, an inverse
+    mass or the joints changed since they were last built (a sub-step asks after every move,
+    and again where nothing moved: after the projection found the joints closed, and at the
+    start of the next sub-step)."""
     js = step.joints
     if not len(js.ids):
         js.solve = None
         return
     b = step.bodies
+    now = (js.ids, js.ab, b.x, b.q, js.x, js.rot, step.inv_mass, step.awake)
+    if js.solve is not None and js.posed_at is not None and all(
+            u.shape == v.shape and u.tobytes() == v.tobytes()
+            for u, v in zip(now, js.posed_at)):
+        return
+    js.posed_at = tuple(u.copy() for u in now)
     f = len(js.rows)
     inv_inertia = inverse_inertia(step, b.q)
     js.solve = js_.rows(
