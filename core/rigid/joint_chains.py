@@ -81,6 +81,8 @@ class ChainSolver:
     def __init__(self, op, paths: list[np.ndarray]):
         r, rows = op.r, op.use.shape[1]
         self.op, self.rows = op, rows
+        # the rows any joint uses (a hinge's five of ten): the blocks are that size
+        self.cols = np.flatnonzero(op.use.any(axis=0)) if op.use.any() else np.arange(1)
         length = max(len(p) for p in paths)
         self.index = np.full((len(paths), length), -1, np.int64)
         for c, p in enumerate(paths):
@@ -88,7 +90,7 @@ class ChainSolver:
         key = (op.use.tobytes(), op.soft.tobytes())  # (the rows and paths are r's)
         factors = r.factors.get(key)
         if factors is None:
-            factors = r.factors[key] = self._factor(r, op, rows, length, len(paths))
+            factors = r.factors[key] = self._factor(r, op, length, len(paths))
         self.levels, self.inv = factors
         self.groups = op.groups
         if self.groups:  # the groups' rows: their coupling to the joints (B) and each other
@@ -102,13 +104,16 @@ class ChainSolver:
             self.schur = self.c_ - self.b_.T @ inner
             self.a_inv_b = inner
 
-    def _factor(self, r, op, rows: int, length: int, count: int) -> tuple[list, np.ndarray]:
+    def _factor(self, r, op, length: int, count: int) -> tuple[list, np.ndarray]:
         """The block-tridiagonal system along the paths (each joint's rows in use, the
         springs' softness on the diagonal, unused rows identity), reduced (:func:`reduce`)."""
         idx, pad = np.maximum(self.index, 0), self.index < 0
-        use = op.use[idx] & ~pad[..., None]  # (C, L, R): each path's joints by position
-        j, mj = r.j[idx][..., :rows, :], r.mj[idx][..., :rows, :]
-        diag = np.einsum("clri,clsi->clrs", j, mj) + np.eye(rows) * op.soft[idx][..., None, :]
+        cols = self.cols
+        rows = len(cols)
+        use = op.use[idx][..., cols] & ~pad[..., None]  # (C, L, R): each path's joints
+        j, mj = r.j[idx][..., cols, :], r.mj[idx][..., cols, :]
+        diag = np.einsum("clri,clsi->clrs", j, mj) + np.eye(rows) * \
+            op.soft[idx][..., cols][..., None, :]
         pair = use[..., :, None] & use[..., None, :]
         eye = np.eye(rows, dtype=bool)
         d = np.where(pair, diag, np.where(eye, 1.0, 0.0))
@@ -137,10 +142,10 @@ class ChainSolver:
         r, rows = self.op.r, self.rows
         m = b.shape[1]
         idx, pad = np.maximum(self.index, 0), self.index < 0
-        x = reduced_solve(self.levels, self.inv, b.reshape(len(r), rows, m)[idx]
+        x = reduced_solve(self.levels, self.inv, b.reshape(len(r), rows, m)[idx][..., self.cols, :]
                           * ~pad[..., None, None])
         out = np.zeros((len(r), rows, m))
-        out[self.index[~pad]] = x[~pad]
+        out[self.index[~pad][:, None], self.cols] = x[~pad]
         return (out * self.op.use[..., None]).reshape(len(r) * rows, m)
 
     def solve(self, b: np.ndarray) -> np.ndarray:
