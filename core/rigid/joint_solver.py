@@ -113,23 +113,25 @@ def rows(model: JointModel, joints: np.ndarray, ab: np.ndarray, x: np.ndarray,
 
     j = np.zeros((n, ROWS, 12))
     c = np.zeros((n, ROWS))
-    for i in range(3):  # the pivot along the joint's axes (on A)
-        u = wa[:, :, i]
-        j[:, i] = _linear(u, ra, rb)
-        c[:, i] = np.einsum("ji,ji->j", u, gap)
-    turn = _rotation_vector(wb @ wa.transpose(0, 2, 1))
+    axes = wa.transpose(0, 2, 1)  # (J, 3, 3): the joint's x, y, z axes (on A) as rows
+    pivot = _linear(axes, ra[:, None], rb[:, None])  # (J, 3, 12) the pivot along them
+    j[:, :3] = pivot
+    for i in range(3):
+        c[:, i] = np.einsum("ji,ji->j", wa[:, :, i], gap)
+    turn = _rotation_vector(wb @ axes)
     swing = cross(axis_a, axis_b)
     hinge = kind == HINGE
-    for i in range(3):  # turning about the joint's axes
+    j[:, 3:6] = _angular(axes)  # turning about the joint's axes
+    for i in range(3):
         u = wa[:, :, i]
-        j[:, 3 + i] = _angular(u)
         c[:, 3 + i] = np.where(hinge, np.einsum("ji,ji->j", u, swing),
                                np.einsum("ji,ji->j", u, turn))
     holds = _HOLDS[kind]
     j[:, :EQ] *= holds[:, :, None]
     c[:, :EQ] *= holds
 
-    clamped = _clamped(model, joints, kind, wa, wb, axis_a, axis_b, swing, gap, ra, rb, h)
+    clamped = _clamped(model, joints, kind, wa, wb, axis_a, axis_b, swing, gap, ra, rb, h,
+                       pivot)
     j[:, EQ:], c[:, EQ:] = clamped[0], clamped[1]
     ma, mb = inv_mass[a, None], inv_mass[b, None]
     mj = np.empty_like(j)
@@ -144,9 +146,9 @@ def rows(model: JointModel, joints: np.ndarray, ab: np.ndarray, x: np.ndarray,
                      chains(ab, moved))
 
 
-def _clamped(model, joints, kind, wa, wb, axis_a, axis_b, swing, gap, ra, rb, h):
+def _clamped(model, joints, kind, wa, wb, axis_a, axis_b, swing, gap, ra, rb, h, pivot):
     """The 4 clamped rows of each joint: (rows (J, 4, 12), errors (J, 4), kind (J, 4),
-    target, bound, gamma, beta (J, 4))."""
+    target, bound, gamma, beta (J, 4)); ``pivot`` (J, 3, 12) the pivot's linear rows."""
     n = len(joints)
     j = np.zeros((n, 4, 12))
     c = np.zeros((n, 4))
@@ -161,15 +163,16 @@ def _clamped(model, joints, kind, wa, wb, axis_a, axis_b, swing, gap, ra, rb, h)
     # side A's coordinate relative to side B (the base: the world, a frame or the second
     # body): a hinged door turns by its angle, its motor turns it that way
     free = -np.where(kind == SLIDER, slide, angle)
-    row = -np.where((kind == SLIDER)[:, None], _linear(axis_a, ra, rb), _angular(axis_a))
     on = driven & limits
-    j[on, 0], c[on, 0], what[on, 0] = row[on], (free - lower)[on], LIMIT
-    j[on, 1], c[on, 1], what[on, 1] = -row[on], (upper - free)[on], LIMIT
     motor = driven & model.joint_use_motor[joints]
-    j[motor, 2], what[motor, 2] = row[motor], MOTOR
     spring = driven & model.joint_use_spring[joints] & \
         ((model.joint_stiffness[joints] > 0.0) | (model.joint_damping[joints] > 0.0))
-    j[spring, 3], c[spring, 3], what[spring, 3] = row[spring], free[spring], SPRING
+    if (on | motor | spring).any():
+        row = -np.where((kind == SLIDER)[:, None], pivot[:, 2], _angular(axis_a))
+        j[on, 0], c[on, 0], what[on, 0] = row[on], (free - lower)[on], LIMIT
+        j[on, 1], c[on, 1], what[on, 1] = -row[on], (upper - free)[on], LIMIT
+        j[motor, 2], what[motor, 2] = row[motor], MOTOR
+        j[spring, 3], c[spring, 3], what[spring, 3] = row[spring], free[spring], SPRING
     # cone-twist: B's axis within the cone, its twist within [lower, upper]
     cone = kind == CONE_TWIST
     if cone.any():
@@ -185,10 +188,9 @@ def _clamped(model, joints, kind, wa, wb, axis_a, axis_b, swing, gap, ra, rb, h)
         j[on, 2], c[on, 2], what[on, 2] = _angular(axis_a)[on], (upper - twist)[on], LIMIT
     # a spring joint: its pivot's three directions as soft rows (slots 0, 1 and 3)
     sprung = kind == SPRING_JOINT
-    for slot, i in zip((0, 1, 3), range(3)):
-        u = wa[:, :, i]
-        j[sprung, slot] = _linear(u, ra, rb)[sprung]
-        c[sprung, slot] = np.einsum("ji,ji->j", u, gap)[sprung]
+    for slot, i in zip((0, 1, 3), range(3) if sprung.any() else ()):
+        j[sprung, slot] = pivot[sprung, i]
+        c[sprung, slot] = np.einsum("ji,ji->j", wa[:, :, i], gap)[sprung]
         what[sprung, slot] = SPRING
     target = np.zeros((n, 4))
     target[:, 2] = model.joint_motor_velocity[joints]
@@ -215,14 +217,21 @@ def _twist(wa, wb, axis_b, normal, phi) -> np.ndarray:
 
 
 def _linear(u, ra, rb) -> np.ndarray:
-    """(J, 12) rows along u (J, 3) with lever arms ra, rb."""
-    return np.concatenate([-u, -cross(ra, u), u, cross(rb, u)], axis=1)
+    """(..., 12) rows along u (..., 3) with lever arms ra, rb (broadcast with u)."""
+    out = np.empty(u.shape[:-1] + (12,))
+    np.negative(u, out=out[..., :3])
+    np.negative(cross(ra, u), out=out[..., 3:6])
+    out[..., 6:9] = u
+    cross(rb, u, out=out[..., 9:])
+    return out
 
 
 def _angular(u) -> np.ndarray:
-    """(J, 12) rows turning about u (J, 3)."""
-    z = np.zeros_like(u)
-    return np.concatenate([z, -u, z, u], axis=1)
+    """(..., 12) rows turning about u (..., 3)."""
+    out = np.zeros(u.shape[:-1] + (12,))
+    np.negative(u, out=out[..., 3:6])
+    out[..., 9:] = u
+    return out
 
 
 def _rotation_vector(m: np.ndarray) -> np.ndarray:
