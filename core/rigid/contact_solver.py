@@ -135,7 +135,6 @@ def rows(cs: ContactSet, inv_mass: np.ndarray, inv_inertia: np.ndarray, ra: np.n
     return Rows(jn, mn, mass[:, :s], j[:, s:], mj[:, s:], mass[:, s:] / count)
 
 
-
 @dataclass
 class Scales:
     """Per slot (M, S): the velocity bias [m/s], the mass and impulse scales of a solve."""

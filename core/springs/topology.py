@@ -70,7 +70,6 @@ def distance2_pairs(hinge: np.ndarray) -> np.ndarray:
     return unique_pairs(hinge[:, 2:4]) if len(hinge) else np.zeros((0, 2), np.int64)
 
 
-
 def hinge_geometry(x: np.ndarray, hinge: np.ndarray):
     """Per hinge: corners x0..x3 (e0, e1, w0, w1), edge e = x1 - x0, its length, the face
     normals n1 = e x (x2 - x0), n2 = (x3 - x0) x e (unnormalised) and the signed dihedral angle
