@@ -55,6 +55,7 @@ class BakeJob(Resumable, Failures):
         if self._resume_from is not None:
             only = self._resume_from["only"]
         self._owns_checkpoint = False  # replaced the scene's checkpoint with one of this bake
+        self._aside = False  # set the scene's checkpoint aside (resume.set_aside)
         self._keep_partial = False  # suspended: the partial folders stay for a resume
         self._no_checkpoint: str | None = None  # why this bake cannot save checkpoints
         self.view_layer = context.view_layer
@@ -367,6 +368,8 @@ class BakeJob(Resumable, Failures):
                                   frame=state_at[1])
         else:  # the scene's checkpoint (this bake's partial folders, or an earlier bake's)
             checkpoint.discard(self.scene)  # no longer describes what is baked
+            self._aside = self._owns_checkpoint = False
+        self._checkpoint_settled(kept=True)
         for ob in emitters:
             results.attach(context, self.scene, ob,
                            relative_path(os.path.join(paths[ob.name], STREAM)),
@@ -439,8 +442,7 @@ class BakeJob(Resumable, Failures):
         self.memory.end()
 
         keep = self._keep_partial
-        if self._owns_checkpoint and not keep:
-            checkpoint.discard(self.scene)  # it named this bake's partial folders
+        self._checkpoint_settled(kept=keep)  # a failed bake's checkpoint named its partial folders
         self.colliders.release()
         for mesh in self.meshes:
             mesh.detach() if keep else mesh.abort()

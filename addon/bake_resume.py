@@ -99,8 +99,11 @@ class Resumable:
                          frame: int | None = None) -> None:
         if self._no_checkpoint is not None:
             return
-        if not self._owns_checkpoint and self._resume_from is None:
-            checkpoint.discard(self.scene)  # an earlier cut-off bake's partial folders go
+        if not self._owns_checkpoint and not self._aside:
+            # the scene's checkpoint (a finished bake's, or a cut-off one's with its partial
+            # folders) is kept until this bake finishes: a failed bake puts it back
+            checkpoint.set_aside(self.scene)
+            self._aside = True
         # A checkpoint names only frames whose files are whole on disk: a process killed right
         # after it must not leave a frame half written that a resume would keep.
         for writer in self._writers().values():
@@ -110,10 +113,16 @@ class Resumable:
         except (pickle.PicklingError, TypeError, AttributeError) as exc:
             self._checkpoint_failed(exc)
             return
-        if not self._owns_checkpoint and self._resume_from is not None:
-            # the new checkpoint holds the frames resumed from (linked): their folders go
-            checkpoint.release(self._resume_from)
         self._owns_checkpoint = True
+
+    def _checkpoint_settled(self, kept: bool) -> None:
+        """The bake is over: the checkpoint it set aside goes when it finished or was cut off
+        (``kept``: its own checkpoint stands), and is the scene's again when it failed."""
+        if self._aside:
+            checkpoint.drop_previous(self.scene) if kept else checkpoint.put_back(self.scene)
+            self._aside = False
+        elif self._owns_checkpoint and not kept:  # (a checkpoint of a bake that set none aside)
+            checkpoint.discard(self.scene)
 
     def _checkpoint_failed(self, exc: Exception) -> None:
         """Something in the state cannot be saved: the bake goes on, without checkpoints (it

@@ -13,8 +13,9 @@ range, the inputs hash of each system and the folder each system's frames are in
 - A finished bake's checkpoint is its last frame in its committed folders: **Resume** with a
   later frame end extends it the same way.
 - The scene must be as it was (every system's inputs hash, the frame range apart from its end):
-  otherwise resuming is refused, naming what changed. A fresh bake discards the checkpoint and
-  the partial folders it kept.
+  otherwise resuming is refused, naming what changed. A fresh bake replaces the checkpoint and
+  the partial folders it kept once it finishes or is cut off; until then they are set aside, and
+  a bake that fails puts them back as they were (Resume still goes on from them).
 """
 from __future__ import annotations
 
@@ -29,6 +30,7 @@ from ..core.pc2 import Pc2Writer
 from .cache_paths import cache_root, safe_name
 
 CHECKPOINT = "checkpoint.pkl"
+PREVIOUS = "checkpoint.previous.pkl"  # the checkpoint a running bake replaced (set_aside)
 #: The extension's own package (``bl_ext.<repository>.physanim``): checkpoints name classes by
 #: module, and another machine (a farm node) may have installed PhysAnim from another repository.
 PACKAGE = __name__.rsplit(".addon.", 1)[0]
@@ -52,6 +54,10 @@ def load(scene) -> dict | None:
         path = folder(scene) / CHECKPOINT
     except PhysanimError:  # no cache folder (an unsaved file with a '//' cache)
         return None
+    return _read(path)
+
+
+def _read(path: Path) -> dict | None:
     if not path.is_file():
         return None
     try:
@@ -86,14 +92,57 @@ def release(data: dict) -> None:
 
 
 def discard(scene) -> None:
-    """Forget the checkpoint; delete the partial folders it kept (never a finished bake)."""
-    data = load(scene)
+    """Forget the checkpoint (and one set aside); delete the partial folders they kept (never a
+    finished bake's)."""
+    try:
+        target = folder(scene)
+    except PhysanimError:
+        return
+    for path in (target / CHECKPOINT, target / PREVIOUS):
+        data = _read(path)
+        if data is not None:
+            release(data)
+    shutil.rmtree(target, ignore_errors=True)
+
+
+def set_aside(scene) -> None:
+    """A bake is about to save its first checkpoint: the scene's checkpoint so far is kept
+    aside, byte for byte with the partial folders it names, until the bake finishes
+    (:func:`drop_previous`) or fails (:func:`put_back`). One set aside by a bake whose process
+    was killed is superseded by the checkpoint that bake left: it goes."""
+    target = folder(scene)
+    aside = target / PREVIOUS
+    if aside.is_file():
+        data = _read(aside)
+        if data is not None:
+            release(data)
+        aside.unlink()
+    if (target / CHECKPOINT).is_file():
+        os.replace(target / CHECKPOINT, aside)
+
+
+def put_back(scene) -> None:
+    """A bake that set the checkpoint aside failed: its own checkpoint and the partial folders
+    it named go, the one set aside is the scene's again."""
+    target = folder(scene)
+    data = _read(target / CHECKPOINT)
     if data is not None:
         release(data)
-    try:
-        shutil.rmtree(folder(scene), ignore_errors=True)
-    except PhysanimError:
-        pass
+    if (target / PREVIOUS).is_file():
+        os.replace(target / PREVIOUS, target / CHECKPOINT)
+    else:
+        shutil.rmtree(target, ignore_errors=True)
+
+
+def drop_previous(scene) -> None:
+    """A bake that set the checkpoint aside finished or was cut off: the one set aside no longer
+    describes anything baked — it goes, with its partial folders (a resumed bake linked the
+    frames it needed)."""
+    aside = folder(scene) / PREVIOUS
+    data = _read(aside)
+    if data is not None:
+        release(data)
+    aside.unlink(missing_ok=True)
 
 
 def interval() -> float:

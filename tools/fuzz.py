@@ -244,6 +244,9 @@ def main(argv: list[str]) -> int:
 
     import bpy  # noqa: F401  (loads Blender; addon_utils needs it)
 
+    import os
+
+    os.environ.setdefault("PHYSANIM_CHECKPOINT_SECONDS", "0")  # checkpoints are restored too
     global VERBOSE
     VERBOSE = "-v" in argv
     argv = [a for a in argv if a != "-v"]

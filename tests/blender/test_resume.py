@@ -260,6 +260,51 @@ def test_a_failed_bake_leaves_no_checkpoint_behind(physanim_ext, tmp_path):
         bake.run(bpy.context, resume=True)
 
 
+def _checkpoint_bytes(cache: Path) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in cache.rglob("*") if ".resume" in p.parts
+            and p.is_file()}
+
+
+def test_a_failed_bake_puts_back_the_checkpoint_of_the_bake_before(physanim_ext, tmp_path):
+    """A bake that fails after it saved checkpoints leaves the scene's checkpoint as it was: a
+    finished bake still extends, a cut-off one still resumes (its frames kept), a failed resume
+    leaves the cut-off bake it went on from."""
+    path = _shot(tmp_path / "shot", frame_end=12)
+    bake, resume = _module(physanim_ext, "bake"), _module(physanim_ext, "resume")
+    cache = path.parent / "physanim_cache"
+    scene = bpy.context.scene
+    assert bake.run(bpy.context)[1] is None
+    finished = _checkpoint_bytes(cache)
+    assert list(finished) == ["checkpoint.pkl"]
+
+    def failed_after(steps: int, **kw) -> None:
+        job = bake.BakeJob(bpy.context, checkpoint_every=0, **kw)
+        for _ in range(steps):
+            job.step(bpy.context)
+        assert resume.load(scene)["frame"] > 1  # it replaced the checkpoint ...
+        job.abort()  # ... and failed (what an error does)
+
+    failed_after(3)
+    assert _checkpoint_bytes(cache) == finished and _partials(cache) == []
+    scene.physanim.frame_end = 16
+    assert resume.status(scene) == ("Frames 1-12 cached: Resume extends the bake to 16", True)
+
+    _cut_off(bake, 5)
+    cut = _checkpoint_bytes(cache)
+    kept = _partials(cache)
+    assert len(kept) == 3
+    failed_after(2)  # a fresh bake
+    assert _checkpoint_bytes(cache) == cut and _partials(cache) == kept
+    failed_after(2, resume=True)  # going on from the cut-off bake
+    assert _checkpoint_bytes(cache) == cut and _partials(cache) == kept
+    text, can = resume.status(scene)
+    assert can and text.startswith("Frames 1-6 of 1-16 cached (cut off)")
+    assert bake.run(bpy.context, resume=True)[1] is None
+    assert _partials(cache) == []
+    assert list(_checkpoint_bytes(cache)) == ["checkpoint.pkl"]
+    assert resume.status(scene) == ("Frames 1-16 cached", False)
+
+
 def test_the_panel_offers_resume_and_says_which_frames_are_cached(physanim_ext, tmp_path):
     _shot(tmp_path / "shot")
     bake, panels = _module(physanim_ext, "bake"), _module(physanim_ext, "panels")
