@@ -12,6 +12,10 @@ from ..contact import Contacts
 from ..contact.features import FaceSet, NearPairs, keep_off_features
 
 ESTIMATE_ROUNDS = 2  # detection rounds that estimate where the faces' vertices must land
+# [m] a step whose faces the features lift by less than this everywhere is not solved again:
+# the lift is left to the features' pass after the step (a face sagging onto a corner it rests
+# on, a fraction of a millimetre each sub-step, would cost a whole solve each time)
+LAND_LIFT = 1e-3
 
 
 def contacts(base: Contacts, hit: Contacts, x0: np.ndarray, h: float, free: np.ndarray,
@@ -38,17 +42,22 @@ def contacts(base: Contacts, hit: Contacts, x0: np.ndarray, h: float, free: np.n
 
 def off_features(paths: list, faces: FaceSet, x0: np.ndarray, x: np.ndarray, v: np.ndarray,
                  inv_mass: np.ndarray, s0: float, s1: float,
-                 rest_speed: float, near: NearPairs | None = None
+                 rest_speed: float, near: NearPairs | None = None, bodies: frozenset = frozenset()
                  ) -> tuple[Contacts, np.ndarray, np.ndarray]:
     """Where keeping the colliders' features off the faces puts a step's vertices (x, v at
     its end; x0 at its start), as hits to land on, and that projection (positions,
-    velocities)."""
+    velocities). No hits when every vertex moves less than LAND_LIFT and none of them off a
+    collider named in ``bodies`` (bodies stepped first: the solve's impulses are what they take
+    back, so a lift off them always lands)."""
     placed, pushed = x.copy(), v.copy()
     kept = keep_off_features(paths, faces, x0, placed, pushed, inv_mass, s0, s1, rest_speed,
                              ESTIMATE_ROUNDS, near)
     moved = np.nonzero(np.any(placed != x, axis=1))[0]
     moved = moved[np.isin(moved, kept.index)]
     rows = np.searchsorted(kept.index, moved)
+    if len(moved) and np.max(np.linalg.norm(placed[moved] - x[moved], axis=1)) < LAND_LIFT \
+            and not any(paths[c].frame.name in bodies for c in np.unique(kept.collider[rows])):
+        moved, rows = moved[:0], rows[:0]
     return Contacts.of(moved, placed[moved], kept.normal[rows], kept.surface_velocity[rows],
                        kept.friction[rows], kept.restitution[rows],
                        collider=kept.collider[rows]), placed, pushed

@@ -374,7 +374,7 @@ class SpringMeshSolver:
             if implicit and self.faces and (first is None or (again and more is None)):
                 faced, *placed = landing_.off_features(step.paths, self.faces, x0, x, v,
                                                        self._inv_mass, s0, s1, step.rest_speed,
-                                                       self._near)
+                                                       self._near, frozenset(step.inputs.bodies))
             if first is None:
                 first = (*placed, self._outside(placed[1], solved))
             if again and more is None:

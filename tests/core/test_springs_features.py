@@ -178,6 +178,33 @@ def test_a_small_sphere_pushed_up_through_a_pinned_cloth_lifts_it_and_never_pass
     assert state.x[:, 2].max() > 1.3
 
 
+def test_a_cloth_resting_on_a_cone_tip_is_solved_once_per_sub_step(monkeypatch):
+    """A cloth draped on a grippy cone's tip (friction 1, as the resting test above): once it
+    rests (from frame 32), each sub-step is solved once. Its faces sag onto the tip by a
+    fraction of a millimetre each sub-step; solving the sub-step again with them landing (as
+    for a real hit) cost every resting sub-step a second solve, which the features' pass after
+    the step makes unnecessary. The tip never gets inside (the first test above), and the cloth
+    stays on it."""
+    from physanim.core.springs import implicit
+
+    solves = []
+    step = implicit.BaraffWitkin._step_impl
+
+    def counted(self, system, t, y, h):
+        solves.append(t)
+        return step(self, system, t, y, h)
+
+    monkeypatch.setattr(implicit.BaraffWitkin, "_step_impl", counted)
+    c = _collider("cone", friction=1.0)
+    frames = [x for x, _ in _drop("cloth", c, 48)]
+    times, count = np.unique(np.round(solves, 9), return_counts=True)
+    late = count[times > 32 * DT + 1e-6]
+    assert len(late) > 30 and late.mean() < 1.1, np.bincount(late)
+    tops = np.array([x[:, 2].max() for x in frames[32:]])
+    assert TOP <= tops.min() and tops.max() < TOP + 0.02, (tops.min(), tops.max())
+    assert np.abs(frames[-1] - frames[-2]).max() / DT < 2e-2  # at rest
+
+
 @pytest.mark.parametrize("shape", ["BOX", "PLANE"])
 def test_a_coarse_plane_dropped_over_a_box_or_plane_collider_edge_never_has_it_inside(shape):
     """Analytic colliders' corners and edges count too: a 4-vertex plane 1 m wide dropped
