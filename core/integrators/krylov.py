@@ -88,7 +88,8 @@ def projected_pcg(
         rtol: stop when ``|r| <= rtol * scale``; ``scale`` defaults to ``|b|``.
         max_iterations: iteration cap; at the cap the last iterate is returned (every CG
             iterate lowers the A-norm of the error, so a capped solve is still usable).
-        start: first guess (projected here), or None for zero.
+        start: first guess (projected here), or None for zero; a guess with a larger
+            r . M^-1 r than zero's is not used.
 
     Returns:
         ``(x, iterations, relative residual |r| / scale)``.
@@ -100,17 +101,25 @@ def projected_pcg(
     b_norm = float(np.sqrt(np.vdot(b, b))) if scale is None else scale
     if b_norm == 0.0:
         return np.zeros_like(b), 0, 0.0
+    z = None
     if start is None:
         x, r = np.zeros_like(b), b.copy()
     else:
         x = project(start)
         r = b - project(matvec(x))
+        z = project(precondition(r))
+        zb = project(precondition(b))
+        # a guess worse than none starts from zero instead — judged by r . M^-1 r, about the
+        # error's A-norm, which CG lowers (by |r| alone a good extrapolation can look worse)
+        if np.vdot(r, z) > np.vdot(b, zb):
+            x, r, z, start = np.zeros_like(b), b.copy(), zb, None
     residual = float(np.sqrt(np.vdot(r, r))) / b_norm
     # a warm start gets at least one iteration (an accepted guess would err systematically
     # by up to the tolerance), unless it is exact already
     if residual <= rtol and (start is None or residual == 0.0):
         return x, 0, residual
-    z = project(precondition(r))
+    if z is None:
+        z = project(precondition(r))
     p = z.copy()
     rz = float(np.vdot(r, z))
     if rz == 0.0:  # nothing the filter leaves free to correct

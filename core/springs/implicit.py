@@ -258,14 +258,15 @@ class BaraffWitkin(Integrator):
             if first:
                 out.first = (blocks, rhs, linear.matrix)
             known = out.dv if first else np.zeros_like(out.dv)
-            start = self._first_guess(out.dv.shape, t) if first else None
+            guess = self._first_guess(out.dv.shape, t) if first else None
+            start = None if guess is None else guess - known  # (a guess of dv itself)
             delta, iterations, residual, scale = self._solve(linear, known, constraints, start,
                                                              floor)
             out.scale = max(out.scale, scale)
             out.iterations += iterations
             out.residual = linear.apply_a(delta + known) - rhs  # the constraints' impulses
             if first:
-                self._remember_solution(delta, t)
+                self._remember_solution(delta + known, t, not len(constraints.pressed))
                 out.reaction = out.residual
             out.dv = out.dv + delta
             out.last = linear
@@ -347,24 +348,31 @@ class BaraffWitkin(Integrator):
         return v1 + delta, iterations, linear.apply_a(delta)
 
     # --- memory between steps ------------------------------------------------------------------
-    def _first_guess(self, shape, t: float):
-        """Warm start: the last step's solution extrapolated along the one before (smooth
-        motion changes dv smoothly; about 10 % fewer CG iterations than the last alone); a
-        step solved again starts from its own last solution."""
+    def _first_guess(self, shape, t: float) -> np.ndarray | None:
+        """Warm start for dv: the last step's solution — extrapolated along the one before when
+        neither step pressed a vertex on a collider (smooth motion changes dv smoothly: a hanging
+        cloth swinging, about 10 % fewer CG iterations than the last alone; a cloth landing on
+        a body does not, and extrapolating its stops and slips costs more than it saves). A step
+        solved again starts from its own last solution."""
         memory = self._memory
         warm = [w for w in memory.warm if w.shape == shape]
         if warm and t == memory.warm_t:
             return warm[0].copy()
-        if len(warm) == 2:
+        if len(warm) == 2 and all(memory.smooth):
             return 2.0 * warm[0] - warm[1]
         return warm[0].copy() if warm else None
 
-    def _remember_solution(self, delta: np.ndarray, t: float) -> None:
-        """Keep the first solve's correction for the next first guess; a step solved again
-        (landing constraints) replaces its own entry."""
+    def _remember_solution(self, dv: np.ndarray, t: float, smooth: bool) -> None:
+        """Keep the first solve's dv for the next first guess; a step solved again (landing
+        constraints) replaces its own entry. (dv itself, not the solve's correction to what
+        the constraints prescribe: a step solved again with vertices landing prescribes more,
+        and corrects less, than its first solve.) ``smooth``: no vertex was pressed."""
         memory = self._memory
-        keep = memory.warm[1:2] if t == memory.warm_t else memory.warm[:1]
-        memory.warm, memory.warm_t = [delta.copy()] + keep, t
+        again = t == memory.warm_t
+        keep = memory.warm[1:2] if again else memory.warm[:1]
+        smooth_kept = memory.smooth[1:2] if again else memory.smooth[:1]
+        memory.warm, memory.warm_t = [dv.copy()] + keep, t
+        memory.smooth = [smooth] + smooth_kept
 
     def _start_energy(self, system: BaraffWitkinSystem, x: np.ndarray, v: np.ndarray) -> float:
         """The energy at the step's start: the one computed at the end of the last step if the

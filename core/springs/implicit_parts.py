@@ -191,11 +191,13 @@ class StepMemory:
     Attributes:
         warm: the last two steps' solutions dv (n, 3), newest first: the next first guess.
         warm_t: the step time [s] of ``warm[0]``.
+        smooth: for each of them, whether its step pressed no vertex on a collider.
         end: ``(x, v, energy)`` at the end of the last step, when the Newton check computed it.
     """
 
     warm: list = field(default_factory=list)
     warm_t: float | None = None
+    smooth: list = field(default_factory=list)
     end: tuple | None = None
 
 
