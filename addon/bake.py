@@ -54,8 +54,7 @@ class BakeJob(Resumable, Failures):
         self._resume_from = self._resume_data(only) if resume else None
         if self._resume_from is not None:
             only = self._resume_from["only"]
-        self._owns_checkpoint = False  # replaced the scene's checkpoint with one of this bake
-        self._aside = False  # set the scene's checkpoint aside (resume.set_aside)
+        self._aside = False  # set the scene's checkpoint aside for its own (resume.set_aside)
         self._keep_partial = False  # suspended: the partial folders stay for a resume
         self._no_checkpoint: str | None = None  # why this bake cannot save checkpoints
         self.view_layer = context.view_layer
@@ -368,7 +367,7 @@ class BakeJob(Resumable, Failures):
                                   frame=state_at[1])
         else:  # the scene's checkpoint (this bake's partial folders, or an earlier bake's)
             checkpoint.discard(self.scene)  # no longer describes what is baked
-            self._aside = self._owns_checkpoint = False
+            self._aside = False
         self._checkpoint_settled(kept=True)
         for ob in emitters:
             results.attach(context, self.scene, ob,

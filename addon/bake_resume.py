@@ -99,7 +99,7 @@ class Resumable:
                          frame: int | None = None) -> None:
         if self._no_checkpoint is not None:
             return
-        if not self._owns_checkpoint and not self._aside:
+        if not self._aside:
             # the scene's checkpoint (a finished bake's, or a cut-off one's with its partial
             # folders) is kept until this bake finishes: a failed bake puts it back
             checkpoint.set_aside(self.scene)
@@ -112,17 +112,13 @@ class Resumable:
             self.checkpoints.save(self, finished, folders, state, frame)
         except (pickle.PicklingError, TypeError, AttributeError) as exc:
             self._checkpoint_failed(exc)
-            return
-        self._owns_checkpoint = True
 
     def _checkpoint_settled(self, kept: bool) -> None:
         """The bake is over: the checkpoint it set aside goes when it finished or was cut off
         (``kept``: its own checkpoint stands), and is the scene's again when it failed."""
-        if self._aside:
+        if self._aside:  # (set before this bake's first checkpoint: none without it)
             checkpoint.drop_previous(self.scene) if kept else checkpoint.put_back(self.scene)
             self._aside = False
-        elif self._owns_checkpoint and not kept:  # (a checkpoint of a bake that set none aside)
-            checkpoint.discard(self.scene)
 
     def _checkpoint_failed(self, exc: Exception) -> None:
         """Something in the state cannot be saved: the bake goes on, without checkpoints (it

@@ -98,10 +98,8 @@ def discard(scene) -> None:
         target = folder(scene)
     except PhysanimError:
         return
-    for path in (target / CHECKPOINT, target / PREVIOUS):
-        data = _read(path)
-        if data is not None:
-            release(data)
+    _forget(target / CHECKPOINT)
+    _forget(target / PREVIOUS)
     shutil.rmtree(target, ignore_errors=True)
 
 
@@ -111,23 +109,16 @@ def set_aside(scene) -> None:
     (:func:`drop_previous`) or fails (:func:`put_back`). One set aside by a bake whose process
     was killed is superseded by the checkpoint that bake left: it goes."""
     target = folder(scene)
-    aside = target / PREVIOUS
-    if aside.is_file():
-        data = _read(aside)
-        if data is not None:
-            release(data)
-        aside.unlink()
+    _forget(target / PREVIOUS)
     if (target / CHECKPOINT).is_file():
-        os.replace(target / CHECKPOINT, aside)
+        os.replace(target / CHECKPOINT, target / PREVIOUS)
 
 
 def put_back(scene) -> None:
     """A bake that set the checkpoint aside failed: its own checkpoint and the partial folders
     it named go, the one set aside is the scene's again."""
     target = folder(scene)
-    data = _read(target / CHECKPOINT)
-    if data is not None:
-        release(data)
+    _forget(target / CHECKPOINT)
     if (target / PREVIOUS).is_file():
         os.replace(target / PREVIOUS, target / CHECKPOINT)
     else:
@@ -138,11 +129,15 @@ def drop_previous(scene) -> None:
     """A bake that set the checkpoint aside finished or was cut off: the one set aside no longer
     describes anything baked — it goes, with its partial folders (a resumed bake linked the
     frames it needed)."""
-    aside = folder(scene) / PREVIOUS
-    data = _read(aside)
+    _forget(folder(scene) / PREVIOUS)
+
+
+def _forget(path: Path) -> None:
+    """Delete the checkpoint file ``path`` (if any) and the partial folders it names."""
+    data = _read(path)
     if data is not None:
         release(data)
-    aside.unlink(missing_ok=True)
+    path.unlink(missing_ok=True)
 
 
 def interval() -> float:

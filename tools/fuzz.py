@@ -12,6 +12,7 @@ The test suite runs a few scenes of it (tests/blender/test_fuzz.py).
 from __future__ import annotations
 
 import math
+import os
 import re
 import sys
 import time
@@ -243,8 +244,6 @@ def main(argv: list[str]) -> int:
     from tools import blender_env  # before bpy: it keeps Blender's user files in a temp dir
 
     import bpy  # noqa: F401  (loads Blender; addon_utils needs it)
-
-    import os
 
     os.environ.setdefault("PHYSANIM_CHECKPOINT_SECONDS", "0")  # checkpoints are restored too
     global VERBOSE
