@@ -162,6 +162,29 @@ def test_colouring_never_puts_a_moving_point_twice_in_a_group():
         assert len(np.unique(used)) == len(used)
 
 
+@pytest.mark.parametrize("k, points, count", [(2, 40, 300), (3, 50, 1500), (4, 300, 1000)])
+def test_colouring_gives_each_constraint_the_lowest_group_free_at_its_turn(k, points, count):
+    # the groups a greedy pass in index order makes, again and again on what is left (the
+    # solvers' Gauss-Seidel order depends on them): checked against sets, one row at a time
+    rng = np.random.default_rng(k)
+    moving = rng.random(points) < 0.8
+    members = rng.integers(0, points, (count, k))
+    groups = colour(members, moving)
+    group_of = np.empty(count, np.int64)
+    for g, rows in enumerate(groups):
+        group_of[rows] = g
+        assert np.all(np.diff(rows) > 0)  # ascending within a group
+    taken: list[set] = []  # per group, the moving items in it so far
+    for c, row in enumerate(members):
+        items = {int(i) for i in row if moving[i]}
+        g = next((g for g, used in enumerate(taken) if not used & items), len(taken))
+        if g == len(taken):
+            taken.append(set())
+        taken[g] |= items
+        assert group_of[c] == g
+    assert len(groups) == len(taken)
+
+
 @pytest.mark.parametrize("case", ["dense", "touching", "large", "hashed"])
 def test_box_pairs_across_two_sets_are_every_overlapping_pair(case):
     # Against all pairs tried: a dense set A (a cloth's neighbouring triangles overlap each
