@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.controls.timing import TimeMap
+from ..core.controls.timing import MAX_SCALE, MIN_SCALE, TimeMap
 from ..core.errors import PhysanimError
 from . import compat, convert
 
@@ -33,6 +33,10 @@ def time_map(scene, frame_start: int, frame_end: int) -> TimeMap:
             scene.frame_set(current[0], subframe=current[1])
     else:
         scale = np.full(max(1, frame_end - frame_start + 1), scene.physanim.time_scale)
+    # Blender keeps the property in single precision: its own limits read back a rounding
+    # beyond them (0.01 as 0.0099999998) and are the limits
+    for limit in (MIN_SCALE, MAX_SCALE):
+        scale[scale == float(np.float32(limit))] = limit
     try:
         return TimeMap(frame_start, scale)
     except ValueError as exc:

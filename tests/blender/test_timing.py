@@ -204,6 +204,26 @@ def test_time_scale_alone_bakes_and_changing_it_outdates(physanim_ext, tmp_path)
     assert "outdated" in panels.bake_status(scene)[0]
 
 
+@pytest.mark.parametrize("limit, end, shows", [(0.01, 101, 2), (100.0, 2, 101)])
+def test_time_scale_at_the_sliders_ends_bakes(physanim_ext, tmp_path, limit, end, shows):
+    """The Time Scale slider's own ends bake, set or keyed (Blender keeps the value in single
+    precision: 0.01 reads back as 0.0099999998, which was refused as below 0.01), and the last
+    frame shows the simulated frame ``shows``: where a bake at scale 1 has the ball then."""
+    _scene(tmp_path, shows, 1.0, "one.blend")
+    ball = _ball()
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    reference = _track(ball, [shows])
+    scene = _scene(tmp_path, end, limit, "limit.blend")
+    ball = _ball()
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    track = _track(ball, range(1, end + 1))
+    assert np.abs(track[-1] - reference[0]).max() < 1e-6
+    for frame in (1, end):  # the same scale, keyed: read at every frame
+        scene.physanim.keyframe_insert("time_scale", frame=frame)
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    assert np.abs(_track(ball, range(1, end + 1)) - track).max() < 1e-9
+
+
 def _drop(tmp_path: Path, name: str, **props):
     _scene(tmp_path, 70, 1.0, name)
     _ground()
