@@ -22,7 +22,7 @@ from .curve_wire import curve_wire, wire_ends
 from .mesh_read import evaluated_mesh, mesh_polygons
 from .props import INTERACTION_TYPES
 from .rigid_props import POINT_TYPES
-from .roles import Roles, attachments, made_by_bake, type_name
+from .roles import Roles, attachments, made_by_bake, object_kind, type_name
 
 MESH_SOURCES = ("VERTS", "FACES", "VOLUME")
 
@@ -179,7 +179,7 @@ class Extractor:
             shape, fit = automatic_collider(ob)
             if shape is None:
                 raise PhysanimError(f"an Automatic collider must be a mesh with faces or an "
-                                    f"empty (this is a {ob.type}"
+                                    f"empty (this is {object_kind(ob)}"
                                     f"{' without faces' if ob.type == 'MESH' else ''}) — "
                                     "pick a shape, or give it faces", obj=ob.name, frame=frame,
                                     kind="collider")
@@ -190,7 +190,8 @@ class Extractor:
         """Local vertex positions of a mesh collider's evaluated (deformed) mesh at this frame;
         its triangles are read once and the vertex count must not change."""
         if ob.type != 'MESH':
-            raise PhysanimError(f"a Mesh collider must be a mesh object (this is a {ob.type})",
+            raise PhysanimError(f"a Mesh collider must be a mesh object (this is "
+                                f"{object_kind(ob)})",
                                 obj=ob.name, frame=frame, kind="collider")
         first = ob.name not in self._collider_tris
         mesh = evaluated_mesh(ob, depsgraph, triangles=first)
@@ -222,7 +223,8 @@ class Extractor:
             tris, nverts = np.zeros((0, 3), np.int64), 0
             if self._uses_mesh(ob):
                 if ob.type != 'MESH':
-                    raise PhysanimError(f"source {p.source} needs a mesh object (this is a {ob.type})",
+                    raise PhysanimError(f"source {p.source} needs a mesh object (this is "
+                                        f"{object_kind(ob)})",
                                         obj=ob.name, frame=frame, kind="emitter")
                 mesh = evaluated_mesh(ob, depsgraph, triangles=True)
                 verts, tris = mesh.co, mesh.triangles

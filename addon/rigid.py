@@ -26,7 +26,7 @@ from . import limits
 from .cache_paths import rigid_cache_dir
 from .extract import world_matrix
 from .rigid_props import POINT_TYPES
-from .roles import type_name
+from .roles import object_kind, type_name
 from .mesh_read import evaluated_mesh
 
 STREAM = "bodies"
@@ -129,7 +129,7 @@ def _closed_mesh_mass(mesh, name: str, amount: dict):
 def body_settings(ob, depsgraph, frame: int) -> RigidBodySettings:
     """Core settings of a rigid-body object at the bake's first frame."""
     if ob.type != 'MESH':
-        raise PhysanimError(f"a rigid body must be a mesh object (this is a {ob.type})",
+        raise PhysanimError(f"a rigid body must be a mesh object (this is {object_kind(ob)})",
                             obj=ob.name, frame=frame, kind="rigid body")
     p = ob.physanim.rigid_body
     m = world_matrix(ob, frame, "rigid body")

@@ -65,6 +65,13 @@ def type_name(identifier: str) -> str:
     return next(name for key, name, _ in CONSTRAINT_TYPE_ITEMS if key == identifier)
 
 
+def object_kind(ob) -> str:
+    """What an object is, as the interface names its type, with its article ("an Empty", "a
+    Curve"): for messages."""
+    name = ob.bl_rna.properties["type"].enum_items[ob.type].name
+    return f"{'an' if name[:1].upper() in 'AEIOU' else 'a'} {name}"
+
+
 def gather(scene, only: set[str] | None = None) -> Roles:
     """Objects of ``scene`` with a physanim role enabled.
 

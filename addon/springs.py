@@ -23,7 +23,7 @@ from ..core.transforms import inverse_affine, transform_points
 from . import convert, limits
 from .cache_paths import spring_cache_dir
 from .extract import world_matrix
-from .roles import attachments, type_name
+from .roles import attachments, object_kind, type_name
 from .mesh_read import evaluated_mesh
 
 MODIFIER = "physanim"
@@ -90,7 +90,8 @@ class SpringMeshBake:
 
     def __init__(self, scene, ob, frame: int, colliders: ColliderPaths):
         if ob.type != 'MESH':
-            raise PhysanimError(f"a spring mesh must be a mesh object (this is a {ob.type})",
+            raise PhysanimError(f"a spring mesh must be a mesh object (this is "
+                                f"{object_kind(ob)})",
                                 obj=ob.name, frame=frame, kind="spring mesh")
         self.scene, self.ob = scene, ob
         self.writer = CacheWriter(spring_cache_dir(scene, ob))

@@ -406,8 +406,8 @@ class SpringMeshSolver:
         try:
             self.integrator.step(system, t, h)
         except SimulationError as exc:
-            raise self._fail(f"the simulation blew up ({exc}) — use the IMPLICIT integrator, "
-                             "more substeps or lower stiffness", frame, SimulationError) from exc
+            raise self._fail(f"the simulation blew up ({exc}) — {self._advice()}", frame,
+                             SimulationError) from exc
         state.x[~self.free] = pin_x1[~self.free]
         state.v[~self.free] = pin_v[~self.free]
         model = self.model

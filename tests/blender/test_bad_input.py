@@ -468,7 +468,7 @@ def test_an_emitter_that_cannot_be_read_does_not_stop_a_spring_mesh(physanim_ext
     if when == "first frame":
         bad = _emitter("Bad")
         bad.physanim.emitter.source = 'VERTS'
-        parts = ('emitter "Bad"', "needs a mesh object")
+        parts = ('emitter "Bad"', "needs a mesh object (this is an Empty)")
     else:
         bad = bpy.data.objects.new("Bad", _mesh("Bad", _grid))
         scene.collection.objects.link(bad)

@@ -240,6 +240,24 @@ def test_failed_or_cancelled_bake_keeps_the_previous_keys(physanim_ext, tmp_path
         np.testing.assert_allclose(a, _world(cube, f), atol=1e-7)
 
 
+def test_a_rigid_body_on_an_empty_is_refused_by_name_and_the_keys_stay(physanim_ext, tmp_path):
+    """The fuzzer's rigid bodies: an Empty tagged as a rigid body fails the rigid bodies with a
+    message naming it and what it is, and the cube's earlier keys stay as they were."""
+    scene = _scene(tmp_path)
+    _ground()
+    cube = _body()
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    before = [_world(cube, f) for f in (1, 24, 48)]
+    handle = bpy.data.objects.new("Handle", None)
+    scene.collection.objects.link(handle)
+    handle.physanim.rigid_body.enabled = True
+    with pytest.raises(RuntimeError, match=r'rigid body "Handle".*a mesh object \(this is an '
+                                           r'Empty\)'):
+        bpy.ops.physanim.bake()
+    for a, f in zip(before, (1, 24, 48)):
+        np.testing.assert_allclose(a, _world(cube, f), atol=1e-7)
+
+
 def test_bake_status_is_outdated_after_an_edit_and_current_after_rebake(physanim_ext, tmp_path):
     scene = _scene(tmp_path)
     _ground()

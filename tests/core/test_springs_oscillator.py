@@ -184,6 +184,24 @@ def test_explicit_euler_blow_up_is_reported_with_object_and_frame():
     assert "IMPLICIT" in message and "substeps" in message
 
 
+def test_implicit_blow_up_does_not_advise_the_implicit_integrator():
+    """A failed implicit solve (here a non-finite velocity: CG loses positive definiteness)
+    names the object and the frame, and advises what an implicit mesh can change: not the
+    integrator it already uses."""
+    settings = SpringMeshSettings("Sheet", mass=1.0, stiffness=100.0, damping=0.0,
+                                  shear_stiffness=0.0, bend_mode="NONE", drag=0.0)
+    model = SpringMeshBuilder(settings, [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], [[0, 1]],
+                              np.zeros((0, 3))).finalize(1)
+    solver = SpringMeshSolver(model, "IMPLICIT", 1, frame_dt=1 / 24, frame=1)
+    state = model.state()
+    state.v[1, 0] = np.nan
+    with pytest.raises(SimulationError) as info:
+        solver.advance(state, SpringFrameInputs(3, 3 / 24, 1 / 24, gravity=(0.0, 0.0, 0.0)))
+    message = str(info.value)
+    assert info.value.obj == "Sheet" and "frame 3" in message and "blew up" in message
+    assert "substeps" in message and "IMPLICIT" not in message
+
+
 def test_stiff_spring_rejected_up_front_for_explicit_methods():
     """The same spring 1000x stiffer fails at construction, not mid-bake."""
     omega = 0.099 * 24.0
