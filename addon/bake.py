@@ -33,7 +33,7 @@ from .bake_failures import Failures
 from .bake_resume import Resumable
 from .cache_paths import relative_path
 from .particles_bake import STREAM, ParticleBake
-from .roles import Roles, gather
+from .roles import Roles, check_exclusive, gather
 
 class BakeJob(Resumable, Failures):
     """Bake every (or the chosen) emitter and spring mesh of a scene, one frame per :meth:`step`.
@@ -109,6 +109,7 @@ class BakeJob(Resumable, Failures):
         if not roles:
             raise PhysanimError("nothing to bake: no object has a PhysAnim emitter, spring "
                                 "mesh or rigid body enabled", obj=self.scene.name, kind="scene")
+        check_exclusive(roles)
         self.frame_start = self.settings.frame_start
         self.frame_end = self.settings.frame_end
         if self.frame_end < self.frame_start:

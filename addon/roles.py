@@ -101,6 +101,16 @@ def gather(scene, only: set[str] | None = None) -> Roles:
                  [o for o in objects if o.physanim.constraint.enabled], followers)
 
 
+def check_exclusive(roles: Roles) -> None:
+    """An object is a spring mesh or a rigid body, not both (the rigid body's keys would move
+    the mesh its cache already moves): an error naming it otherwise."""
+    rigid = {o.name for o in roles.rigid_bodies}
+    both = next((o for o in roles.spring_meshes if o.name in rigid), None)
+    if both is not None:
+        raise PhysanimError("it is both a spring mesh and a rigid body: an object is one or the "
+                            "other — turn one of them off", obj=both.name, kind="object")
+
+
 def emitter_chain(ob) -> list:
     """``ob`` and the emitters above it: a sub-emitter (source Particle Deaths) bursts where its
     parent's particles die, so it depends on its parent, and on its parent's parent... The one

@@ -146,9 +146,11 @@ class SpringMeshSolver:
 
     def begin_frame(self, state: SpringMeshState, inputs: SpringFrameInputs,
                     paths: list) -> _FrameStep:
+        # attached to them, not colliding with them; nor with its own object as a collider
+        # (that is its undeformed shape, which the mesh starts on)
         apart = {a.target for a in self.model.attachments if not a.collide}
-        if apart:  # attached to them, not colliding with them
-            paths = [p for p in paths if p.frame.name not in apart]
+        apart.add(self.model.settings.name)
+        paths = [p for p in paths if p.frame.name not in apart]
         h = inputs.frame_dt / self.substeps
         g = np.asarray(inputs.gravity, dtype=np.float64)
         rest0 = inputs.rest0 if inputs.rest0 is not None else self.model.rest_x

@@ -258,6 +258,23 @@ def test_a_rigid_body_on_an_empty_is_refused_by_name_and_the_keys_stay(physanim_
         np.testing.assert_allclose(a, _world(cube, f), atol=1e-7)
 
 
+def test_a_spring_mesh_that_is_also_a_rigid_body_is_refused_by_name(physanim_ext, tmp_path):
+    """The two roles exclude each other (shared/DESIGN.md): the keys would move the mesh its
+    cache already moves. The bake says so, naming the object, and the earlier keys stay."""
+    _scene(tmp_path)
+    _ground()
+    cube = _body()
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    before = [_world(cube, f) for f in (1, 24, 48)]
+    cube.physanim.spring_mesh.enabled = True
+    with pytest.raises(RuntimeError, match=r'object "Cube".*both a spring mesh and a rigid '
+                                           r'body.*turn one of them off'):
+        bpy.ops.physanim.bake()
+    for a, f in zip(before, (1, 24, 48)):
+        np.testing.assert_allclose(a, _world(cube, f), atol=1e-7)
+    assert "physanim" not in cube.modifiers
+
+
 def test_bake_status_is_outdated_after_an_edit_and_current_after_rebake(physanim_ext, tmp_path):
     scene = _scene(tmp_path)
     _ground()
