@@ -21,7 +21,8 @@ from pathlib import Path
 import numpy as np
 
 KINDS = ("plane", "cube", "ico_sphere", "monkey", "grid", "empty")
-ROLES = ("emitter", "collider", "spring_mesh", "force")
+ROLES = ("emitter", "collider", "spring_mesh", "force")  # drawn per object
+CHANGED = ROLES + ("rigid_body",)  # (rigid bodies are drawn after the rest: :func:`build_scene`)
 VERBOSE = False  # print every failure message (tools/fuzz.sh ... -v)
 SKIP = {"enabled", "result", "bake_hash", "seed", "parent", "instance_object", "output",
         "pin_group", "target", "vertex_group"}
@@ -144,12 +145,42 @@ def build_scene(seed: int):
     if rng.random() < 0.3:  # slow motion, a speed-up, or the limits (drawn last: the scenes of
         # earlier seeds stay as they were)
         s.time_scale = float(rng.choice([0.01, 0.3, 2.5, 100.0]))
+    if rng.random() < 0.4:  # rigid bodies (drawn after the rest, for the same reason)
+        for ob in objects:
+            if rng.random() < 0.6:
+                _rigid(rng, ob.physanim.rigid_body)
     return rng, objects
+
+
+def _rigid(rng, group) -> None:
+    """A rigid body with random settings, and sometimes random (or absurd) starting motion."""
+    group.enabled = True
+    _randomise(rng, group)
+    for key in ("initial_velocity", "initial_angular_velocity"):
+        if rng.random() < 0.3:
+            setattr(group, key, tuple(float(rng.choice([-1.0, 1.0]) * 10 ** rng.uniform(-2, 6))
+                                      for _ in range(3)))
 
 
 def _snapshot(root: Path) -> dict[str, bytes]:
     return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*"))
             if p.is_file()} if root.exists() else {}
+
+
+def _rigid_keys(ext, scene) -> dict[str, tuple]:
+    """Every rigid body's animation as it is now: its rotation mode and each F-curve's keys."""
+    compat = sys.modules[f"{ext.__name__}.addon.compat"]
+    out = {}
+    for ob in scene.objects:
+        if not ob.physanim.rigid_body.enabled:
+            continue
+        curves = []
+        for fc in compat.action_fcurves(ob.animation_data):
+            co = np.empty(2 * len(fc.keyframe_points))
+            fc.keyframe_points.foreach_get("co", co)
+            curves.append((fc.data_path, fc.array_index, co.tobytes()))
+        out[ob.name] = (ob.rotation_mode, sorted(curves))
+    return out
 
 
 def _check_results(ext, scene) -> None:
@@ -168,6 +199,10 @@ def _check_results(ext, scene) -> None:
                 for key, a in (arrays or {}).items():
                     if a.dtype.kind == 'f' and not np.isfinite(a).all():
                         raise AssertionError(f'{ob.name}: non-finite "{key}" at frame {frame}')
+        if ob.physanim.rigid_body.enabled:
+            for data_path, index, co in _rigid_keys(ext, scene).get(ob.name, ("", []))[1]:
+                if not np.isfinite(np.frombuffer(co)).all():
+                    raise AssertionError(f"{ob.name}: a non-finite key on {data_path}[{index}]")
         mod = ob.modifiers.get("physanim")
         if mod is not None and mod.type == 'MESH_CACHE':
             samples = pc2.read_pc2(bpy.path.abspath(mod.filepath))[0]
@@ -181,6 +216,7 @@ def _bake_once(ext, scene, names: set[str]) -> str:
 
     root = Path(bpy.path.abspath(scene.physanim.cache_dir))
     before = _snapshot(root)
+    keys_before = _rigid_keys(ext, scene)
     try:
         result = bpy.ops.physanim.bake()
     except RuntimeError as exc:
@@ -194,6 +230,9 @@ def _bake_once(ext, scene, names: set[str]) -> str:
         if "the rest baked" not in message:
             if after != before:
                 raise AssertionError(f"a failed bake changed the previous one: {message}") from exc
+            if _rigid_keys(ext, scene) != keys_before:
+                raise AssertionError(f"a failed bake changed the rigid bodies' keys: {message}") \
+                    from exc
             _check_results(ext, scene)
             return "failed"
         paths = sys.modules[f"{ext.__name__}.addon.cache_paths"]
@@ -201,6 +240,9 @@ def _bake_once(ext, scene, names: set[str]) -> str:
         failed = [(name, True) for name in re.findall(r'spring mesh "([^"]+)"', kept)]
         for group in re.findall(r"particles \(emitters? (.*?)\)(?:,|$)", kept):
             failed += [(name, False) for name in re.findall(r'"([^"]+)"', group)]
+        if "rigid bodies (" in kept and _rigid_keys(ext, scene) != keys_before:
+            raise AssertionError(f"the failed rigid bodies lost their previous keys: {message}") \
+                from exc
         for name, mesh in failed:
             folder = paths.safe_name(name)
             for key in before:
@@ -227,7 +269,7 @@ def run_scene(ext, seed: int, folder: Path) -> list[str]:
     scene = bpy.context.scene
     outcomes = [_bake_once(ext, scene, names)]
     for ob in objects:  # a change, as a user would make between bakes
-        for role in ROLES:
+        for role in CHANGED:
             group = getattr(ob.physanim, role)
             if group.enabled and rng.random() < 0.5:
                 _randomise(rng, group, keep=0.8)
