@@ -32,15 +32,20 @@ from .mesh_read import evaluated_mesh
 STREAM = "bodies"
 SPHERE_TOLERANCE = 1e-3  # vertices within this fraction of the radius: the mesh is a sphere
 CONCAVE_FRACTION = 0.9  # a closed mesh with less volume than this of its hull's is concave
+FLAT_THICKNESS = 0.01  # a flat mesh (a plane, a card, a disc) is a solid this fraction of its
+# size thick (a 2 m plane 2 cm, a 0.4 m card 4 mm), centred on it
 
 
 def shape_of(co: np.ndarray, tris: np.ndarray, choice: str) -> tuple[str, dict]:
     """The core shape of a mesh (local vertices ``co`` with the object's scale applied) and
     its parameters. Automatic: an axis-aligned box is a BOX, vertices all on a sphere a
     SPHERE, a closed mesh that is clearly concave (a ring, a cup, a T) its own MESH, anything
-    else its CONVEX_HULL."""
+    else its CONVEX_HULL. A flat mesh as Automatic, Convex Hull or Box is a thin solid
+    (:func:`_thin`): what the user sees has no thickness, and a rigid body needs some."""
     lo, hi = co.min(axis=0), co.max(axis=0)
     centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    if choice in ('AUTO', 'CONVEX_HULL', 'BOX') and len(co) and convex_hull(co).dimension == 2:
+        return _thin(co, centre, half)
     if choice == 'AUTO':
         fitted, _ = fit_analytic_shape(co, tris) if len(tris) else ("MESH", None)
         dist = np.linalg.norm(co - centre, axis=1)
@@ -66,6 +71,27 @@ def shape_of(co: np.ndarray, tris: np.ndarray, choice: str) -> tuple[str, dict]:
     if hull.dimension < 3:
         return "HULL", {"hull": co}  # flat: the mass properties step says so, naming it
     return "HULL", {"hull": hull.points[hull.vertices]}
+
+
+def _thin(co: np.ndarray, centre: np.ndarray, half: np.ndarray) -> tuple[str, dict]:
+    """A flat mesh (local vertices ``co``, its box's centre and half extents) as a solid
+    FLAT_THICKNESS of its size thick, centred on its plane: a BOX when it is a rectangle on the
+    local axes (a plane, a grid), else its outline's hull pushed out both ways along its
+    normal (a disc, a card turned in its object)."""
+    size = float(2.0 * half.max())
+    thick = FLAT_THICKNESS * size
+    flat = 2.0 * half <= 1e-6 * size  # (single-precision vertices: flat to their rounding)
+    outline = co[convex_hull(co).vertices]  # its corners
+    if flat.sum() == 1:
+        axes = np.nonzero(~flat)[0]
+        if len(outline) == 4 and np.allclose(np.abs(outline[:, axes] - centre[axes]), half[axes],
+                                             rtol=1e-6, atol=1e-6 * size):
+            box = half.copy()
+            box[flat] = 0.5 * thick
+            return "BOX", {"half_extents": tuple(box), "shape_centre": tuple(centre)}
+    normal = np.linalg.svd(co - centre, full_matrices=False)[2][-1]  # least-spread direction
+    return "HULL", {"hull": np.concatenate([outline + 0.5 * thick * normal,
+                                            outline - 0.5 * thick * normal])}
 
 
 def _concave(co: np.ndarray, tris: np.ndarray) -> bool:
@@ -100,9 +126,8 @@ def mass_of(shape: str, params: dict, p, name: str, mesh=None):
         else:
             hull = convex_hull(params["hull"])
             if hull.dimension < 3:
-                raise PhysanimError("the mesh is flat (its convex hull has no volume) — give "
-                                    "it thickness, or use the Box shape", obj=name,
-                                    kind="rigid body")
+                raise PhysanimError("the mesh is a line or a point (its convex hull has no "
+                                    "area) — give it faces", obj=name, kind="rigid body")
             props = _closed_mesh_mass(mesh, name, amount) or \
                 polyhedron_mass(hull.points, hull.triangles, name=name, **amount)
         return with_override(props, com=tuple(p.com) if p.use_custom_com else None,

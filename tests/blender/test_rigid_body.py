@@ -102,6 +102,29 @@ def test_automatic_shape_follows_what_the_user_sees(physanim_ext, tmp_path, kind
     assert settings.shape == shape
 
 
+@pytest.mark.parametrize("kind, shape", [("plane", "BOX"), ("grid", "BOX"), ("circle", "HULL")])
+def test_a_default_flat_mesh_falls_as_a_thin_solid_and_lies_on_the_ground(physanim_ext,
+                                                                          tmp_path, kind, shape):
+    """A plane, a grid and a circle (vertices only) tagged with nothing else set: each is a
+    solid 1 % of its 2 m size thick, centred on it (a plane was refused as flat, and a circle,
+    its vertices all equally far from its centre, was taken for a 1 m ball and lay a metre up).
+    Dropped tilted, each lies flat on the ground, half its thickness up."""
+    _scene(tmp_path)
+    _ground(40.0)
+    getattr(bpy.ops.mesh, f"primitive_{kind}_add")(location=(0.0, 0.0, 2.0),
+                                                   rotation=(0.3, 0.2, 0.0))
+    ob = bpy.context.object
+    ob.physanim.rigid_body.enabled = True
+    rigid = _addon(physanim_ext, "rigid")
+    settings = rigid.body_settings(ob, bpy.context.evaluated_depsgraph_get(), FRAME_START)
+    assert settings.shape == shape
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    m = _world(ob, FRAME_END)
+    assert abs(m[2, 2]) > 0.9999  # its normal is vertical: lying flat
+    assert 0.0095 < m[2, 3] < 0.0125  # 2 cm thick, on the ground (soft contact: within 2.5 mm)
+    assert abs(_world(ob, FRAME_END - 1)[2, 3] - m[2, 3]) < 1e-4  # at rest
+
+
 def _l_prism(name="L"):
     """A closed L-shaped prism: the boxes [0, 2] x [0, 1] x [0, 1] and [0, 1] x [1, 2] x [0, 1]
     (the outline extruded along Z)."""
