@@ -31,6 +31,8 @@ from .mesh_read import evaluated_mesh
 
 STREAM = "bodies"
 SPHERE_TOLERANCE = 1e-3  # vertices within this fraction of the radius: the mesh is a sphere
+SPHERE_FILL = 0.75  # ... when their hull fills this much of it (a cylinder's rings are all as
+# far from its centre too: 0.53; Blender's ico sphere 0.87, UV sphere 0.98)
 CONCAVE_FRACTION = 0.9  # a closed mesh with less volume than this of its hull's is concave
 FLAT_THICKNESS = 0.01  # a flat mesh (a plane, a card, a disc) is a solid this fraction of its
 # size thick (a 2 m plane 2 cm, a 0.4 m card 4 mm), centred on it
@@ -38,20 +40,23 @@ FLAT_THICKNESS = 0.01  # a flat mesh (a plane, a card, a disc) is a solid this f
 
 def shape_of(co: np.ndarray, tris: np.ndarray, choice: str) -> tuple[str, dict]:
     """The core shape of a mesh (local vertices ``co`` with the object's scale applied) and
-    its parameters. Automatic: an axis-aligned box is a BOX, vertices all on a sphere a
-    SPHERE, a closed mesh that is clearly concave (a ring, a cup, a T) its own MESH, anything
+    its parameters. Automatic: an axis-aligned box is a BOX, vertices all on a sphere (and
+    spread over it: not a cylinder's two rings) a SPHERE, a closed mesh that is clearly concave (a ring, a cup, a T) its own MESH, anything
     else its CONVEX_HULL. A flat mesh as Automatic, Convex Hull or Box is a thin solid
     (:func:`_thin`): what the user sees has no thickness, and a rigid body needs some."""
     lo, hi = co.min(axis=0), co.max(axis=0)
     centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
-    if choice in ('AUTO', 'CONVEX_HULL', 'BOX') and len(co) and convex_hull(co).dimension == 2:
+    hull = convex_hull(co) if len(co) else None
+    if choice in ('AUTO', 'CONVEX_HULL', 'BOX') and hull is not None and hull.dimension == 2:
         return _thin(co, centre, half)
     if choice == 'AUTO':
         fitted, _ = fit_analytic_shape(co, tris) if len(tris) else ("MESH", None)
         dist = np.linalg.norm(co - centre, axis=1)
         if fitted == "BOX":
             choice = 'BOX'
-        elif len(co) >= 12 and np.ptp(dist) <= SPHERE_TOLERANCE * dist.max():
+        elif len(co) >= 12 and np.ptp(dist) <= SPHERE_TOLERANCE * dist.max() and \
+                hull.dimension == 3 and polyhedron_mass(hull.points, hull.triangles, density=1.0) \
+                .volume >= SPHERE_FILL * 4.0 / 3.0 * np.pi * dist.max() ** 3:
             choice = 'SPHERE'
         else:
             choice = 'MESH' if _concave(co, tris) else 'CONVEX_HULL'

@@ -41,7 +41,9 @@ def _ground(size=20.0):
 def _body(kind="cube", location=(0.0, 0.0, 3.0), **props):
     add = {"cube": bpy.ops.mesh.primitive_cube_add, "uv": bpy.ops.mesh.primitive_uv_sphere_add,
            "ico": bpy.ops.mesh.primitive_ico_sphere_add, "monkey": bpy.ops.mesh.primitive_monkey_add,
-           "torus": bpy.ops.mesh.primitive_torus_add}
+           "torus": bpy.ops.mesh.primitive_torus_add,
+           "cylinder": bpy.ops.mesh.primitive_cylinder_add,
+           "cone": bpy.ops.mesh.primitive_cone_add}
     add[kind](location=location)
     ob = bpy.context.object
     ob.physanim.rigid_body.enabled = True
@@ -93,13 +95,25 @@ def test_default_cube_falls_and_rests_on_a_default_plane(physanim_ext, tmp_path)
 
 
 @pytest.mark.parametrize("kind, shape", [("cube", "BOX"), ("uv", "SPHERE"), ("ico", "SPHERE"),
-                                         ("monkey", "HULL"), ("torus", "MESH")])
+                                         ("monkey", "HULL"), ("torus", "MESH"),
+                                         ("cylinder", "HULL"), ("cone", "HULL")])
 def test_automatic_shape_follows_what_the_user_sees(physanim_ext, tmp_path, kind, shape):
     _scene(tmp_path)
     ob = _body(kind)
     rigid = _addon(physanim_ext, "rigid")
     settings = rigid.body_settings(ob, bpy.context.evaluated_depsgraph_get(), FRAME_START)
     assert settings.shape == shape
+
+
+def test_a_default_cylinder_stands_on_its_end(physanim_ext, tmp_path):
+    """Its two rings of vertices are all equally far from its centre, which made it a ball of
+    radius 1.41 m that rested 1.41 m up: it is its hull, and stands on the ground 1 m up."""
+    _scene(tmp_path)
+    _ground()
+    cylinder = _body("cylinder")
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    m = _world(cylinder, FRAME_END)
+    assert m[2, 3] == pytest.approx(1.0, abs=0.005) and m[2, 2] > 0.9999  # upright
 
 
 @pytest.mark.parametrize("kind, shape", [("plane", "BOX"), ("grid", "BOX"), ("circle", "HULL")])
