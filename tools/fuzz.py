@@ -146,8 +146,8 @@ def build_scene(seed: int):
         # earlier seeds stay as they were)
         s.time_scale = float(rng.choice([0.01, 0.3, 2.5, 100.0]))
     if rng.random() < 0.4:  # rigid bodies (drawn after the rest, for the same reason)
-        for ob in objects:
-            if rng.random() < 0.6:
+        for ob in objects:  # (rarely on a spring mesh: the two exclude each other)
+            if rng.random() < (0.06 if ob.physanim.spring_mesh.enabled else 0.6):
                 _rigid(rng, ob.physanim.rigid_body)
     return rng, objects
 
