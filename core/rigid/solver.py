@@ -146,7 +146,8 @@ class RigidBodySolver:
         step = _FrameStep(state, inputs, inputs.frame_dt / self.substeps, g, posed, rows, bodies,
                           np.concatenate([vel, np.zeros((len(framed), 6))]), inv_mass,
                           RigidReport(), driven=kin)
-        bodies.excluded = model.joints.excluded_pairs(len(bodies))
+        bodies.excluded = np.union1d(model.joints.excluded_pairs(len(bodies)),
+                                     _own_colliders(model.body_name, colliders[6], len(bodies)))
         fast = np.linalg.norm(bodies.v, axis=1) + np.linalg.norm(bodies.w, axis=1) * \
             bodies.bound > sleep.WAKE_SPEED
         self._wake_state(step, moving=fast)
@@ -409,6 +410,14 @@ class RigidBodySolver:
                                   "start and gravity, or use more substeps",
                                   obj=self.model.body_name[bad[0]], frame=step.inputs.frame,
                                   kind="rigid body")
+
+
+def _own_colliders(bodies: tuple, colliders: tuple, count: int) -> np.ndarray:
+    """Keys body * count + collider row of each body and the collider of the same name: a
+    body's own object tagged as a collider too (a body never collides with itself)."""
+    row = {name: i for i, name in enumerate(bodies)}
+    return np.array([row[name] * count + len(bodies) + k for k, name in enumerate(colliders)
+                     if name in row], np.int64)
 
 
 def _hulls(model: RigidBodyModel):
