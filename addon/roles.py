@@ -102,13 +102,31 @@ def gather(scene, only: set[str] | None = None) -> Roles:
 
 
 def check_exclusive(roles: Roles) -> None:
-    """An object is a spring mesh or a rigid body, not both (the rigid body's keys would move
-    the mesh its cache already moves): an error naming it otherwise."""
-    rigid = {o.name for o in roles.rigid_bodies}
-    both = next((o for o in roles.spring_meshes if o.name in rigid), None)
-    if both is not None:
-        raise PhysanimError("it is both a spring mesh and a rigid body: an object is one or the "
-                            "other — turn one of them off", obj=both.name, kind="object")
+    """Roles one object cannot have together, an error naming it otherwise: a spring mesh and
+    a rigid body (the keys would move the mesh its cache already moves); a spring mesh and a
+    collider (the other systems would meet its undeformed shape, not the simulated one); a
+    rigid body that is not animated and a collider (the body is already the other systems'
+    collider: they would also meet a still copy of it where it starts)."""
+    rigid = {o.name: o for o in roles.rigid_bodies}
+    colliders = {o.name for o in roles.colliders}
+    for ob in roles.spring_meshes:
+        if ob.name in rigid:
+            _refuse(ob, "a rigid body", "the rigid body's keys would move the mesh its cache "
+                    "already moves")
+        if ob.name in colliders:
+            _refuse(ob, "a collider", "particles and rigid bodies would meet its undeformed "
+                    "shape, not the simulated one")
+    for ob in rigid.values():
+        if ob.name in colliders and not ob.physanim.rigid_body.kinematic:
+            raise PhysanimError("it is both a rigid body and a collider: a rigid body is already "
+                                "a collider for particles and spring meshes (they would also "
+                                "meet a still copy of it where it starts) — turn Collider off",
+                                obj=ob.name, kind="object")
+
+
+def _refuse(ob, other: str, why: str) -> None:
+    raise PhysanimError(f"it is both a spring mesh and {other}: {why} — turn one of them off",
+                        obj=ob.name, kind="object")
 
 
 def emitter_chain(ob) -> list:

@@ -124,6 +124,8 @@ def build_scene(seed: int):
             roles = ["emitter"]
         if ob.type != 'MESH':
             roles = [r for r in roles if r != "spring_mesh"] or ["emitter"]
+        if "spring_mesh" in roles:  # (a spring mesh cannot be a collider too: refused by name)
+            roles = [r for r in roles if r != "collider"]
         for role in roles:
             group = getattr(ob.physanim, role)
             group.enabled = True

@@ -51,6 +51,24 @@ def test_box_dropped_on_the_ground_comes_to_rest_within_a_second():
     assert abs(heights[-1] - 0.5) < 5e-3  # resting on its face, at most 5 mm into the ground
 
 
+def test_a_body_never_collides_with_a_collider_of_its_own_name():
+    """A collider named as a body is that body's own object tagged as a collider too (an
+    animated one's collider follows it): the body takes no contact with it. A 1 m box whose
+    still copy sits where it starts falls onto the ground as it does without the copy."""
+    def fall(colliders):
+        model, solver, state = world(box("Box", (0.5, 0.5, 0.5), (0.0, 0.0, 1.5)))
+        run(solver, state, 24, colliders=colliders)
+        return state.body_x.copy(), state.body_q.copy()
+
+    m = np.eye(4)
+    m[:3, :3] *= 0.5
+    m[:3, 3] = (0.0, 0.0, 1.5)
+    copy = ColliderFrame("Box", "BOX", m, m, 0.0, 0.5)
+    alone, with_copy = fall([ground()]), fall([ground(), copy])
+    assert alone[0][0, 2] < 0.51  # it fell
+    assert np.array_equal(alone[0], with_copy[0]) and np.array_equal(alone[1], with_copy[1])
+
+
 @pytest.mark.parametrize("mu, tilt", [(0.6, math.radians(20.0)), (0.2, math.radians(30.0))])
 def test_box_on_a_slope_sticks_or_slides_by_coulomb(mu, tilt):
     """mu > tan(theta): stays (drift < 1 mm in 5 s); mu < tan(theta): slides with
