@@ -62,6 +62,25 @@ def _world(ob, frame: int) -> np.ndarray:
     return np.array(ob.matrix_world)
 
 
+def _baked_cube(tmp_path: Path):
+    """A default cube baked falling onto the ground, and its world matrices at frames 1, 24
+    and 48."""
+    _scene(tmp_path)
+    _ground()
+    cube = _body()
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    return cube, [_world(cube, f) for f in (1, 24, 48)]
+
+
+def _refused_keeping_keys(ob, before: list, match: str) -> None:
+    """The bake fails with a message matching ``match``, and ``ob`` is where its earlier keys
+    put it at frames 1, 24 and 48 (``before``)."""
+    with pytest.raises(RuntimeError, match=match):
+        bpy.ops.physanim.bake()
+    for a, f in zip(before, (1, 24, 48)):
+        np.testing.assert_allclose(a, _world(ob, f), atol=1e-7)
+
+
 def test_cube_falls_into_a_default_mesh_collider_and_rests_on_it(physanim_ext, tmp_path):
     """Suzanne as an Automatic collider is a Mesh collider: a cube dropped on her rests on her
     head, not in it."""
@@ -280,35 +299,22 @@ def test_failed_or_cancelled_bake_keeps_the_previous_keys(physanim_ext, tmp_path
 def test_a_rigid_body_on_an_empty_is_refused_by_name_and_the_keys_stay(physanim_ext, tmp_path):
     """The fuzzer's rigid bodies: an Empty tagged as a rigid body fails the rigid bodies with a
     message naming it and what it is, and the cube's earlier keys stay as they were."""
-    scene = _scene(tmp_path)
-    _ground()
-    cube = _body()
-    assert bpy.ops.physanim.bake() == {'FINISHED'}
-    before = [_world(cube, f) for f in (1, 24, 48)]
+    cube, before = _baked_cube(tmp_path)
+    scene = bpy.context.scene
     handle = bpy.data.objects.new("Handle", None)
     scene.collection.objects.link(handle)
     handle.physanim.rigid_body.enabled = True
-    with pytest.raises(RuntimeError, match=r'rigid body "Handle".*a mesh object \(this is an '
-                                           r'Empty\)'):
-        bpy.ops.physanim.bake()
-    for a, f in zip(before, (1, 24, 48)):
-        np.testing.assert_allclose(a, _world(cube, f), atol=1e-7)
+    _refused_keeping_keys(cube, before, r'rigid body "Handle".*a mesh object \(this is an '
+                          r'Empty\)')
 
 
 def test_a_spring_mesh_that_is_also_a_rigid_body_is_refused_by_name(physanim_ext, tmp_path):
     """The two roles exclude each other (shared/DESIGN.md): the keys would move the mesh its
     cache already moves. The bake says so, naming the object, and the earlier keys stay."""
-    _scene(tmp_path)
-    _ground()
-    cube = _body()
-    assert bpy.ops.physanim.bake() == {'FINISHED'}
-    before = [_world(cube, f) for f in (1, 24, 48)]
+    cube, before = _baked_cube(tmp_path)
     cube.physanim.spring_mesh.enabled = True
-    with pytest.raises(RuntimeError, match=r'object "Cube".*both a spring mesh and a rigid '
-                                           r'body.*turn one of them off'):
-        bpy.ops.physanim.bake()
-    for a, f in zip(before, (1, 24, 48)):
-        np.testing.assert_allclose(a, _world(cube, f), atol=1e-7)
+    _refused_keeping_keys(cube, before, r'object "Cube".*both a spring mesh and a rigid '
+                          r'body.*turn one of them off')
     assert "physanim" not in cube.modifiers
 
 
@@ -318,17 +324,10 @@ def test_a_rigid_body_that_is_also_a_collider_is_refused_unless_animated(physani
     of it where it started (particles came to rest on nothing, 0.5 m above the cube). Refused
     by name, the earlier keys kept. An animated (kinematic) body may be a collider: that
     collider follows its animation, and the body does not collide with it."""
-    _scene(tmp_path)
-    _ground()
-    cube = _body()
-    assert bpy.ops.physanim.bake() == {'FINISHED'}
-    before = [_world(cube, f) for f in (1, 24, 48)]
+    cube, before = _baked_cube(tmp_path)
     cube.physanim.collider.enabled = True
-    with pytest.raises(RuntimeError, match=r'object "Cube".*both a rigid body and a collider'
-                                           r'.*turn Collider off'):
-        bpy.ops.physanim.bake()
-    for a, f in zip(before, (1, 24, 48)):
-        np.testing.assert_allclose(a, _world(cube, f), atol=1e-7)
+    _refused_keeping_keys(cube, before, r'object "Cube".*both a rigid body and a collider'
+                          r'.*turn Collider off')
     assert bpy.ops.physanim.free_bake() == {'FINISHED'}
     cube.physanim.rigid_body.kinematic = True
     cube.keyframe_insert("location", frame=FRAME_START)
