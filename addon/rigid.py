@@ -41,25 +41,22 @@ FLAT_THICKNESS = 0.01  # a flat mesh (a plane, a card, a disc) is a solid this f
 def shape_of(co: np.ndarray, tris: np.ndarray, choice: str) -> tuple[str, dict]:
     """The core shape of a mesh (local vertices ``co`` with the object's scale applied) and
     its parameters. Automatic: an axis-aligned box is a BOX, vertices all on a sphere (and
-    spread over it: not a cylinder's two rings) a SPHERE, a closed mesh that is clearly concave (a ring, a cup, a T) its own MESH, anything
-    else its CONVEX_HULL. A flat mesh as Automatic, Convex Hull or Box is a thin solid
+    spread over it: not a cylinder's two rings) a SPHERE, a closed mesh that is clearly
+    concave (a ring, a cup, a T) its own MESH, anything else its CONVEX_HULL. A flat mesh as Automatic, Convex Hull or Box is a thin solid
     (:func:`_thin`): what the user sees has no thickness, and a rigid body needs some."""
     lo, hi = co.min(axis=0), co.max(axis=0)
     centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
     hull = convex_hull(co) if len(co) else None
     if choice in ('AUTO', 'CONVEX_HULL', 'BOX') and hull is not None and hull.dimension == 2:
-        return _thin(co, centre, half)
+        return _thin(co, hull, centre, half)
     if choice == 'AUTO':
         fitted, _ = fit_analytic_shape(co, tris) if len(tris) else ("MESH", None)
-        dist = np.linalg.norm(co - centre, axis=1)
         if fitted == "BOX":
             choice = 'BOX'
-        elif len(co) >= 12 and np.ptp(dist) <= SPHERE_TOLERANCE * dist.max() and \
-                hull.dimension == 3 and polyhedron_mass(hull.points, hull.triangles, density=1.0) \
-                .volume >= SPHERE_FILL * 4.0 / 3.0 * np.pi * dist.max() ** 3:
+        elif _is_sphere(co, hull, centre):
             choice = 'SPHERE'
         else:
-            choice = 'MESH' if _concave(co, tris) else 'CONVEX_HULL'
+            choice = 'MESH' if _concave(co, tris, hull) else 'CONVEX_HULL'
     if choice == 'BOX':
         return "BOX", {"half_extents": tuple(half), "shape_centre": tuple(centre)}
     if choice == 'SPHERE':
@@ -72,21 +69,30 @@ def shape_of(co: np.ndarray, tris: np.ndarray, choice: str) -> tuple[str, dict]:
                            "shape_centre": tuple(centre)}
     if choice == 'MESH':
         return "MESH", {"mesh": (co, np.asarray(tris, np.int64).reshape(-1, 3))}
-    hull = convex_hull(co)
-    if hull.dimension < 3:
-        return "HULL", {"hull": co}  # flat: the mass properties step says so, naming it
+    if hull is None or hull.dimension < 3:
+        return "HULL", {"hull": co}  # a line or a point: the mass properties step says so
     return "HULL", {"hull": hull.points[hull.vertices]}
 
 
-def _thin(co: np.ndarray, centre: np.ndarray, half: np.ndarray) -> tuple[str, dict]:
-    """A flat mesh (local vertices ``co``, its box's centre and half extents) as a solid
-    FLAT_THICKNESS of its size thick, centred on its plane: a BOX when it is a rectangle on the
-    local axes (a plane, a grid), else its outline's hull pushed out both ways along its
-    normal (a disc, a card turned in its object)."""
+def _is_sphere(co: np.ndarray, hull, centre: np.ndarray) -> bool:
+    """Vertices all on a sphere about the box's centre (within SPHERE_TOLERANCE) whose hull
+    fills SPHERE_FILL of it."""
+    dist = np.linalg.norm(co - centre, axis=1)
+    return bool(len(co) >= 12 and np.ptp(dist) <= SPHERE_TOLERANCE * dist.max()
+                and hull.dimension == 3
+                and polyhedron_mass(hull.points, hull.triangles, density=1.0).volume
+                >= SPHERE_FILL * 4.0 / 3.0 * np.pi * dist.max() ** 3)
+
+
+def _thin(co: np.ndarray, hull, centre: np.ndarray, half: np.ndarray) -> tuple[str, dict]:
+    """A flat mesh (local vertices ``co``, their hull, its box's centre and half extents) as a
+    solid FLAT_THICKNESS of its size thick, centred on its plane: a BOX when it is a rectangle
+    on the local axes (a plane, a grid), else its outline's hull pushed out both ways along
+    its normal (a disc, a card turned in its object)."""
     size = float(2.0 * half.max())
     thick = FLAT_THICKNESS * size
     flat = 2.0 * half <= 1e-6 * size  # (single-precision vertices: flat to their rounding)
-    outline = co[convex_hull(co).vertices]  # its corners
+    outline = co[hull.vertices]  # its corners
     if flat.sum() == 1:
         axes = np.nonzero(~flat)[0]
         if len(outline) == 4 and np.allclose(np.abs(outline[:, axes] - centre[axes]), half[axes],
@@ -99,10 +105,9 @@ def _thin(co: np.ndarray, centre: np.ndarray, half: np.ndarray) -> tuple[str, di
                                             outline - 0.5 * thick * normal])}
 
 
-def _concave(co: np.ndarray, tris: np.ndarray) -> bool:
+def _concave(co: np.ndarray, tris: np.ndarray, hull) -> bool:
     """A closed, consistently wound mesh whose volume is less than CONCAVE_FRACTION of its
-    convex hull's (open or flat meshes are not: they collide as their hull)."""
-    hull = convex_hull(co)
+    convex ``hull``'s (open or flat meshes are not: they collide as their hull)."""
     if not len(tris) or hull.dimension < 3:
         return False
     solid = _closed_mesh_mass((co, tris), "mesh", {"density": 1.0})

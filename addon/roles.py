@@ -111,22 +111,20 @@ def check_exclusive(roles: Roles) -> None:
     colliders = {o.name for o in roles.colliders}
     for ob in roles.spring_meshes:
         if ob.name in rigid:
-            _refuse(ob, "a rigid body", "the rigid body's keys would move the mesh its cache "
-                    "already moves")
+            _refuse(ob, "a spring mesh and a rigid body", "the rigid body's keys would move the "
+                    "mesh its cache already moves")
         if ob.name in colliders:
-            _refuse(ob, "a collider", "particles and rigid bodies would meet its undeformed "
-                    "shape, not the simulated one")
+            _refuse(ob, "a spring mesh and a collider", "particles and rigid bodies would meet "
+                    "its undeformed shape, not the simulated one")
     for ob in rigid.values():
         if ob.name in colliders and not ob.physanim.rigid_body.kinematic:
-            raise PhysanimError("it is both a rigid body and a collider: a rigid body is already "
-                                "a collider for particles and spring meshes (they would also "
-                                "meet a still copy of it where it starts) — turn Collider off",
-                                obj=ob.name, kind="object")
+            _refuse(ob, "a rigid body and a collider", "a rigid body is already a collider for "
+                    "particles and spring meshes (they would also meet a still copy of it where "
+                    "it starts)", "turn Collider off")
 
 
-def _refuse(ob, other: str, why: str) -> None:
-    raise PhysanimError(f"it is both a spring mesh and {other}: {why} — turn one of them off",
-                        obj=ob.name, kind="object")
+def _refuse(ob, both: str, why: str, fix: str = "turn one of them off") -> None:
+    raise PhysanimError(f"it is both {both}: {why} — {fix}", obj=ob.name, kind="object")
 
 
 def emitter_chain(ob) -> list:
