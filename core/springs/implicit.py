@@ -73,6 +73,7 @@ class BaraffWitkin(Integrator):
     # impulse alone does not tell a pull (let go, a cloth slid off a faceted sphere).
     PULL_SHARE = 0.05
     RELEASE_ROUNDS = 3  # re-solves a step may take for that (the first also for slipping ones)
+    FRICTION_SHARE = 0.1  # the friction solve's residual at most this share of its impulses
 
     PRECONDITIONERS = ("MULTIGRID", "JACOBI")
 
@@ -340,7 +341,11 @@ class BaraffWitkin(Integrator):
         if not np.any(stop):
             return v1, 0, 0.0
         b = constraints.project(mass * stop)
-        scale = max(float(np.sqrt(np.vdot(b, b))), newton.scale, floor)
+        size = float(np.sqrt(np.vdot(b, b)))
+        # to the step's accuracy, but never coarser than FRICTION_SHARE of the friction itself
+        # (a friction impulse within the step's tolerance would be dropped whole: a towel
+        # lying in folds, its springs' forces large, slid across the floor at 10 cm/s)
+        scale = min(max(size, newton.scale, floor), self.FRICTION_SHARE * size / self.tolerance)
         linear = newton.last
         delta, iterations, _ = projected_pcg(linear.apply_a, b, linear.precondition,
                                              constraints.project, self.tolerance,

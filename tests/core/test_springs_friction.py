@@ -76,6 +76,29 @@ def test_cloth_on_a_slope_shallower_than_its_friction_stays_where_it_lies():
     assert abs((centre - model.rest_x.mean(axis=0)) @ downhill) < 1e-3
 
 
+def test_friction_far_smaller_than_the_rest_of_the_step_still_stops_a_slide():
+    """One mesh of two parts: a 1 m sheet 1 m up, stretched to twice its size (its springs'
+    forces make the step's right-hand side large), and a 10 cm patch sliding on the ground
+    at 5 cm/s, its friction 0.5. Friction can take mu g h = 0.1 m/s from it in each sub-step,
+    so the patch stops in the first one. (Friction's solve was judged against the whole
+    step's right-hand side, and an impulse below that tolerance was dropped whole: the patch
+    slid on at 4.98 cm/s; a towel lying in folds slid across the floor at 10 cm/s.)"""
+    xa, ea, ta, *_ = _grid(10, 10, 1.0)
+    xb, eb, tb, *_ = _grid(2, 2, 0.1)
+    n = len(xa)
+    x = np.concatenate([xa + [0.0, 0.0, 1.0], xb + [2.0, 0.0, 0.0]])
+    model = SpringMeshBuilder(SpringMeshSettings("Two"), x, np.concatenate([ea, eb + n]),
+                              np.concatenate([ta, tb + n])).finalize(1)
+    state = model.state()
+    state.x[:n, :2] *= 2.0
+    state.v[n:, 0] = 0.05
+    ground = ColliderFrame("Ground", "HALF_SPACE", np.eye(4), np.eye(4), friction=0.5)
+    solver = SpringMeshSolver(model, "IMPLICIT", 2, frame_dt=DT, frame=1)
+    solver.advance(state, SpringFrameInputs(1, DT, DT, colliders=[ground]))
+    assert np.abs(state.x[n:, 2]).max() < 1e-6  # still lying on the ground
+    assert np.abs(state.v[n:]).max() < 1e-3
+
+
 def test_cloth_at_rest_on_the_ground_at_the_defaults_costs_no_solve():
     """The defaults (a collider's friction, the mesh's settings) on the common case: a cloth
     dropped flat onto the ground comes to rest, and from then on its steps solve nothing."""
