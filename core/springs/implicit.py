@@ -330,7 +330,8 @@ class BaraffWitkin(Integrator):
         drags its neighbours along instead of stretching the springs to them. The correction is
         solved to the step's own accuracy (the tolerance times the step's right-hand side), not
         to a thousandth of itself: the step is only as exact as its main solve, and friction's
-        small impulses solved that finely took a quarter of a draped cloth's iterations.
+        small impulses solved that finely took a quarter of a draped cloth's iterations; but
+        never coarser than FRICTION_SHARE of its own impulses, or it would be dropped whole.
         Returns the new velocities (n, 3) [m/s], the CG iterations spent and the impulses
         (n, 3) [N s] the step's residual gains (friction's on the pressed vertices)."""
         mass = system.mass[:, None]
@@ -342,9 +343,8 @@ class BaraffWitkin(Integrator):
             return v1, 0, 0.0
         b = constraints.project(mass * stop)
         size = float(np.sqrt(np.vdot(b, b)))
-        # to the step's accuracy, but never coarser than FRICTION_SHARE of the friction itself
-        # (a friction impulse within the step's tolerance would be dropped whole: a towel
-        # lying in folds, its springs' forces large, slid across the floor at 10 cm/s)
+        # (a towel lying in folds, its springs' forces large, slid across the floor at 10 cm/s
+        # while its friction, within the step's tolerance, took no CG iteration)
         scale = min(max(size, newton.scale, floor), self.FRICTION_SHARE * size / self.tolerance)
         linear = newton.last
         delta, iterations, _ = projected_pcg(linear.apply_a, b, linear.precondition,
