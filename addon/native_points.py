@@ -82,8 +82,7 @@ def ensure_reader(res, file_rel: str, layout: dict, frame_start: int, frame_end:
     # A fresh cache file for every bake: Blender keeps an open reader per cache file, which
     # would go on showing the replaced bake's frame until the frame changes.
     cache.cache_file = _new_cache_file(file_rel, res.name)
-    if frame_start < 1:
-        _number_driver(cache.cache_file, file_number(0, frame_start))
+    _number_driver(cache.cache_file, frame_start, frame_end)
     if previous is not None and previous.users == 0 and previous.library is None:
         bpy.data.batch_remove([previous])  # cache_files has no remove()
     cache.object_path = usd_points.PRIM_PATH
@@ -117,13 +116,22 @@ def _new_cache_file(file_rel: str, label: str):
     return cache_file
 
 
-def _number_driver(cache_file, shift: int) -> None:
-    """Look files up by ``frame + shift``: a driver with a simple expression, which Blender
-    evaluates without Python (so it plays where scripts are disabled or PhysAnim is missing)."""
+def _number_driver(cache_file, frame_start: int, frame_end: int) -> None:
+    """Look files up by the scene frame held inside the baked frames, numbered as
+    :func:`file_number`: a driver with a simple expression, which Blender evaluates without
+    Python (so it plays where scripts are disabled or PhysAnim is missing).
+
+    Outside the baked frames there is no file: a reader first made there (a bake of frames
+    1001-1100 seen from frame 1, a file opened at a frame after the end) failed, and the
+    modifier showed "Could not create cache reader" until the frame entered the bake. The
+    attributes modifier shows no points outside Start..End, so which file is read there is
+    never seen."""
     cache_file.override_frame = True
     curve = cache_file.driver_add("frame")
     curve.driver.type = 'SCRIPTED'
-    curve.driver.expression = f"frame + {shift}"
+    shift = file_number(0, frame_start)
+    held = f"min(max(frame, {int(frame_start)}), {int(frame_end)})"
+    curve.driver.expression = held if shift == 0 else f"{held} + {shift}"
 
 
 def _override() -> dict:

@@ -215,6 +215,54 @@ def test_frames_below_one_play_from_their_own_files(physanim_ext, tmp_path):
         np.testing.assert_array_equal(shown["position"], cached["position"], err_msg=str(frame))
 
 
+_OPEN_AT = textwrap.dedent('''
+    import sys
+    import bpy
+    bpy.ops.wm.open_mainfile(filepath=sys.argv[1])
+    scene = bpy.context.scene
+    for frame in map(int, sys.argv[2:]):
+        scene.frame_set(frame)
+        bpy.context.evaluated_depsgraph_get()
+        print("shown frame", frame)
+''')
+
+
+def test_frames_outside_the_bake_show_no_points_and_no_modifier_error(physanim_ext, tmp_path):
+    """A shot baked at frames 3-6 seen from frame 1, or opened at frame 9: no file has those
+    numbers, and the cache modifier's reader, first made there, failed ("Could not create cache
+    reader", the modifier in red) until the frame entered the bake."""
+    scene = _scene(tmp_path, frame_end=6)
+    scene.physanim.frame_start = 3
+    ob = _default_emitter(scene)
+    scene.frame_set(1)
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    res = ob.physanim.emitter.result
+    (driver,) = res.modifiers["physanim_cache"].cache_file.animation_data.drivers
+    assert driver.driver.is_simple_expression  # evaluated without Python
+    cache = sys.modules[f"{physanim_ext.__name__}.core.cache"]
+    folder = bpy.path.abspath(res.physanim.result.cache)
+    for frame in (1, 2, 3, 6, 7, 9, 4):
+        scene.frame_set(frame)
+        shown, cached = result_points(res), cache.read_frame(folder, frame)
+        if cached is None:
+            assert len(shown["position"]) == 0, frame
+        else:
+            assert len(cached["id"]) > 0
+            np.testing.assert_array_equal(shown["id"], cached["id"], err_msg=str(frame))
+
+    # Blender logs the modifier's error: read it where a user opens the file, at each end
+    for frame in (1, 9):
+        scene.frame_set(frame)
+        bpy.ops.wm.save_mainfile()
+        script = tmp_path / "open_at.py"
+        script.write_text(_OPEN_AT)
+        done = subprocess.run([sys.executable, str(script), bpy.data.filepath, "2", "7"],
+                              capture_output=True, text=True, timeout=300)
+        log = done.stdout + done.stderr  # the bpy module logs to stdout
+        assert done.returncode == 0 and "shown frame 7" in done.stdout, log[-2000:]
+        assert "Could not create cache reader" not in log, (frame, log[-2000:])
+
+
 def test_a_rebake_shows_at_once_without_a_frame_change(physanim_ext, tmp_path):
     """Blender keeps a reader open per cache file: the rebake must not show the old frame."""
     scene = _scene(tmp_path, frame_end=6)
