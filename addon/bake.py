@@ -336,6 +336,13 @@ class BakeJob(Resumable, Failures):
             self.particles.flush()
         if self.rigid is not None:
             self.rigid.flush()
+        keys = []  # computed and checked (Squash & Stretch) before any cache is swapped in:
+        if self.rigid is not None:  # a failure there drops the rigid bodies, keeping their keys
+            with self._system(self.rigid):
+                keys = rigid_keys.plan_keys(
+                    self.scene, self.rigid.objects,
+                    os.path.join(self.rigid.writer.partial_dir, rigid.STREAM), self.frame_start,
+                    self.frame_end, self.rigid.simulated, self.clock, self.rigid.model.body_com)
         emitters = self.particles.emitters if self.particles is not None else []
         paths = self.particles.commit(meta) if self.particles is not None else {}
         mesh_paths = {mesh.ob.name: mesh.commit(dict(meta, kind="spring_mesh", object=mesh.ob.name,
@@ -345,10 +352,7 @@ class BakeJob(Resumable, Failures):
             if self.rigid is not None else None
         results.resume_refresh(self.scene)
         if self.rigid is not None:
-            rigid_keys.write_keys(self.scene, self.rigid.objects,
-                                  os.path.join(rigid_path, rigid.STREAM), self.frame_start,
-                                  self.frame_end, self.rigid.simulated, self.clock,
-                                  self.rigid.model.body_com)
+            rigid_keys.write_keys(keys)
             for ob in self.rigid.objects:
                 ob.physanim.rigid_body.bake_hash = self.rigid_hash
             self.breaks = self.rigid.record_breaks()

@@ -73,39 +73,53 @@ def _local(ob, space, position, rotation):
     return basis[:, :3, 3], quat.from_matrix(lin / np.linalg.norm(lin, axis=1)[:, None, :])
 
 
-def write_keys(scene, objects: list, folder: str, frame_start: int, frame_end: int,
-               simulated, clock: TimeMap | None = None, com: np.ndarray | None = None) -> None:
-    """Key the location and rotation_quaternion of every body ``simulated`` (indices: the
-    bodies not on their animation for at least one frame) once per frame; the others keep
-    their own animation. ``clock``: the bake's time map (default: time scale 1); ``com``:
-    (n, 3) the bodies' centres of mass in their own axes (what Hang Time and Exaggeration
-    shape; default: their origins)."""
+def plan_keys(scene, objects: list, folder: str, frame_start: int, frame_end: int,
+              simulated, clock: TimeMap | None = None, com: np.ndarray | None = None) -> list:
+    """Every key :func:`write_keys` will write, computed and checked before anything is
+    written: the location and rotation_quaternion of every body ``simulated`` (indices: the
+    bodies not on their animation for at least one frame) once per frame, and its scale under
+    Squash & Stretch; the others keep their own animation. ``clock``: the bake's time map
+    (default: time scale 1); ``com``: (n, 3) the bodies' centres of mass in their own axes
+    (what Hang Time and Exaggeration shape; default: their origins).
+
+    Raises :class:`PhysanimError` (naming the body and frame) while nothing is written yet: the
+    bake computes this before it swaps any cache in, so a failure here keeps every previous
+    bake. Returns ``[(object, frames (f,) float32, location (f, 3), rotation (f, 4), scale
+    (f, 3) or None)]``."""
     frames, pos, rot = _tracks(folder, frame_start, frame_end)
     clock = clock or TimeMap.constant(frame_start, frame_end)
     times = timing.frame_seconds(clock, scene, frames)
     if not len(frames):
-        return
+        return []
     dynamic = [(i, ob) for i, ob in enumerate(objects) if i in simulated]
     spaces = _parent_spaces(scene, [ob for _, ob in dynamic], frames)
     f32 = frames.astype(np.float32)
+    plan = []
     for i, ob in dynamic:
         shown_pos, shown_rot = _flights(scene, clock, ob, times, pos[:, i], rot[:, i],
                                         None if com is None else com[i])
         loc, q = _local(ob, spaces.get(ob.name), shown_pos, shown_rot)
+        scale = None
+        if ob.physanim.rigid_body.squash > 0.0:
+            factors = squash_factors(scene, ob, shown_pos, shown_rot, times)
+            scale = _own_scale(ob) * factors
+        plan.append((ob, f32, loc, _continuous(q), scale))
+    return plan
+
+
+def write_keys(plan: list) -> None:
+    """Key each body of a :func:`plan_keys` plan, in bulk, into its baked action."""
+    for ob, f32, loc, q, scale in plan:
         bag = compat.channelbag_for(ob, _baked_action(ob))
-        q = _continuous(q)
         for axis in range(3):
             compat.set_keys(compat.fcurve_ensure(bag, "location", axis), f32, loc[:, axis])
         for axis in range(4):
             compat.set_keys(compat.fcurve_ensure(bag, "rotation_quaternion", axis), f32,
                             q[:, axis])
         ob.rotation_mode = 'QUATERNION'
-        if ob.physanim.rigid_body.squash > 0.0:
-            factors = squash_factors(scene, ob, shown_pos, shown_rot, times)
-            own = np.array(ob.physanim.rigid_body.previous_pose[14:17])
+        if scale is not None:
             for axis in range(3):
-                compat.set_keys(compat.fcurve_ensure(bag, "scale", axis), f32,
-                                own[axis] * factors[:, axis])
+                compat.set_keys(compat.fcurve_ensure(bag, "scale", axis), f32, scale[:, axis])
 
 
 def _flights(scene, clock: TimeMap, ob, times, origins: np.ndarray, rotations: np.ndarray,
@@ -152,7 +166,8 @@ def squash_factors(scene, ob, position: np.ndarray, rotation: np.ndarray,
         world = log_deformation(velocity[k:k + 1], impact, age, settings)[0]
         local = axes[k].T @ world @ axes[k]
         diagonal = np.diag(local)
-        out[k] = np.exp(diagonal - diagonal.sum() / 3.0)
+        with np.errstate(over="ignore"):  # an overflow is reported below, naming the frame
+            out[k] = np.exp(diagonal - diagonal.sum() / 3.0)
     bad = ~(np.abs(out) <= np.finfo(np.float32).max).all(axis=1)  # keys are float32
     if bad.any():
         k = int(np.argmax(bad))
@@ -160,6 +175,12 @@ def squash_factors(scene, ob, position: np.ndarray, rotation: np.ndarray,
                             f"{np.linalg.norm(velocity[k]):.4g} m/s) — lower Squash & Stretch",
                             obj=ob.name, frame=scene.physanim.frame_start + k, kind="rigid body")
     return out
+
+
+def _own_scale(ob) -> np.ndarray:
+    """The object's own scale: as :func:`_baked_action` sets it aside (or set aside already)."""
+    p = ob.physanim.rigid_body
+    return np.array(p.previous_pose[14:17] if p.baked_action is not None else ob.scale)
 
 
 def _baked_action(ob) -> bpy.types.Action:

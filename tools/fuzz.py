@@ -231,7 +231,10 @@ def _bake_once(ext, scene, names: set[str]) -> str:
         after = _snapshot(root)
         if "the rest baked" not in message:
             if after != before:
-                raise AssertionError(f"a failed bake changed the previous one: {message}") from exc
+                changed = sorted(k for k in before.keys() | after.keys()
+                                 if before.get(k) != after.get(k))
+                raise AssertionError(f"a failed bake changed the previous one ({len(changed)} "
+                                     f"files, e.g. {changed[:3]}): {message}") from exc
             if _rigid_keys(ext, scene) != keys_before:
                 raise AssertionError(f"a failed bake changed the rigid bodies' keys: {message}") \
                     from exc

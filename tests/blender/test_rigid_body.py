@@ -296,6 +296,50 @@ def test_failed_or_cancelled_bake_keeps_the_previous_keys(physanim_ext, tmp_path
         np.testing.assert_allclose(a, _world(cube, f), atol=1e-7)
 
 
+def _cache_files(scene) -> dict[str, bytes]:
+    root = Path(bpy.path.abspath(scene.physanim.cache_dir))
+    return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*"))
+            if p.is_file()}
+
+
+def test_a_failure_found_while_keying_keeps_every_previous_bake(physanim_ext, tmp_path):
+    """Squash & Stretch is checked on the keys, after the simulation (the fuzzer's: a body
+    thrown at 18 km/s came to a scale of inf). It used to be found after the caches were
+    swapped in and with the bodies' keys half written: the emitter's previous bake was lost,
+    the rigid bodies' cache replaced and the cube's keys changed. Now the rigid bodies alone
+    fail, keeping their keys and cache, and the rest bakes; alone, nothing changes."""
+    scene = _scene(tmp_path)
+    _ground()
+    cube, emitter = _body(), _body("ico", location=(4.0, 0.0, 3.0))
+    emitter.physanim.rigid_body.enabled = False
+    emitter.physanim.emitter.enabled = True
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    before = [_world(cube, f) for f in (1, 24, 48)]
+    files = _cache_files(scene)
+    rigid = {k: v for k, v in files.items() if "rigid" in k}
+    assert rigid and len(rigid) < len(files)
+
+    cube.physanim.rigid_body.squash = 20.0
+    cube.physanim.rigid_body.initial_velocity = (2.0e4, 0.0, 0.0)
+    emitter.physanim.emitter.seed += 1  # the emitter's bake changes
+    with pytest.raises(RuntimeError, match=r'rigid body "Cube".*Squash & Stretch.*the rest '
+                                           r'baked'):
+        bpy.ops.physanim.bake()
+    for a, f in zip(before, (1, 24, 48)):
+        np.testing.assert_allclose(a, _world(cube, f), atol=1e-7)
+    assert cube.rotation_mode == 'QUATERNION' and ("scale", 0) not in _curves(physanim_ext, cube)
+    now = _cache_files(scene)
+    assert {k: v for k, v in now.items() if "rigid" in k} == rigid
+    assert now != files  # the emitter did bake
+
+    emitter.physanim.emitter.enabled = False  # the rigid bodies alone: nothing changes
+    with pytest.raises(RuntimeError, match=r'rigid body "Cube".*Squash & Stretch'):
+        bpy.ops.physanim.bake()
+    for a, f in zip(before, (1, 24, 48)):
+        np.testing.assert_allclose(a, _world(cube, f), atol=1e-7)
+    assert _cache_files(scene) == now
+
+
 def test_a_rigid_body_on_an_empty_is_refused_by_name_and_the_keys_stay(physanim_ext, tmp_path):
     """The fuzzer's rigid bodies: an Empty tagged as a rigid body fails the rigid bodies with a
     message naming it and what it is, and the cube's earlier keys stay as they were."""
