@@ -10,8 +10,9 @@ and a mesh against itself.
   (:func:`..colouring.colour`: each group one vectorised step), or relaxed Jacobi passes
   where pairs crowd on few points.
 * :func:`respond` does the same for velocities: the weighted sum's approach along n is
-  cancelled (a bounce of restitution times it when faster than the rest speed), Coulomb
-  friction on its sliding.
+  cancelled (a bounce of restitution times it when faster than the rest speed); then Coulomb
+  friction on its sliding, each pair's friction impulse within mu times the whole normal
+  impulse it took.
 """
 from __future__ import annotations
 
@@ -26,6 +27,7 @@ PASSES = 16  # position passes at most
 TOLERANCE = 0.05  # a pass leaving every pair within this fraction of the gap is the last
 VELOCITY_PASSES = 4  # Gauss-Seidel velocity passes at most
 RELAXED_PASSES = 32  # relaxed Jacobi velocity passes at most
+SLIDE_TOLERANCE = 1e-4  # of the rest speed: a friction pass changing no slide more is the last
 CROWD = 12  # pairs on one point beyond which passes are relaxed Jacobi, not coloured
 MIN_SHARE = 0.25  # of a pair's weight on moving points, below which pinned ones hold it
 
@@ -83,17 +85,20 @@ def _groups(pairs: PointPairs, rows: np.ndarray, inv_mass: np.ndarray,
     return colour(vertex, inv_mass > 0.0) if coloured else None
 
 
-def _apply(x: np.ndarray, vertex: np.ndarray, delta: np.ndarray, relax: bool) -> None:
+def _apply(x: np.ndarray, vertex: np.ndarray, delta: np.ndarray, relax: bool):
     """x[vertex] += delta ((c, k) points, (c, k, 3) moves). ``relax``: a Jacobi pass — each
     pair's moves scaled by one over the most pairs moving any of its points, the same factor
     for all its points, so a pair's equal and opposite impulses stay so (momentum kept) and
-    no point takes more than about one full push."""
+    no point takes more than about one full push. Returns the share of each pair's move
+    applied ((c,) or 1.0)."""
+    scale = 1.0
     if relax:
         moves = np.any(delta != 0.0, axis=2)
         count = np.bincount(vertex[moves], minlength=len(x))
-        most = np.where(moves, count[vertex], 0).max(axis=1)
-        delta = delta / np.maximum(most, 1)[:, None, None]
+        scale = 1.0 / np.maximum(np.where(moves, count[vertex], 0).max(axis=1), 1)
+        delta = delta * scale[:, None, None]
     np.add.at(x, vertex, delta)
+    return scale
 
 
 def separate(pairs: PointPairs, x: np.ndarray, inv_mass: np.ndarray,
@@ -126,8 +131,15 @@ def respond(pairs: PointPairs, v: np.ndarray, inv_mass: np.ndarray, normal: np.n
             surface: np.ndarray, friction: float, restitution: float, rest_speed: float,
             coloured: bool | None = True) -> np.ndarray:
     """Velocities v (n, 3) [m/s] in place: each pair's weighted sum stops approaching the
-    anchor's velocity ``surface`` (c, 3) along ``normal`` (c, 3) (world directions);
-    ``coloured``: see :func:`_groups`. Returns the pairs that can move (rows)."""
+    anchor's velocity ``surface`` (c, 3) along ``normal`` (c, 3) (world directions) — passes
+    until none approaches — then friction passes stop or slow its sliding, each pair's
+    friction impulse (summed over the passes) held within ``friction`` times the normal
+    impulse it took in all of them. (Friction bounded by one pass's part let the layers of a
+    resting pile creep over each other: where a heap crowds dozens of pairs on a point, the
+    relaxed passes give each pair a small part of its push at a time. Friction interleaved
+    with the normal passes made the Gauss-Seidel order show: a cloth striking a box square
+    spun it five times faster.) ``coloured``: see :func:`_groups`. Returns the pairs that can
+    move (rows)."""
     vertex, weight = pairs.vertex, pairs.weight
     share, denom, rows = shares(pairs, inv_mass)
     groups = _groups(pairs, rows, inv_mass, coloured) if len(rows) else []
@@ -138,28 +150,49 @@ def respond(pairs: PointPairs, v: np.ndarray, inv_mass: np.ndarray, normal: np.n
         rel = np.einsum("ck,ckj->cj", weight[g], v[vertex[g]]) - surface[g]
         return rel, dot_rows(rel, normal[g])
 
+    def push(g, impulse):  # impulse (per unit weight) (g, 3) on pairs g: the share applied
+        return _apply(v, vertex[g], share[g][:, :, None] * impulse[:, None, :], relax)
+
     _, vn = normal_speed(rows)
     # what each pair's normal speed must reach: a bounce when approaching faster than the
     # rest speed, resting contact when slower, nothing for a separating pair
     e = restitution
     floor = np.full(len(vertex), -np.inf)
     floor[rows] = np.where(vn < 0.0, np.where(-e * vn > rest_speed, -e * vn, 0.0), -np.inf)
-    for k in range(RELAXED_PASSES if relax else VELOCITY_PASSES):
+    pushed = np.zeros(len(vertex))  # each pair's normal impulse so far
+    held = np.zeros((len(vertex), 3))  # and its friction impulse
+    still = SLIDE_TOLERANCE * rest_speed  # a friction change below this (m/s) changes nothing
+    passes = RELAXED_PASSES if relax else VELOCITY_PASSES
+    for _ in range(passes):
         changed = False
         for g in groups:
-            rel, vn = normal_speed(g)
+            _, vn = normal_speed(g)
             dvn = np.maximum(floor[g] - vn, 0.0)
-            if not dvn.any():
+            if dvn.any():
+                changed = True
+                step = dvn / denom[g]
+                pushed[g] += step * push(g, step[:, None] * normal[g])
+        if not changed:
+            break
+    if friction <= 0.0:
+        return rows
+    groups = [g[pushed[g] > 0.0] for g in groups]
+    for _ in range(passes):
+        changed = False
+        for g in groups:
+            if not len(g):
                 continue
-            changed = True
-            change = dvn[:, None] * normal[g]
-            if k == 0 and friction > 0.0:  # Coulomb: sliding stops or slows by mu times the push
-                slide = rel - vn[:, None] * normal[g]
-                speed = norm_rows(slide)
-                change -= (np.minimum(speed, friction * dvn)
-                           / np.maximum(speed, 1e-300))[:, None] * slide
-            step = change / denom[g][:, None]
-            _apply(v, vertex[g], share[g][:, :, None] * step[:, None, :], relax)
+            rel, vn = normal_speed(g)
+            slide = rel - vn[:, None] * normal[g]
+            want = held[g] - slide / denom[g][:, None]  # the impulse that stops the slide,
+            size = norm_rows(want)  # within the cone
+            want *= np.minimum(1.0, friction * pushed[g] / np.maximum(size, 1e-300))[:, None]
+            delta = want - held[g]
+            moved = norm_rows(delta) * denom[g] > still
+            if moved.any():
+                changed = True
+                g, delta = g[moved], delta[moved]
+                held[g] += delta * np.reshape(push(g, delta), (-1, 1))
         if not changed:
             break
     return rows

@@ -85,7 +85,7 @@ def test_layers_keep_their_distance():
         assert np.sqrt(d2.min()) > 0.5 * 0.02, f"frame {frame}"
 
 
-def _two_layers(gap_start: float, gap_end: float, n: int = 6):
+def _two_layers(gap_start: float, gap_end: float, n: int = 6, **settings):
     """A sheet folded flat on itself: a lower and an upper layer (n x n vertices each, 0.5 m
     wide, offset by a third of a cell) joined at one side, the upper layer ``gap_start`` above
     the lower at the sub-step's start and ``gap_end`` at its end (negative: it went
@@ -96,8 +96,8 @@ def _two_layers(gap_start: float, gap_end: float, n: int = 6):
     x1 = np.concatenate([x, upper + (0, 0, gap_end)])
     tris = np.concatenate([tris, tris + n * n])
     edges = np.concatenate([edges, edges + n * n])
-    model = SpringMeshBuilder(SpringMeshSettings("Folded", self_collision=True), x0, edges,
-                              tris).finalize(1)
+    model = SpringMeshBuilder(SpringMeshSettings("Folded", self_collision=True, **settings), x0,
+                              edges, tris).finalize(1)
     return model, x0, x1, tris
 
 
@@ -127,6 +127,30 @@ def test_layers_that_came_too_near_or_went_through_are_parted_and_keep_their_mom
     assert np.all(upper[over, 2] > lower[:, 2].mean())  # on its own side
     # no longer closing in: the relaxed passes leave under 5 % of the approach speed
     assert v[n:, 2].mean() - v[:n, 2].mean() >= 0.05 * (gap_end - 0.05) / DT
+
+
+@pytest.mark.parametrize("friction", [0.0, 0.2])
+def test_a_layer_landing_on_another_while_sliding_is_stopped_by_friction(friction):
+    """One sub-step as above, the upper layer also sliding along the lower at 0.1 m/s: the
+    pushes that stop it approaching at 1.1 m/s let friction (0.2, the default) take up to
+    0.22 m/s of its slide, so it stops sliding — to the relaxed passes' 5 %, as its approach.
+    The relaxed passes give each pair a part of its push at a time; friction bounded by one
+    pass's part took a tenth of the slide, and the layers of a resting pile crept over each
+    other at 7 mm/s. Without friction the slide is kept."""
+    model, x0, x1, tris = _two_layers(0.05, 0.004, self_friction=friction)
+    solver = SpringMeshSolver(model, "IMPLICIT", 1, frame_dt=DT, frame=1)
+    n = len(x0) // 2
+    v = np.zeros_like(x1)
+    v[n:] = (0.1, 0.0, (0.004 - 0.05) / DT)
+    p0 = (model.vertex_mass[:, None] * v).sum(axis=0)
+    x = x1.copy()
+    assert solver.itself.keep_apart(x0, x, v, 0.1) > 0
+    np.testing.assert_allclose((model.vertex_mass[:, None] * v).sum(axis=0), p0, atol=1e-12)
+    slide = v[n:, 0].mean() - v[:n, 0].mean()
+    if friction:
+        assert abs(slide) < 0.05 * 0.1
+    else:
+        assert slide > 0.095
 
 
 def test_a_layer_the_ground_lifts_does_not_come_up_through_the_layer_above():
