@@ -190,6 +190,18 @@ def test_switching_the_output_replaces_the_result_and_leaves_nothing_behind(phys
     assert not [g for g in bpy.data.node_groups if "physanim_usd_layout" in g]
 
 
+def _baked_with_driven_frames(ext, ob):
+    """Bake; the result and a reader of its cached frames. The cache file looks its files up
+    by a driven frame: a simple expression, which Blender evaluates without Python."""
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    res = ob.physanim.emitter.result
+    (driver,) = res.modifiers["physanim_cache"].cache_file.animation_data.drivers
+    assert driver.driver.is_simple_expression
+    cache = sys.modules[f"{ext.__name__}.core.cache"]
+    folder = bpy.path.abspath(res.physanim.result.cache)
+    return res, lambda frame: cache.read_frame(folder, frame)
+
+
 def test_frames_below_one_play_from_their_own_files(physanim_ext, tmp_path):
     """Blender reads a file's number without its sign: files are numbered from the bake's first
     frame and the cache file's frame offset maps them back."""
@@ -197,15 +209,10 @@ def test_frames_below_one_play_from_their_own_files(physanim_ext, tmp_path):
     scene.physanim.frame_start, scene.physanim.frame_end = -4, 6
     ob = _default_emitter(scene)
     ob.physanim.emitter.frame_start = -4
-    assert bpy.ops.physanim.bake() == {'FINISHED'}
-    res = ob.physanim.emitter.result
-    (driver,) = res.modifiers["physanim_cache"].cache_file.animation_data.drivers
-    assert driver.driver.is_simple_expression  # evaluated without Python
-    cache = sys.modules[f"{physanim_ext.__name__}.core.cache"]
-    folder = bpy.path.abspath(res.physanim.result.cache)
+    res, read = _baked_with_driven_frames(physanim_ext, ob)
     for frame in (-4, -1, 0, 1, 3, 6, -5, 7):
         scene.frame_set(frame)
-        cached = cache.read_frame(folder, frame)
+        cached = read(frame)
         shown = result_points(res)
         if cached is None:
             assert len(shown["position"]) == 0, frame
@@ -235,15 +242,10 @@ def test_frames_outside_the_bake_show_no_points_and_no_modifier_error(physanim_e
     scene.physanim.frame_start = 3
     ob = _default_emitter(scene)
     scene.frame_set(1)
-    assert bpy.ops.physanim.bake() == {'FINISHED'}
-    res = ob.physanim.emitter.result
-    (driver,) = res.modifiers["physanim_cache"].cache_file.animation_data.drivers
-    assert driver.driver.is_simple_expression  # evaluated without Python
-    cache = sys.modules[f"{physanim_ext.__name__}.core.cache"]
-    folder = bpy.path.abspath(res.physanim.result.cache)
+    res, read = _baked_with_driven_frames(physanim_ext, ob)
     for frame in (1, 2, 3, 6, 7, 9, 4):
         scene.frame_set(frame)
-        shown, cached = result_points(res), cache.read_frame(folder, frame)
+        shown, cached = result_points(res), read(frame)
         if cached is None:
             assert len(shown["position"]) == 0, frame
         else:
