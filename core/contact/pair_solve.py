@@ -129,7 +129,7 @@ def separate(pairs: PointPairs, x: np.ndarray, inv_mass: np.ndarray,
 
 def respond(pairs: PointPairs, v: np.ndarray, inv_mass: np.ndarray, normal: np.ndarray,
             surface: np.ndarray, friction: float, restitution: float, rest_speed: float,
-            coloured: bool | None = True) -> np.ndarray:
+            coloured: bool | None = True, impulses: list | None = None) -> np.ndarray:
     """Velocities v (n, 3) [m/s] in place: each pair's weighted sum stops approaching the
     anchor's velocity ``surface`` (c, 3) along ``normal`` (c, 3) (world directions) — passes
     until none approaches — then friction passes stop or slow its sliding, each pair's
@@ -138,8 +138,9 @@ def respond(pairs: PointPairs, v: np.ndarray, inv_mass: np.ndarray, normal: np.n
     resting pile creep over each other: where a heap crowds dozens of pairs on a point, the
     relaxed passes give each pair a small part of its push at a time. Friction interleaved
     with the normal passes made the Gauss-Seidel order show: a cloth striking a box square
-    spun it five times faster.) ``coloured``: see :func:`_groups`. Returns the pairs that can
-    move (rows)."""
+    spun it five times faster.) ``coloured``: see :func:`_groups`. ``impulses``: a list, given
+    each row's normal impulse (c,) and friction impulse (c, 3) (per unit weight: point k of
+    a row took weight_k times them). Returns the pairs that can move (rows)."""
     vertex, weight = pairs.vertex, pairs.weight
     share, denom, rows = shares(pairs, inv_mass)
     groups = _groups(pairs, rows, inv_mass, coloured) if len(rows) else []
@@ -174,6 +175,8 @@ def respond(pairs: PointPairs, v: np.ndarray, inv_mass: np.ndarray, normal: np.n
                 pushed[g] += step * push(g, step[:, None] * normal[g])
         if not changed:
             break
+    if impulses is not None:
+        impulses[:] = [pushed, held]
     if friction <= 0.0:
         return rows
     groups = [g[pushed[g] > 0.0] for g in groups]

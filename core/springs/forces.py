@@ -167,3 +167,18 @@ class MassShared:
         f = np.zeros_like(f_out)
         self.force.apply(p, f)
         f_out += self.share[:, None] * f
+
+
+@dataclass(frozen=True)
+class ConstantForces:
+    """Forces (n, 3) [N] on the vertices, constant over a sub-step (self-collision's carried
+    contact forces): the potential -sum f . x, so the implicit step's energy check counts
+    their work as it counts gravity's."""
+
+    f: np.ndarray
+
+    def apply(self, p: ParticleView, f_out: np.ndarray) -> None:
+        f_out += self.f
+
+    def energy(self, x: np.ndarray) -> float:
+        return -float(np.vdot(self.f, x))

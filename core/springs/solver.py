@@ -24,7 +24,7 @@ from ..forces import AnchorSprings, DampedSprings, Gravity
 from ..integrators import make_integrator
 from ..transforms import TransformPath, inverse_affine, transform_points
 from ..world import SolverSettings, SolverSystem, World, WorldFrame, merged
-from .forces import AngularSprings, LinearDrag, MassShared
+from .forces import AngularSprings, ConstantForces, LinearDrag, MassShared
 from .implicit import BaraffWitkin
 from .inputs import SpringDrive, SpringFrameInputs
 from . import attach
@@ -223,9 +223,10 @@ class SpringMeshSolver:
         state = step.state
         grounded = np.unique(np.concatenate([c.index for c in touched]))
         before = state.x.copy()
+        self.itself.begin_substep()
         for _ in range(GROUND_ROUNDS):
             step.hits += self.itself.keep_apart(start, state.x, state.v, step.rest_speed,
-                                                grounded)
+                                                grounded, step.h)
             if not step.paths:
                 return
             pushed = state.x
@@ -288,12 +289,14 @@ class SpringMeshSolver:
         """Gravity, springs, bending, drag, virtual springs, wind on faces, force objects."""
         model, inputs = self.model, step.inputs
         virtual = self._virtual(step.state, inputs, t, step.h, s0, s1)
+        carried = self.itself.forces(model.vertex_count) if self.itself is not None else None
+        carried = [ConstantForces(carried)] if carried is not None else []
         return SubstepForces(
             all=[Gravity(tuple(step.g)), self.springs, self.bending, self.drag, *virtual,
                  *(FaceWind(model.triangles, w) for w in inputs.winds if len(model.triangles)),
-                 *(MassShared(f, self._mass_share) for f in inputs.fields)],
+                 *(MassShared(f, self._mass_share) for f in inputs.fields), *carried],
             stiff=[self.springs, self.bending, self.drag, *virtual],
-            potentials=[self.springs, self.bending], gravity=step.g)
+            potentials=[self.springs, self.bending, *carried], gravity=step.g)
 
     def _virtual(self, state: SpringMeshState, inputs: SpringFrameInputs, t0: float, h: float,
                  s0: float, s1: float) -> list:

@@ -153,6 +153,33 @@ def test_a_layer_landing_on_another_while_sliding_is_stopped_by_friction(frictio
         assert slide > 0.095
 
 
+def test_the_ground_carries_the_weight_of_a_layer_resting_on_another():
+    """A sheet lying flat on another on the ground, at rest. The implicit step holds the lower
+    layer on the ground; the upper one rests on it through self-collision, which acts after the
+    step. Its pairs' forces are carried into the next step, so the step sees the upper layer
+    held up and the lower one pressed down by it: the ground's impulses carry the weight of
+    both (at least 90 %: a carried force fades by CARRY_KEEP each sub-step and the passes make
+    up the rest). Without them they carried the lower layer's alone, half (the upper one sagged
+    into it every sub-step and was lifted back, and the floor's friction never felt it)."""
+    model, x0, _, tris = _two_layers(0.0, 0.0)
+    d = model.settings.self_distance
+    state = model.state()
+    n = len(x0) // 2
+    state.x[n:, 2] = d  # resting on the lower layer, which rests on the ground
+    solver = SpringMeshSolver(model, "IMPLICIT", 2, frame_dt=DT, frame=1)
+    g = 9.81
+    for frame in range(1, 25):
+        solver.advance(state, SpringFrameInputs(frame, frame * DT, DT, gravity=(0.0, 0.0, -g),
+                                                colliders=[GROUND]))
+    _, constraints, _, residual = solver.integrator.last_solve
+    ground = residual[constraints.pressed, 2].sum() / (DT / 2)  # [N] over the last sub-step
+    weight = model.vertex_mass.sum() * g
+    assert np.all(np.isin(constraints.pressed, np.arange(n)))  # the lower layer's
+    assert 0.9 * weight < ground < 1.02 * weight
+    assert np.abs(state.v).max() < 0.01  # at rest (a sub-step of gravity: 0.2 m/s)
+    assert _crossings(state.x, tris) == 0
+
+
 def test_a_layer_the_ground_lifts_does_not_come_up_through_the_layer_above():
     """A soft towel (36 x 36 vertices, 0.3 kg, bend stiffness 1e-3) dropped corner-down from
     0.1 m lies folded on the ground; ``data/towel_folds.npz`` holds its positions and
