@@ -36,6 +36,7 @@ import numpy as np
 
 from ..collision.crossing import (KeptPairs, KeptTests, box_pairs, element_boxes,
                                   segment_segment, triangle_point)
+from ..forces.springs import scatter_add
 from ..transforms import column_max, column_min, dot_rows, norm_rows, row_any
 from .contacts import Contacts
 from .pair_solve import PointPairs, respond, separate, shares
@@ -356,7 +357,7 @@ def _per_point(pairs: PointPairs, share: np.ndarray, surface: np.ndarray, count:
     index, first = np.unique(pairs.vertex[rows], return_index=True)
     pair = rows[0][first]
     summed = np.zeros((count, 3))
-    np.add.at(summed, pairs.vertex[rows], pairs.weight[rows][:, None] * pairs.normal[rows[0]])
+    scatter_add(summed, pairs.vertex[rows], pairs.weight[rows][:, None] * pairs.normal[rows[0]])
     normal = summed[index]
     length = norm_rows(normal)
     normal = np.where((length > 0.5)[:, None], normal / np.maximum(length, 1e-300)[:, None],

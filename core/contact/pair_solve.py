@@ -21,6 +21,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..colouring import colour
+from ..forces.springs import scatter_add
 from ..transforms import dot_rows, norm_rows
 
 PASSES = 16  # position passes at most
@@ -97,7 +98,7 @@ def _apply(x: np.ndarray, vertex: np.ndarray, delta: np.ndarray, relax: bool):
         count = np.bincount(vertex[moves], minlength=len(x))
         scale = 1.0 / np.maximum(np.where(moves, count[vertex], 0).max(axis=1), 1)
         delta = delta * scale[:, None, None]
-    np.add.at(x, vertex, delta)
+    scatter_add(x, vertex, delta)
     return scale
 
 

@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..forces.springs import scatter_add
 from ..transforms import cross, row_all, row_any, row_max, take
 from . import manifold_blocks as blocks
 from .contact_set import ContactSet, subset_width
@@ -189,8 +190,8 @@ def warm_start(vel: np.ndarray, cs: ContactSet, r: Rows) -> None:
     m = len(cs)
     d = np.einsum("ms,msj->mj", cs.impulse[..., 0], r.mn) + \
         np.einsum("mt,mtj->mj", cs.impulse[..., 1:].reshape(m, -1), r.mt)
-    np.add.at(vel, cs.ab[:, 0], d[:, :6])
-    np.add.at(vel, cs.ab[:, 1], d[:, 6:])
+    scatter_add(vel, cs.ab[:, 0], d[:, :6])
+    scatter_add(vel, cs.ab[:, 1], d[:, 6:])
 
 
 def solve(vel: np.ndarray, cs: ContactSet, r: Rows, sc: Scales) -> None:

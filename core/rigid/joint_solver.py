@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..forces.springs import scatter_add
 from ..transforms import cross
 from .joint_chains import ChainSolver, chains
 from .joints import CONE_TWIST, FRAME, HINGE, ROWS, SLIDER, SPRING_JOINT, JointModel
@@ -264,8 +265,8 @@ def warm_start(vel: np.ndarray, r: JointRows, impulse: np.ndarray) -> None:
 def _apply(vel: np.ndarray, r: JointRows, impulse: np.ndarray, rows: slice) -> None:
     """Add the velocity changes of impulses (J, R) along the rows ``rows`` to ``vel``."""
     d = np.einsum("jr,jri->ji", impulse, r.mj[:, rows])
-    np.add.at(vel, r.ab[:, 0], d[:, :6])
-    np.add.at(vel, r.ab[:, 1], d[:, 6:])
+    scatter_add(vel, r.ab[:, 0], d[:, :6])
+    scatter_add(vel, r.ab[:, 1], d[:, 6:])
 
 
 def solve(vel: np.ndarray, r: JointRows, impulse: np.ndarray, h: float, use_bias: bool) -> None:

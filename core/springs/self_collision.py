@@ -38,6 +38,7 @@ from ..collision.crossing import (KeptPairs, KeptTests, element_boxes, segment_s
                                   triangle_point)
 from ..contact.features import FaceSet
 from ..contact.pair_solve import PointPairs, respond, separate, shares
+from ..forces.springs import scatter_add
 from ..transforms import row_any
 
 ROUNDS = 8  # detections per sub-step
@@ -99,7 +100,7 @@ class SelfCollision:
             return None
         f = np.zeros((n, 3))
         per = c.normal_force[:, None] * c.normal + c.friction_force
-        np.add.at(f, c.vertex, c.weight[:, :, None] * per[:, None, :])
+        scatter_add(f, c.vertex, c.weight[:, :, None] * per[:, None, :])
         return f
 
     def keep_apart(self, x0: np.ndarray, x1: np.ndarray, v: np.ndarray, rest_speed: float,
