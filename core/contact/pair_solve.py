@@ -102,6 +102,13 @@ def _apply(x: np.ndarray, vertex: np.ndarray, delta: np.ndarray, relax: bool):
     return scale
 
 
+def within_cone(tangent: np.ndarray, bound: np.ndarray) -> np.ndarray:
+    """Friction impulses or forces (c, 3) scaled down, each to at most its ``bound`` (c,)
+    (mu times its normal one), in place; returned."""
+    tangent *= np.minimum(1.0, bound / np.maximum(norm_rows(tangent), 1e-300))[:, None]
+    return tangent
+
+
 def separate(pairs: PointPairs, x: np.ndarray, inv_mass: np.ndarray,
              coloured: bool | None = True) -> np.ndarray | None:
     """Restore the pairs' gaps in x (n, 3), in place (``coloured``: see :func:`_groups`).
@@ -188,9 +195,8 @@ def respond(pairs: PointPairs, v: np.ndarray, inv_mass: np.ndarray, normal: np.n
                 continue
             rel, vn = normal_speed(g)
             slide = rel - vn[:, None] * normal[g]
-            want = held[g] - slide / denom[g][:, None]  # the impulse that stops the slide,
-            size = norm_rows(want)  # within the cone
-            want *= np.minimum(1.0, friction * pushed[g] / np.maximum(size, 1e-300))[:, None]
+            # the impulse that stops the slide, within the cone
+            want = within_cone(held[g] - slide / denom[g][:, None], friction * pushed[g])
             delta = want - held[g]
             moved = norm_rows(delta) * denom[g] > still
             if moved.any():

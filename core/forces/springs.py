@@ -25,9 +25,11 @@ def flat_index(index: np.ndarray) -> np.ndarray:
 
 def scatter_add(out: np.ndarray, index: np.ndarray, values: np.ndarray,
                 flat: np.ndarray | None = None) -> None:
-    """out[index] += values for (m, 3) values, repeated indices summed: one flat bincount
-    when ``flat`` = flat_index(index) is given (precomputed by callers that scatter often),
-    else one per column (twice as fast as building it, eight times np.add.at)."""
+    """out[index] += values, repeated indices summed, for out (n, k) and values (m, k) (or
+    shaped as index, then k): one flat bincount when ``flat`` = flat_index(index) is given
+    (k = 3, precomputed by callers that scatter often), else one per column (twice as fast as
+    building it, eight times np.add.at). Shared by forces, contact pairs and the rigid
+    solvers' warm starts."""
     if flat is None:
         index = np.asarray(index).ravel()
         values = values.reshape(len(index), out.shape[1])

@@ -37,7 +37,7 @@ from ..collision.broadphase_grid import UniformGrid
 from ..collision.crossing import (KeptPairs, KeptTests, element_boxes, segment_segment,
                                   triangle_point)
 from ..contact.features import FaceSet
-from ..contact.pair_solve import PointPairs, respond, separate, shares
+from ..contact.pair_solve import PointPairs, respond, separate, shares, within_cone
 from ..forces.springs import scatter_add
 from ..transforms import row_any
 
@@ -149,7 +149,9 @@ class SelfCollision:
         last[inverse] = np.arange(len(keys))  # each pair's latest row: its geometry
         normal = pairs.normal[last]
         fn = np.bincount(inverse, pushed, m) / h
-        ft = np.stack([np.bincount(inverse, held[:, c], m) for c in range(3)], axis=1) / h
+        ft = np.zeros((m, 3))
+        scatter_add(ft, inverse, held)
+        ft /= h
         base, keep = self.carried, CARRY_KEEP if self._fresh else 1.0
         self._fresh = False
         if base is not None and len(base.key):
@@ -160,8 +162,7 @@ class SelfCollision:
             old -= np.einsum("ij,ij->i", old, normal)[:, None] * normal
             ft = ft + keep * old
         fn = np.maximum(fn, 0.0)
-        size = np.sqrt(np.einsum("ij,ij->i", ft, ft))
-        ft *= np.minimum(1.0, self.friction * fn / np.maximum(size, 1e-300))[:, None]
+        within_cone(ft, self.friction * fn)
         self.carried = Carried(unique, pairs.vertex[last], pairs.weight[last], normal, fn, ft)
 
     def fail_safe(self, x0, x1, v) -> None:
