@@ -38,12 +38,18 @@ from ..collision.crossing import (KeptPairs, KeptTests, element_boxes, segment_s
                                   triangle_point)
 from ..contact.features import FaceSet
 from ..contact.pair_solve import PointPairs, respond, separate, shares, within_cone
+from ..errors import SimulationError
 from ..forces.springs import scatter_add
 from ..transforms import row_any
 
 ROUNDS = 8  # detections per sub-step
 GROUNDED_SHARE = 0.01  # of the inverse mass a point touching a collider keeps here
 CARRY_KEEP = 0.9  # of a pair's carried force kept into the next sub-step (see Carried)
+# Candidate pairs per triangle (vertices) or per edge (edges) beyond which a detection is
+# refused: a heap of folds has up to about 15; a mesh whose faces sweep across each other in
+# one sub-step (a closed mesh pushed flat out of deep inside a collider: over 300) would take
+# minutes per sub-step to test, and its motion is no cloth's
+CROWD_LIMIT = 100
 
 
 class Carried(NamedTuple):
@@ -203,6 +209,7 @@ class SelfCollision:
         moved, = self._tests.begin((x0, x1))
         if len(tris):
             i, j = self._faces_points.pairs(self._margin, *element_boxes(lo, hi, tris), lo, hi)
+            self._not_crowded(len(i), len(tris), "triangle", x0, x1)
             keep = ~row_any(tris[i] == j[:, None])
             i, j = i[keep], j[keep]
             if len(i):
@@ -218,6 +225,7 @@ class SelfCollision:
                 depth.append(sep.gap[near])
         if len(edges):
             i, j = self._edges.pairs(self._margin, *element_boxes(lo, hi, edges))
+            self._not_crowded(len(i), len(edges), "edge", x0, x1)
             a, b = edges[i], edges[j]
             keep = ~row_any(np.stack([a[:, 0] == b[:, 0], a[:, 0] == b[:, 1], a[:, 1] == b[:, 0],
                                      a[:, 1] == b[:, 1]], axis=1))
@@ -241,6 +249,22 @@ class SelfCollision:
         normal = np.concatenate(normal)
         return PointPairs(np.concatenate(vertex), np.concatenate(weight), normal,
                           np.zeros_like(normal), np.concatenate(depth), d)
+
+
+    def _not_crowded(self, pairs: int, elements: int, what: str, x0: np.ndarray,
+                     x1: np.ndarray) -> None:
+        """A SimulationError (the caller names the mesh and frame) when the sub-step's boxes
+        put more than CROWD_LIMIT candidate pairs on each of the ``elements``."""
+        if pairs <= CROWD_LIMIT * elements:
+            return
+        move = float(np.sqrt(np.einsum("ij,ij->i", x1 - x0, x1 - x0).max()))
+        raise SimulationError(
+            f"self-collision found {pairs:,} candidate pairs for its {elements:,} {what}s in "
+            f"one sub-step (more than {CROWD_LIMIT} each): its vertices moved up to "
+            f"{move:.3g} m in the sub-step against a self-collision distance of "
+            f"{self.distance:g} m, so its faces swept across each other (as when a collider "
+            "pushes a mesh out from deep inside it) — start the mesh outside the colliders, "
+            "add substeps, or turn Self Collision off")
 
 
 def _pairs_within(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

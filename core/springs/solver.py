@@ -193,7 +193,12 @@ class SpringMeshSolver:
                 touched = [*touched, self._keep_off(step, start, x, v, s0, s1, outside)]
             state.x, state.v, step.hits = x, v, step.hits + collided
         if self.itself is not None:  # its own impulses: equal and opposite, none from outside
-            self._keep_apart(step, start, touched, s1)
+            try:
+                self._keep_apart(step, start, touched, s1)
+            except SimulationError as exc:  # (self-collision's own: it knows no name or frame)
+                if exc.obj is not None:
+                    raise
+                raise self._fail(exc.detail, inputs.frame, SimulationError) from exc
         if outside is not None:
             self._react(step, touched, outside, s1)
         self._check(state, inputs.frame)

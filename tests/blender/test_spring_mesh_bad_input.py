@@ -429,3 +429,27 @@ def test_mesh_without_faces_bakes_edge_springs_only(physanim_ext, tmp_path, bend
     context.object = _cloth("Sheet")
     panels.PHYSANIM_PT_spring_mesh.draw(type("Panel", (), {"layout": LabelRecorder(labels)})(), context)
     assert not any("No faces" in t for t in labels), labels
+
+
+# ------------------------------------------------------------------- self-collision overload
+
+def test_a_self_colliding_mesh_pushed_out_from_deep_inside_a_collider_fails_at_once(
+        physanim_ext, tmp_path):
+    """Fuzz seed 492: Suzanne with Self Collision, an Empty collider (a half-space) added above
+    her. Her vertices are pushed up onto its plane in the first sub-step, her faces sweeping
+    across each other; self-collision tested 476,362 edge pairs per detection and the bake ran
+    for minutes per frame. It now fails in the first step with an error naming her, the frame
+    and the motion, and her previous bake is kept."""
+    _scene()
+    ob = _object("Suzanne", lambda bm: bmesh.ops.create_monkey(bm), pin_top=False)
+    ob.physanim.spring_mesh.self_collision = True
+    _save(tmp_path)
+    baked = _bake_first(physanim_ext, ob)
+    ceiling = bpy.data.objects.new("Ceiling", None)
+    bpy.context.scene.collection.objects.link(ceiling)
+    ceiling.location = (0.0, 0.0, 1.0)
+    ceiling.physanim.collider.enabled = True
+    _bake_fails('spring mesh "Suzanne"', f"frame {FRAME_START + 1}:",  # (its first step)
+                "self-collision found",
+                "candidate pairs", "start the mesh outside the colliders")
+    baked.assert_intact()
