@@ -38,13 +38,13 @@ import numpy as np
 from ..errors import PhysanimError
 from .broadphase_base import (PAIR_CHUNK, BroadPhase, BroadPhaseStats, canonical_pairs,
                               check_boxes)
-from .broadphase_grid import GridStats, UniformGrid
+from .broadphase_grid import GridStats, TooManyCandidates, UniformGrid
 from .broadphase_octree import MAX_OCTREE_DEPTH, Octree, OctreeStats
 from .broadphase_sap import SweepAndPrune, SweepStats, count_inversions
 
 __all__ = [
     "AllPairs", "BroadPhase", "BroadPhaseStats", "GridStats", "MAX_OCTREE_DEPTH", "Octree",
-    "OctreeStats", "PAIR_CHUNK", "SweepAndPrune", "SweepStats", "UniformGrid",
+    "OctreeStats", "PAIR_CHUNK", "SweepAndPrune", "SweepStats", "TooManyCandidates", "UniformGrid",
     "aabb_of_oriented_boxes", "aabb_of_points", "canonical_pairs", "check_boxes",
     "count_inversions", "cube_boxes",
 ]

@@ -60,10 +60,16 @@ class UniformGrid(BroadPhase):
             mean over boxes of their longest side, each call.
         max_cells_per_box: boxes covering more cells than this are tested against all boxes
             rather than entered cell by cell.
+        max_candidates: the candidate pairs a call may test at most (None: any number); a
+            call that would test more raises :class:`TooManyCandidates` before testing any —
+            boxes piled on one spot make n^2 / 2 of them, more than memory holds for a few
+            hundred thousand boxes.
     """
 
-    def __init__(self, cell_size: float | None = None, max_cells_per_box: int = 64):
+    def __init__(self, cell_size: float | None = None, max_cells_per_box: int = 64,
+                 max_candidates: int | None = None):
         super().__init__()
+        self.max_candidates = max_candidates
         if cell_size is not None and not (np.isfinite(cell_size) and cell_size > 0):
             raise PhysanimError(f"grid cell_size must be finite and > 0 (got {cell_size!r})")
         if int(max_cells_per_box) != max_cells_per_box or max_cells_per_box < 1:
@@ -81,11 +87,14 @@ class UniformGrid(BroadPhase):
         extent = cell_hi - cell_lo + 1
         large = extent.prod(axis=1, dtype=np.float64) > self.max_cells_per_box
         lo_t, hi_t = transposed(lo, hi)
-        found, candidates = _large_box_pairs(lo_t, hi_t, large)
+        n_large = int(large.sum())
         box, cell = _entries(np.flatnonzero(~large), cell_lo, extent)
         key, hashed = _keys(cell, dims=column_max(cell_hi) + 1)
         box, cell, count, cells = _by_cell(box, cell, key)
-        candidates += int(count.sum())
+        candidates = n_large * n - n_large * (n_large + 1) // 2 + int(count.sum())
+        if self.max_candidates is not None and candidates > self.max_candidates:
+            raise TooManyCandidates(candidates, n, self.max_candidates)
+        found, _ = _large_box_pairs(lo_t, hi_t, large)
         found += _cell_pairs(lo_t, hi_t, np.ascontiguousarray(cell_lo.T), box, cell, count,
                              hashed)
         i, j = concat_pairs(found)
@@ -95,6 +104,17 @@ class UniformGrid(BroadPhase):
     def __repr__(self) -> str:
         return (f"UniformGrid(cell_size={self.cell_size!r}, "
                 f"max_cells_per_box={self.max_cells_per_box})")
+
+
+class TooManyCandidates(PhysanimError):
+    """A grid call would test more candidate pairs than its ``max_candidates``.
+
+    Attributes: candidates, boxes, limit."""
+
+    def __init__(self, candidates: int, boxes: int, limit: int):
+        self.candidates, self.boxes, self.limit = candidates, boxes, limit
+        super().__init__(f"{candidates:,} candidate pairs among {boxes:,} boxes (at most "
+                         f"{limit:,} allowed)")
 
 
 def _auto_cell_size(lo: np.ndarray, hi: np.ndarray) -> float:

@@ -312,6 +312,27 @@ def test_grid_large_boxes_take_the_all_pairs_pass():
     assert grid.last_stats.large_box_count > 0
 
 
+def test_grid_refuses_more_candidates_than_allowed_before_testing_any():
+    """``max_candidates``: a call that would test more candidate pairs (cells and the large
+    boxes' pass, counted as the stats count them) raises before testing; at the limit it runs."""
+    rng = np.random.default_rng(15)
+    lo, hi = random_scene(rng, 300, 4)
+    free = bp.UniformGrid(0.5, max_cells_per_box=8)
+    expected = free.pairs(lo, hi)
+    count = free.last_stats.candidate_count
+    assert free.last_stats.large_box_count > 0
+    assert np.array_equal(bp.UniformGrid(0.5, 8, max_candidates=count).pairs(lo, hi), expected)
+    with pytest.raises(bp.TooManyCandidates) as caught:
+        bp.UniformGrid(0.5, 8, max_candidates=count - 1).pairs(lo, hi)
+    assert (caught.value.candidates, caught.value.boxes, caught.value.limit) == (
+        count, 300, count - 1)
+    # boxes piled on one spot: n (n - 1) / 2 candidates, refused without making them
+    pile = np.zeros((200_000, 3))
+    with pytest.raises(bp.TooManyCandidates, match="19,999,900,000 candidate pairs among "
+                                                   "200,000 boxes"):
+        bp.UniformGrid(1.0, max_candidates=10**6).pairs(pile, pile + 0.1)
+
+
 # --- stats -----------------------------------------------------------------------------------
 
 def test_stats_count_candidates():

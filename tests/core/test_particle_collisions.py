@@ -131,6 +131,26 @@ def test_bad_settings_name_the_force(kwargs):
         ParticleCollisions("Sand", **kwargs)
 
 
+def test_particles_piled_on_one_spot_fail_naming_the_force_instead_of_filling_memory():
+    """Fuzz seed 589: an emitter at a million particles a second from one point piled 540,000
+    on each other in its pre-roll; every pair overlapped, and the pairs filled 15 GB. A sub-step
+    whose search would test more than CROWD candidate pairs per particle now fails at once,
+    naming the force; the same particles spread out collide."""
+    model = particle_model(EmitterSettings("Spout"))
+    state = model.state()
+    n = 5000
+    place(state, np.zeros((n, 3)), np.zeros((n, 3)))
+    state.particle_size[:] = 0.1
+    with pytest.raises(ValueError, match='force "Pile" at frame 0: particle collisions would '
+                                         'test [0-9,]+ candidate pairs among 5,000 particles'
+                                         '.*piled on top of each other'):
+        _run(model, state, [ParticleCollisions("Pile")], 1)
+    state = model.state()
+    place(state, np.random.default_rng(0).uniform(-10.0, 10.0, (n, 3)), np.zeros((n, 3)))
+    state.particle_size[:] = 0.1
+    _run(model, state, [ParticleCollisions("Pile")], 1)
+
+
 def test_a_warm_start_without_friction_impulses_still_resumes():
     """A checkpoint written before friction impulses were kept holds (keys, normal impulses)
     only: the next sub-step starts from those, with no friction, and does not fail."""
