@@ -24,7 +24,8 @@ import numpy as np
 
 from ..transforms import column_max, cross, dot_rows, norm_rows, row_any, row_max
 from .broadphase_base import keep_overlapping, transposed
-from .broadphase_grid import UniformGrid, _auto_cell_size, _cell_ranges, _entries, _keys
+from .broadphase_grid import (TooManyCandidates, UniformGrid, _auto_cell_size, _cell_ranges,
+                              _entries, _keys)
 from .distance import closest_on_triangles
 
 PARALLEL = 1e-3  # sin of the angle below which two segments have no reliable common normal
@@ -233,10 +234,13 @@ def segment_segment(a0, b0, c0, d0, a1, b1, c1, d1) -> Separation:
 
 
 def box_pairs(lo_a: np.ndarray, hi_a: np.ndarray, lo_b: np.ndarray,
-              hi_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+              hi_b: np.ndarray, max_candidates: int | None = None
+              ) -> tuple[np.ndarray, np.ndarray]:
     """Every overlapping (closed) pair of a box of A (n, 3) and a box of B (m, 3): indices
     (i into A, j into B), sorted by i. Few pairs to try (n m <= BRUTE_FORCE): all of them;
-    else a uniform grid of B's boxes looked up by A's (:func:`_across_cells`)."""
+    else a uniform grid of B's boxes looked up by A's (:func:`_across_cells`), which raises
+    :class:`~.broadphase_grid.TooManyCandidates` before making more than ``max_candidates``
+    candidate pairs (None: any number)."""
     if not len(lo_a) or not len(lo_b):
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
     if len(lo_a) * len(lo_b) <= BRUTE_FORCE:
@@ -246,7 +250,7 @@ def box_pairs(lo_a: np.ndarray, hi_a: np.ndarray, lo_b: np.ndarray,
     lo, hi = np.concatenate([lo_a, lo_b]), np.concatenate([hi_a, hi_b])
     cell_lo, cell_hi = _cell_ranges(lo, hi, _auto_cell_size(lo, hi))
     return _across_cells(lo, hi, len(lo_a), cell_lo, cell_hi - cell_lo + 1,
-                         column_max(cell_hi) + 1)
+                         column_max(cell_hi) + 1, max_candidates)
 
 
 def element_boxes(low: np.ndarray, high: np.ndarray, ids: np.ndarray
@@ -395,7 +399,8 @@ class KeptTests:
         return out
 
 
-def _across_cells(lo, hi, count_a: int, cell_lo, extent, dims) -> tuple[np.ndarray, np.ndarray]:
+def _across_cells(lo, hi, count_a: int, cell_lo, extent, dims,
+                  max_candidates: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Box pairs across the sets A (the first ``count_a`` boxes of lo, hi) and B (the rest)
     through one uniform grid of B's boxes, looked up by A's: no pair within a set is ever
     formed (a cloth's neighbouring triangles all overlap). Each pair is kept from one cell,
@@ -410,6 +415,12 @@ def _across_cells(lo, hi, count_a: int, cell_lo, extent, dims) -> tuple[np.ndarr
     key_b, box_b, cell_b = key_b[order], box_b[order], cell_b[:, order]
     first = np.searchsorted(key_b, key_a, side="left")
     count = np.searchsorted(key_b, key_a, side="right") - first
+    if max_candidates is not None:
+        big = int(large[:count_a].sum()), int(large[count_a:].sum())
+        candidates = int(count.sum()) + big[0] * (len(lo) - count_a) + \
+            (count_a - big[0]) * big[1]
+        if candidates > max_candidates:
+            raise TooManyCandidates(candidates, len(lo), max_candidates)
     entry = np.repeat(np.arange(len(key_a)), count)
     at = np.repeat(first - np.cumsum(count) + count, count) + np.arange(int(count.sum()))
     i, j = box_a[entry], box_b[at]

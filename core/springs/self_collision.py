@@ -29,12 +29,13 @@ Per sub-step, after the step and the colliders (positions x0 -> x1):
 """
 from __future__ import annotations
 
+from functools import partial
 from typing import NamedTuple
 
 import numpy as np
 
-from ..collision.broadphase_grid import UniformGrid
-from ..collision.crossing import (KeptPairs, KeptTests, element_boxes, segment_segment,
+from ..collision.broadphase_grid import TooManyCandidates, UniformGrid
+from ..collision.crossing import (KeptPairs, KeptTests, box_pairs, element_boxes, segment_segment,
                                   triangle_point)
 from ..contact.features import FaceSet
 from ..contact.pair_solve import PointPairs, respond, separate, shares, within_cone
@@ -50,6 +51,8 @@ CARRY_KEEP = 0.9  # of a pair's carried force kept into the next sub-step (see C
 # one sub-step (a closed mesh pushed flat out of deep inside a collider: over 300) would take
 # minutes per sub-step to test, and its motion is no cloth's
 CROWD_LIMIT = 100
+SEARCH_LIMIT = 10  # x CROWD_LIMIT: the candidate pairs per element a search may make before
+# testing their boxes (a refused search fails the same way, before filling memory)
 
 
 class Carried(NamedTuple):
@@ -86,8 +89,11 @@ class SelfCollision:
         self.distance = float(distance)
         self.friction = float(friction)
         # the candidate pairs, kept between detections (the same pairs as a fresh search)
-        self._faces_points = KeptPairs()
-        self._edges = KeptPairs(_pairs_within, within=True)
+        limit = SEARCH_LIMIT * CROWD_LIMIT
+        self._faces_points = KeptPairs(partial(box_pairs,
+                                               max_candidates=limit * len(faces.triangles)))
+        self._edges = KeptPairs(partial(_pairs_within, max_candidates=limit * len(faces.edges)),
+                                within=True)
         self._tests = KeptTests()  # and their tests, for the pairs whose points did not move
         self._margin: float | None = None
         self.carried: Carried | None = None
@@ -208,7 +214,11 @@ class SelfCollision:
         vertex, weight, normal, depth = [], [], [], []
         moved, = self._tests.begin((x0, x1))
         if len(tris):
-            i, j = self._faces_points.pairs(self._margin, *element_boxes(lo, hi, tris), lo, hi)
+            try:
+                i, j = self._faces_points.pairs(self._margin, *element_boxes(lo, hi, tris),
+                                                lo, hi)
+            except TooManyCandidates as exc:
+                self._not_crowded(exc.candidates, len(tris), "triangle", x0, x1)
             self._not_crowded(len(i), len(tris), "triangle", x0, x1)
             keep = ~row_any(tris[i] == j[:, None])
             i, j = i[keep], j[keep]
@@ -224,7 +234,10 @@ class SelfCollision:
                 normal.append(sep.normal[near])
                 depth.append(sep.gap[near])
         if len(edges):
-            i, j = self._edges.pairs(self._margin, *element_boxes(lo, hi, edges))
+            try:
+                i, j = self._edges.pairs(self._margin, *element_boxes(lo, hi, edges))
+            except TooManyCandidates as exc:
+                self._not_crowded(exc.candidates, len(edges), "edge", x0, x1)
             self._not_crowded(len(i), len(edges), "edge", x0, x1)
             a, b = edges[i], edges[j]
             keep = ~row_any(np.stack([a[:, 0] == b[:, 0], a[:, 0] == b[:, 1], a[:, 1] == b[:, 0],
@@ -267,9 +280,10 @@ class SelfCollision:
             "add substeps, or turn Self Collision off")
 
 
-def _pairs_within(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _pairs_within(lo: np.ndarray, hi: np.ndarray, max_candidates: int | None = None
+                  ) -> tuple[np.ndarray, np.ndarray]:
     """Every overlapping pair (i < j) of the boxes (k, 3), sorted by i then j: the library's
     uniform grid over one set (each pair found once; a grid across two copies of the set
     finds each twice and every box with itself, and took 4 x as long), which gives them so."""
-    i, j = np.ascontiguousarray(UniformGrid().pairs(lo, hi).T)
+    i, j = np.ascontiguousarray(UniformGrid(max_candidates=max_candidates).pairs(lo, hi).T)
     return i, j

@@ -209,6 +209,27 @@ def test_box_pairs_across_two_sets_are_every_overlapping_pair(case):
     assert np.array_equal(i, expected_i) and np.array_equal(j, expected_j)
 
 
+def test_box_pairs_refuse_more_candidates_than_allowed_before_making_them():
+    """``max_candidates``: the grid's candidates (boxes sharing a cell, and the large boxes'
+    pass against the whole other set) are counted before any is made."""
+    from physanim.core.collision.broadphase import TooManyCandidates
+    pile = np.zeros((400, 3))
+    i, j = box_pairs(pile, pile + 0.1, pile, pile + 0.1, max_candidates=160_000)
+    assert len(i) == 160_000  # all in one cell: every pair overlaps
+    with pytest.raises(TooManyCandidates) as caught:
+        box_pairs(pile, pile + 0.1, pile, pile + 0.1, max_candidates=159_999)
+    assert (caught.value.candidates, caught.value.boxes) == (160_000, 800)
+    # no shared cell: only the 3 large boxes of B, each tried against all 1,000 of A
+    rng = np.random.default_rng(3)
+    a, b = rng.uniform(0.0, 10.0, (1000, 3)), rng.uniform(100.0, 110.0, (100, 3))
+    lo_b, hi_b = b.copy(), b + 0.01
+    lo_b[:3], hi_b[:3] = -5.0, (15.0, 15.0, 15.0)
+    i, j = box_pairs(a, a + 0.01, lo_b, hi_b, max_candidates=3000)
+    assert len(i) == 3000 and set(j.tolist()) == {0, 1, 2}
+    with pytest.raises(TooManyCandidates, match="3,000 candidate pairs"):
+        box_pairs(a, a + 0.01, lo_b, hi_b, max_candidates=2999)
+
+
 @pytest.mark.parametrize("within", [False, True])
 def test_kept_pairs_equal_a_fresh_search_as_the_boxes_move(within):
     # KeptPairs gives exactly box_pairs's pairs (or, within one set, the grid's), in its

@@ -14,6 +14,7 @@ from physanim.core.collision.distance import closest_on_triangles
 from physanim.core.collision.mesh import TriangleMesh
 from physanim.core.collision.queries import collide
 from physanim.core.contact import ColliderFrame
+from physanim.core.errors import SimulationError
 from physanim.core.springs import (SpringFrameInputs, SpringMeshBuilder, SpringMeshSettings,
                                    SpringMeshSolver)
 from physanim.tests.core.helpers import grid
@@ -202,3 +203,19 @@ def test_a_layer_the_ground_lifts_does_not_come_up_through_the_layer_above():
         solver.advance(state, SpringFrameInputs(frame, frame * DT, DT, gravity=(0.0, 0.0, -9.81),
                                                 colliders=[GROUND_DEFAULT]))
         assert _crossings(state.x, tris) == 0, frame
+
+
+def test_faces_sweeping_across_each_other_are_refused_before_the_search_fills_memory():
+    """A 1 m sheet of 40 x 40 vertices crushed towards one point within a sub-step: every
+    triangle's sweep meets every vertex's. The search itself refuses it, with a SimulationError
+    giving the counts and the motion, before making its millions of candidate pairs (a search
+    under its limit that finds over 100 pairs per element is refused the same way: Suzanne
+    pushed out of a collider, tests/blender/test_spring_mesh_bad_input.py)."""
+    model, _ = _sheet_on_edge(40, self_collision=True)
+    solver = SpringMeshSolver(model, "IMPLICIT", 1, frame_dt=DT, frame=1)
+    x0 = model.state().x
+    x1 = x0.mean(axis=0) + 1e-3 * (x0 - x0.mean(axis=0))
+    with pytest.raises(SimulationError, match=r"self-collision found [0-9,]+ candidate pairs "
+                                              r"for its 3,042 triangles in one sub-step \(more "
+                                              r"than 100 each\): its vertices moved up to 0\.70"):
+        solver.itself.keep_apart(x0, x1.copy(), np.zeros_like(x1), 0.1)
