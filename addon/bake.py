@@ -465,8 +465,8 @@ class BakeJob(Resumable, Failures):
 
 def run(context, only: set[str] | None = None, on_frame=None,
         resume: bool = False) -> tuple[str, str | None]:
-    """Bake synchronously. ``on_frame(job)`` is called after each frame (progress, logging);
-    ``resume``: go on from the scene's checkpoint (see :class:`BakeJob`).
+    """Bake synchronously. ``on_frame(job)`` is called once for each frame reached (progress,
+    logging); ``resume``: go on from the scene's checkpoint (see :class:`BakeJob`).
 
     Returns the summary line and the failure report of systems that failed while others baked
     (None when none failed); raises PhysanimError/OSError/ValueError after aborting, leaving
@@ -474,14 +474,17 @@ def run(context, only: set[str] | None = None, on_frame=None,
     baked so far for a later resume.
     """
     job = BakeJob(context, only, resume)
+    reported = []
+
+    def report() -> None:  # once per frame shown (slowed down, several steps end in one)
+        if on_frame is not None and reported[-1:] != [job.frame]:
+            reported.append(job.frame)
+            on_frame(job)
     try:
-        if on_frame is not None:
-            on_frame(job)
+        report()
         while not job.step(context):
-            if on_frame is not None:
-                on_frame(job)
-        if on_frame is not None:
-            on_frame(job)
+            report()
+        report()
         info = job.finish(context)
         return info, job.failure_report(info)
     except KeyboardInterrupt:

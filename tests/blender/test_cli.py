@@ -3,6 +3,7 @@ directly, as Blender's ``-c`` would, and returns the exit code."""
 from __future__ import annotations
 
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -79,6 +80,21 @@ def test_bake_frames_and_save(cli, tmp_path, capsys):
     scene.frame_set(6)
     shown = result_points(res)
     assert len(shown["position"]) > 0 and len(shown["id"]) == len(shown["position"])
+
+
+@pytest.mark.parametrize("scale", [0.5, 1.0, 2.0, 3.0])
+def test_each_frame_is_logged_once_at_any_time_scale(cli, tmp_path, capsys, scale):
+    """At double speed a simulation frame can end between two scene frames; its step showed no
+    new frame and the log repeated the last one."""
+    path = _shot(tmp_path)
+    scene = _open(path)
+    scene.physanim.time_scale = scale
+    bpy.ops.wm.save_mainfile()
+    capsys.readouterr()
+    assert cli.main(["bake", str(path), "--frames", "1-10"]) == 0
+    logged = [int(n) for n in re.findall(r"^physanim: frame (-?[0-9]+):",
+                                          capsys.readouterr().out, re.MULTILINE)]
+    assert logged == sorted(set(logged)) and logged[0] == 1 and logged[-1] == 10, logged
 
 
 def test_bake_without_save_leaves_the_file(cli, tmp_path):
