@@ -40,9 +40,9 @@ def _sheet_on_edge(n: int = 15, **settings):
     return model, tris
 
 
-def _drop(model, frames: int, colliders=(), gravity=(0.0, 0.0, -9.81)):
+def _drop(model, frames: int, colliders=(), gravity=(0.0, 0.0, -9.81), start=None):
     solver = SpringMeshSolver(model, "IMPLICIT", 2, frame_dt=DT, frame=1)
-    state = model.state()
+    state = model.state() if start is None else start
     for frame in range(1, frames + 1):
         solver.advance(state, SpringFrameInputs(frame, frame * DT, DT, gravity=gravity,
                                                 colliders=list(colliders)))
@@ -71,11 +71,18 @@ def test_a_sheet_dropped_on_edge_folds_onto_itself_without_ever_crossing(on):
     assert max(tops[24:]) > 2 * model.settings.self_distance
 
 
-def test_layers_keep_their_distance():
+@pytest.mark.parametrize("jitter", [0, 2, 5])
+def test_layers_keep_their_distance(jitter):
     """In the heap, a vertex stays at least half the distance off any triangle it is not a
-    corner of (the passes restore the distance to 5 %; the ground holds its layer back)."""
+    corner of (the passes restore the distance to 5 %; the ground holds its layer back) —
+    however the heap falls: the start moved by 1e-12 m (``jitter``: a seed) changes which
+    layers meet where. (With jitters 2 and 5 the ground's last lift in a sub-step used to
+    leave a vertex at 47 % and 40 % of the distance; 79-87 % over six starts now.)"""
     model, tris = _sheet_on_edge(self_collision=True, self_distance=0.02)
-    for frame, state in enumerate(_drop(model, 36, [GROUND]), start=1):
+    start = model.state()
+    if jitter:
+        start.x += np.random.default_rng(jitter).normal(0.0, 1e-12, start.x.shape)
+    for frame, state in enumerate(_drop(model, 36, [GROUND], start=start), start=1):
         if frame < 20:
             continue
         x = state.x
