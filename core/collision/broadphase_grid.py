@@ -91,10 +91,11 @@ class UniformGrid(BroadPhase):
         box, cell = _entries(np.flatnonzero(~large), cell_lo, extent)
         key, hashed = _keys(cell, dims=column_max(cell_hi) + 1)
         box, cell, count, cells = _by_cell(box, cell, key)
+        # each large box against every later box of [large..., small...]
         candidates = n_large * n - n_large * (n_large + 1) // 2 + int(count.sum())
         if self.max_candidates is not None and candidates > self.max_candidates:
             raise TooManyCandidates(candidates, n, self.max_candidates)
-        found, _ = _large_box_pairs(lo_t, hi_t, large)
+        found = _large_box_pairs(lo_t, hi_t, large)
         found += _cell_pairs(lo_t, hi_t, np.ascontiguousarray(cell_lo.T), box, cell, count,
                              hashed)
         i, j = concat_pairs(found)
@@ -200,11 +201,11 @@ def _keys(cell, dims):
 def _large_box_pairs(lo_t, hi_t, large):
     """Pairs involving the large boxes: each against every later box of [large..., small...]."""
     if not large.any():
-        return [], 0
+        return []
     order = np.concatenate([np.flatnonzero(large), np.flatnonzero(~large)])
     n_large, n = int(large.sum()), len(order)
     count = n - np.arange(1, n_large + 1)
     found = []
     for r, offset in iter_ranges(count):
         found.append(keep_overlapping(lo_t, hi_t, order[r], order[r + 1 + offset]))
-    return found, int(count.sum())
+    return found

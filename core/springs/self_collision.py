@@ -220,12 +220,8 @@ class SelfCollision:
         vertex, weight, normal, depth = [], [], [], []
         moved, = self._tests.begin((x0, x1))
         if len(tris):
-            try:
-                i, j = self._faces_points.pairs(self._margin, *element_boxes(lo, hi, tris),
-                                                lo, hi)
-            except TooManyCandidates as exc:
-                self._not_crowded(exc.candidates, len(tris), "triangle", x0, x1)
-            self._not_crowded(len(i), len(tris), "triangle", x0, x1)
+            i, j = self._search(self._faces_points, "triangle", x0, x1,
+                                *element_boxes(lo, hi, tris), lo, hi)
             keep = ~row_any(tris[i] == j[:, None])
             i, j = i[keep], j[keep]
             if len(i):
@@ -240,11 +236,7 @@ class SelfCollision:
                 normal.append(sep.normal[near])
                 depth.append(sep.gap[near])
         if len(edges):
-            try:
-                i, j = self._edges.pairs(self._margin, *element_boxes(lo, hi, edges))
-            except TooManyCandidates as exc:
-                self._not_crowded(exc.candidates, len(edges), "edge", x0, x1)
-            self._not_crowded(len(i), len(edges), "edge", x0, x1)
+            i, j = self._search(self._edges, "edge", x0, x1, *element_boxes(lo, hi, edges))
             a, b = edges[i], edges[j]
             keep = ~row_any(np.stack([a[:, 0] == b[:, 0], a[:, 0] == b[:, 1], a[:, 1] == b[:, 0],
                                      a[:, 1] == b[:, 1]], axis=1))
@@ -269,6 +261,17 @@ class SelfCollision:
         return PointPairs(np.concatenate(vertex), np.concatenate(weight), normal,
                           np.zeros_like(normal), np.concatenate(depth), d)
 
+
+    def _search(self, kept: KeptPairs, what: str, x0: np.ndarray, x1: np.ndarray, lo, hi,
+                *other) -> tuple[np.ndarray, np.ndarray]:
+        """The candidate pairs of the ``what`` boxes ``lo``, ``hi`` (against ``other``'s, or
+        among themselves), refused when crowded (:meth:`_not_crowded`)."""
+        try:
+            i, j = kept.pairs(self._margin, lo, hi, *other)
+        except TooManyCandidates as exc:
+            self._not_crowded(exc.candidates, len(lo), what, x0, x1)
+        self._not_crowded(len(i), len(lo), what, x0, x1)
+        return i, j
 
     def _not_crowded(self, pairs: int, elements: int, what: str, x0: np.ndarray,
                      x1: np.ndarray) -> None:

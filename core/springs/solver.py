@@ -230,7 +230,11 @@ class SpringMeshSolver:
         grounded = np.unique(np.concatenate([c.index for c in touched]))
         before = state.x.copy()
         self.itself.begin_substep()
-        for _ in range(GROUND_ROUNDS):
+        # one round more than GROUND_ROUNDS: the last lift may have brought a layer near the
+        # one above, so they are parted once more, the lifted points hardly moving (a vertex
+        # was left at 40 % of the distance), and the colliders stop what that drove at them
+        # (a layer was left 2 cm under the ground)
+        for round_ in range(GROUND_ROUNDS + 1):
             step.hits += self.itself.keep_apart(start, state.x, state.v, step.rest_speed,
                                                 grounded, step.h)
             if not step.paths:
@@ -239,18 +243,12 @@ class SpringMeshSolver:
             x, v, count, _ = respond(step.paths, before, pushed, state.v, state.v, s1, s1,
                                      step.h, step.rest_speed)
             state.x, state.v, step.hits = x, v, step.hits + count
+            if round_ == GROUND_ROUNDS:
+                break
             lift = np.linalg.norm(x - pushed, axis=1)
             if lift.max(initial=0.0) < LIFT_SHARE * self.itself.distance:
                 return  # too little to carry a layer through another kept a distance off
             grounded = np.union1d(grounded, np.flatnonzero(lift > 0.0))
-        # the last lift may have brought a layer near the one above: part them once more,
-        # the lifted points hardly moving (a vertex was left at 40 % of the distance), and let
-        # the colliders stop what that drove at them (a layer was left 2 cm under the ground)
-        step.hits += self.itself.keep_apart(start, state.x, state.v, step.rest_speed, grounded,
-                                            step.h)
-        x, v, count, _ = respond(step.paths, before, state.x, state.v, state.v, s1, s1, step.h,
-                                 step.rest_speed)
-        state.x, state.v, step.hits = x, v, step.hits + count
         self.itself.fail_safe(start, state.x, state.v)
 
     def _react(self, step: _FrameStep, touched: list, outside: np.ndarray, s1: float) -> None:
