@@ -116,24 +116,35 @@ class SelfCollision:
         return f
 
     def keep_apart(self, x0: np.ndarray, x1: np.ndarray, v: np.ndarray, rest_speed: float,
-                   grounded: np.ndarray | None = None, h: float | None = None) -> int:
+                   grounded: np.ndarray | None = None, h: float | None = None,
+                   lifted: np.ndarray | None = None) -> int:
         """Sub-step x0 -> x1 (n, 3) [m], velocities v (n, 3) [m/s]; x1 and v in place.
         ``grounded``: (k,) points touching a collider this sub-step, which the mesh's own
         pushes move GROUNDED_SHARE as far as the others (a layer on the ground is hardly
         pushed into it: the one on top moves; two layers meeting on it still part). Every
-        pair sees the same inverse masses, which keeps the passes convergent. Returns the
-        pairs handled."""
+        pair sees the same inverse masses, which keeps the passes convergent. ``lifted``:
+        (l,) points among them that a collider lifted back after an earlier pass of this
+        sub-step; the separating passes move them GROUNDED_SHARE as far again (the velocity
+        response and the carried forces do not: its impulses stay those of the masses the
+        solve knows). Where a layer has crumpled flat on the ground, a vertex lying on a
+        triangle of its own layer, both grounded, was pushed half into the ground and lifted
+        back every round, and was left at a seventh of the distance. Returns the pairs
+        handled."""
         inv_mass = self.inv_mass
         if grounded is not None and len(grounded):
             inv_mass = inv_mass.copy()
             inv_mass[grounded] *= GROUNDED_SHARE
+        moves = inv_mass
+        if lifted is not None and len(lifted):
+            moves = inv_mass.copy()
+            moves[lifted] *= GROUNDED_SHARE
         found, keys, settled = [], [], True
         for _ in range(ROUNDS):
             pairs = self._detect(x0, x1, keys)
             if pairs is None:
                 break
             found.append(pairs)
-            if separate(pairs, x1, inv_mass, coloured=None) is None:
+            if separate(pairs, x1, moves, coloured=None) is None:
                 break
         else:
             settled = False

@@ -220,7 +220,8 @@ class SpringMeshSolver:
         beneath). A layer pushed down onto the ground under another one, and lifted back
         by it, could come up through the other: when a collider moved points by a quarter of
         the distance or more, the points it moved count as on it (they hardly move in the
-        mesh's own pushes) and the mesh is kept off itself again, up to GROUND_ROUNDS
+        mesh's own pushes; those already on it move a hundredth as far again in the
+        separating passes) and the mesh is kept off itself again, up to GROUND_ROUNDS
         times. If the colliders' last lift was still that large, the mesh is kept off itself
         once more (the lifted points hardly moving: they press the colliders by a hundredth of
         a push at most), and the points of any pair still crossed go back to where they started
@@ -234,9 +235,10 @@ class SpringMeshSolver:
         # one above, so they are parted once more, the lifted points hardly moving (a vertex
         # was left at 40 % of the distance), and the colliders stop what that drove at them
         # (a layer was left 2 cm under the ground)
+        lifted = np.zeros(0, np.int64)
         for round_ in range(GROUND_ROUNDS + 1):
             step.hits += self.itself.keep_apart(start, state.x, state.v, step.rest_speed,
-                                                grounded, step.h)
+                                                grounded, step.h, lifted)
             if not step.paths:
                 return
             pushed = state.x
@@ -248,7 +250,8 @@ class SpringMeshSolver:
             lift = np.linalg.norm(x - pushed, axis=1)
             if lift.max(initial=0.0) < LIFT_SHARE * self.itself.distance:
                 return  # too little to carry a layer through another kept a distance off
-            grounded = np.union1d(grounded, np.flatnonzero(lift > 0.0))
+            lifted = np.union1d(lifted, np.flatnonzero(lift > 0.0))
+            grounded = np.union1d(grounded, lifted)
         self.itself.fail_safe(start, state.x, state.v)
 
     def _react(self, step: _FrameStep, touched: list, outside: np.ndarray, s1: float) -> None:
