@@ -13,6 +13,9 @@ process, so it cannot be switched back on): blocks up to 32 MiB from the heap, u
 kept free at its top.
 
 Elsewhere (macOS, Windows, musl) this does nothing: their allocators keep memory differently.
+
+A bake holds such process-wide settings through :class:`Hold` (the others: single-threaded BLAS,
+:mod:`.blas`); each is a :class:`Shared`, applied by the first bake and restored by the last.
 """
 from __future__ import annotations
 
@@ -44,56 +47,96 @@ def is_glibc() -> bool:
         return False
 
 
-class _Glibc:
-    """The process's glibc allocator controls, or None where there is no glibc."""
+class Shared:
+    """A process-wide setting that bakes hold while they run (a UI bake and a script's bake may
+    overlap): the first hold applies it, the last one's release restores it. Subclasses say
+    whether the setting exists here (:attr:`available`) and how to apply and restore it."""
 
     def __init__(self):
+        self.users = 0  # bakes holding it
+
+    @property
+    def available(self) -> bool:
+        raise NotImplementedError
+
+    def _apply(self) -> None:
+        raise NotImplementedError
+
+    def _restore(self) -> None:
+        raise NotImplementedError
+
+    def acquire(self) -> bool:
+        """Apply the setting (first user); True when it is in effect."""
+        if not self.available:
+            return False
+        if self.users == 0:
+            self._apply()
+        self.users += 1
+        return True
+
+    def release(self) -> None:
+        """Restore the setting (last user)."""
+        if not self.available or self.users == 0:
+            return
+        self.users -= 1
+        if self.users == 0:
+            self._restore()
+
+
+class _Glibc(Shared):
+    """The process's glibc allocator controls (none where there is no glibc)."""
+
+    def __init__(self):
+        super().__init__()
         self.lib = None
-        self.users = 0  # bakes running (a UI bake and a script's bake may overlap)
         if is_glibc():
             with contextlib.suppress(OSError):
                 lib = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
                 if hasattr(lib, "mallopt") and hasattr(lib, "malloc_trim"):
                     self.lib = lib
 
-    def acquire(self) -> bool:
-        """Raise the thresholds (first user); True when they are in effect."""
-        if self.lib is None:
-            return False
-        if self.users == 0:
-            for param, value in BAKING.items():
-                self.lib.mallopt(param, value)
-        self.users += 1
-        return True
+    @property
+    def available(self) -> bool:
+        return self.lib is not None
 
-    def release(self) -> None:
-        """Free memory returned and the thresholds at :data:`AFTER` (last user)."""
-        if self.lib is None or self.users == 0:
-            return
-        self.users -= 1
-        if self.users == 0:
-            for param, value in AFTER.items():
-                self.lib.mallopt(param, value)
-            self.lib.malloc_trim(0)
+    def _apply(self) -> None:
+        """The thresholds raised."""
+        for param, value in BAKING.items():
+            self.lib.mallopt(param, value)
+
+    def _restore(self) -> None:
+        """Free memory returned and the thresholds at :data:`AFTER`."""
+        for param, value in AFTER.items():
+            self.lib.mallopt(param, value)
+        self.lib.malloc_trim(0)
 
 
-_GLIBC = _Glibc()
+GLIBC = _Glibc()
 
 
-class Reuse:
-    """One bake's hold on the raised thresholds: :meth:`end` (idempotent) lets it go."""
+class Hold:
+    """One bake's hold on process-wide settings (:class:`Shared`): :meth:`end` (idempotent)
+    lets go of them."""
 
-    def __init__(self):
-        self._held = _GLIBC.acquire()
+    def __init__(self, *settings: Shared):
+        self._held = [s for s in settings if s.acquire()]
 
     @property
     def active(self) -> bool:
-        return self._held
+        """Whether any of the settings is in effect."""
+        return bool(self._held)
 
     def end(self) -> None:
-        if self._held:
-            self._held = False
-            _GLIBC.release()
+        held, self._held = self._held, []
+        for setting in held:
+            setting.release()
+
+
+class Reuse(Hold):
+    """One bake's hold on the raised thresholds."""
+
+    def __init__(self):
+        super().__init__(GLIBC)
 
 
 @contextlib.contextmanager

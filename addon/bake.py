@@ -28,7 +28,7 @@ from ..core.world import World
 from . import budget, convert, extract, follow, inputs_hash, limits, rigid, rigid_keys
 from . import aim as aim_solver
 from . import resume as checkpoint
-from . import allocator, springs, timing
+from . import allocator, blas, springs, timing
 from .bake_failures import Failures
 from .bake_resume import Resumable
 from .cache_paths import relative_path
@@ -92,9 +92,10 @@ class BakeJob(Resumable, Failures):
         self.suspended = {ob.name: springs.suspend_modifier(ob) for ob in self.roles.spring_meshes}
         # ... and each rigid body from its own animation, not an earlier bake's keys
         self.rigid_suspended = {ob.name: rigid_keys.suspend(ob) for ob in self.roles.rigid_bodies}
-        # sub-steps reuse their freed arrays instead of faulting fresh memory in (glibc);
-        # given back by finish() and abort()
-        self.memory = allocator.Reuse()
+        # sub-steps reuse their freed arrays instead of faulting fresh memory in (glibc), and
+        # BLAS runs on this thread (a busy core stalls OpenBLAS's own); given back by finish()
+        # and abort()
+        self.memory = allocator.Hold(allocator.GLIBC, blas.OPENBLAS)
         try:
             self._prepare(context)
             if self._resume_from is not None:

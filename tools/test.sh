@@ -7,6 +7,9 @@ set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 venv="$("$here/tools/venv.sh" "${PHYSANIM_BLENDER:-4.5}")"
 cd "$here"
+# each worker's BLAS on its own thread: the workers already keep every core busy, and OpenBLAS's
+# threads would wait for one (a bake sets this itself while it runs: addon/blas.py)
+export OPENBLAS_NUM_THREADS="${OPENBLAS_NUM_THREADS:-1}"
 workers="${PHYSANIM_TEST_WORKERS:-auto}"
 parallel=()
 if [ "$workers" != 0 ]; then parallel=(-n "$workers" --dist worksteal); fi

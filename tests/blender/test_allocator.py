@@ -73,19 +73,19 @@ def test_a_bake_holds_memory_reuse_until_it_ends_and_a_failed_one_lets_it_go(phy
     allocator = _allocator(physanim_ext)
     bake = _spray(physanim_ext, tmp_path, 6)
     users = []
-    bake.run(bpy.context, on_frame=lambda job: users.append(allocator._GLIBC.users))
+    bake.run(bpy.context, on_frame=lambda job: users.append(allocator.GLIBC.users))
     assert users and all(u == 1 for u in users), users
-    assert allocator._GLIBC.users == 0
+    assert allocator.GLIBC.users == 0
 
     def fail(job):
-        users.append(allocator._GLIBC.users)
+        users.append(allocator.GLIBC.users)
         if job.frame >= 3:
             raise RuntimeError("stop here")
 
     users.clear()
     with pytest.raises(RuntimeError, match="stop here"):
         bake.run(bpy.context, on_frame=fail)
-    assert users[-1] == 1 and allocator._GLIBC.users == 0
+    assert users[-1] == 1 and allocator.GLIBC.users == 0
 
 
 def test_a_cancelled_bake_whose_writer_failed_still_lets_memory_reuse_go(physanim_ext,
@@ -97,7 +97,7 @@ def test_a_cancelled_bake_whose_writer_failed_still_lets_memory_reuse_go(physani
     job = bake.BakeJob(bpy.context)
     for _ in range(3):
         job.step(bpy.context)
-    assert allocator._GLIBC.users == 1
+    assert allocator.GLIBC.users == 1
 
     def broken():
         raise ValueError("the writer thread failed")
@@ -105,5 +105,5 @@ def test_a_cancelled_bake_whose_writer_failed_still_lets_memory_reuse_go(physani
     job.particles.flush = broken
     with pytest.raises(ValueError, match="writer thread failed"):
         job.suspend()
-    assert allocator._GLIBC.users == 0
+    assert allocator.GLIBC.users == 0
     assert not any(tmp_path.glob("physanim_cache/**/*.npz"))  # nothing kept
