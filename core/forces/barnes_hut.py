@@ -27,6 +27,30 @@ MAX_LEVEL = 21  # 21 bits per axis in a 63-bit Morton code
 EXACT_BELOW = 1024  # fewer points: the exact sum is cheaper than a tree
 BATCH = 2_000_000  # point-pair interactions evaluated at once
 GROUP_CHUNK = 8192  # groups traversed together (their interaction lists held at once)
+FRONTIER_LIMIT = 4_000_000  # (group, node) pairs a traversal may hold at once (about 100 MB);
+# more, and fewer groups are traversed together
+MAX_INTERACTIONS = 200_000_000  # point-source interactions of one evaluation that are always
+PER_BODY = 10_000  # allowed, or this many per point if more (theta 0.5 takes about 2,000 at a
+# million points, 107 s); beyond, an evaluation is refused: a tiny opening angle over many
+# points is nearly the exact sum (240,000 points: 6e10 interactions, days a step)
+
+
+def interaction_limit(points: int) -> int:
+    """The most point-source interactions one evaluation over ``points`` may take."""
+    return max(MAX_INTERACTIONS, PER_BODY * int(points))
+
+
+class TooManyInteractions(ValueError):
+    """An evaluation would take more than :func:`interaction_limit` point-source interactions
+    (an opening angle too small for the point count); ``interactions``: its estimate."""
+
+    def __init__(self, interactions: int):
+        super().__init__(f"about {interactions:,} interactions")
+        self.interactions = int(interactions)
+
+
+class _FrontierFull(TooManyInteractions):
+    """A traversal's frontier outgrew FRONTIER_LIMIT (traverse fewer groups at once)."""
 
 
 def exact_accelerations(x: np.ndarray, m: np.ndarray, G: float, eps: float) -> np.ndarray:
@@ -135,21 +159,41 @@ class Octree:
 
     def accelerations(self, G: float, eps: float, theta: float) -> np.ndarray:
         """a (n, 3) of every point, in the caller's order. The groups are taken
-        :data:`GROUP_CHUNK` at a time (memory stays bounded for a million bodies)."""
+        :data:`GROUP_CHUNK` at a time (memory stays bounded for a million bodies), fewer where
+        their traversal's frontier would outgrow FRONTIER_LIMIT (a small opening angle opens
+        nearly every node for every group). Raises :class:`TooManyInteractions` as soon as
+        the interactions so far, scaled to every group, exceed :func:`interaction_limit`."""
         a = np.zeros((len(self.x), 3))
         table_x = np.concatenate([self.node_com, self.x])
         table_m = np.concatenate([self.node_mass, self.m])
-        for g0 in range(0, len(self.groups), GROUP_CHUNK):
-            chunk = np.arange(g0, min(g0 + GROUP_CHUNK, len(self.groups)))
-            self._accelerate(a, chunk, table_x, table_m, G, eps, theta)
+        total, done, size, groups = 0, 0, GROUP_CHUNK, len(self.groups)
+        while done < groups:
+            chunk = np.arange(done, min(done + size, groups))
+            try:
+                total = self._accelerate(a, chunk, table_x, table_m, G, eps, theta, total,
+                                         groups)
+            except _FrontierFull:
+                if size == 1:
+                    raise
+                size = max(1, size // 8)
+                continue
+            done += len(chunk)
         out = np.empty_like(a)
         out[self.order] = a
         return out
 
     def _accelerate(self, a: np.ndarray, chunk: np.ndarray, table_x: np.ndarray,
-                    table_m: np.ndarray, G: float, eps: float, theta: float) -> None:
-        """The accelerations of the points of the groups ``chunk`` (consecutive indices)."""
+                    table_m: np.ndarray, G: float, eps: float, theta: float, total: int = 0,
+                    groups_in_all: int | None = None) -> int:
+        """The accelerations of the points of the groups ``chunk`` (consecutive indices, the
+        first ``chunk[0]`` done with ``total`` interactions). Returns the interactions so far
+        (refused before any is evaluated when, scaled to ``groups_in_all``, they would pass
+        :func:`interaction_limit`; and as :class:`_FrontierFull` when its sources would
+        outgrow 4 FRONTIER_LIMIT rows)."""
         (far_g, far_n), (near_g, near_l) = self.interactions(theta, chunk)
+        sources = len(far_n) + int(self.node_count[near_l].sum())
+        if sources > 4 * FRONTIER_LIMIT:
+            raise _FrontierFull(sources)
         # each group's sources, as rows of one table of nodes then points: its far nodes'
         # monopoles and its near leaves' points, sorted by group (a radix sort of small keys)
         n_nodes = len(self.node_mass)
@@ -164,6 +208,10 @@ class Octree:
         src_start = np.cumsum(per_group) - per_group
         count = self.node_count[groups]
         rows = count * per_group  # interactions of each group: its points times its sources
+        total += int(rows.sum())
+        scale = (groups_in_all or len(self.groups)) / (chunk[-1] + 1)
+        if total * scale > interaction_limit(len(self.x)):
+            raise TooManyInteractions(int(total * scale))
         for lo, hi in _batches(rows, BATCH):
             g = np.arange(lo, hi)
             g = g[rows[lo:hi] > 0]
@@ -175,13 +223,15 @@ class Octree:
             src = source[_ranges(np.repeat(src_start[g], count[g]), width)]
             a[point] = _pull_runs(self.x, np.repeat(point, width), table_x[src], table_m[src],
                                   G, eps, np.cumsum(width) - width)
+        return total
 
     def interactions(self, theta: float, groups: np.ndarray | None = None
                      ) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
         """The traversal: (group, far node) pairs and (group, near leaf) pairs; groups are
         indices into :attr:`groups`. A node is far from a group when its side is under theta
         times the distance from its centre of mass to the group's box (so from each of its
-        points)."""
+        points). Raises :class:`TooManyInteractions` (a :class:`_FrontierFull`) rather than
+        hold more than FRONTIER_LIMIT (group, node) pairs at once."""
         far_b, far_n, near_b, near_l = [], [], [], []
         group = np.arange(len(self.groups)) if groups is None else np.asarray(groups)
         node = np.zeros(len(group), np.int64)
@@ -198,6 +248,8 @@ class Octree:
             opened = ~far & ~leaf
             b, nd = group[opened], node[opened]
             k = self.node_children[nd]
+            if int(k.sum()) > FRONTIER_LIMIT:
+                raise _FrontierFull(int(k.sum()))
             group = np.repeat(b, k)
             node = _ranges(self.node_child[nd], k)
         return ((np.concatenate(far_b), np.concatenate(far_n)),

@@ -105,7 +105,14 @@ class _BoundGravity:
                                 f"{n * (n - 1) // 2:,} pairs a step — raise the Opening Angle "
                                 "(0.5: about 0.15 % error)", obj=s.name, kind="force")
         m = p.mass[self.members]
-        a = barnes_hut.accelerations(p.x[self.members], m, s.G, s.softening, s.theta)
+        try:
+            a = barnes_hut.accelerations(p.x[self.members], m, s.G, s.softening, s.theta)
+        except barnes_hut.TooManyInteractions as exc:
+            raise PhysanimError(
+                f"the Opening Angle {s.theta:g} over {n:,} particles takes about "
+                f"{exc.interactions:,} interactions a step (the limit is "
+                f"{barnes_hut.interaction_limit(n):,}) — raise the Opening Angle "
+                "(0.5: about 0.15 % error)", obj=s.name, kind="force") from None
         f_out[self.members] += m[:, None] * a
 
 

@@ -151,6 +151,56 @@ def test_barnes_hut_error_below_one_percent_at_theta_half(shape):
         bh.exact_accelerations(x[:500], m[:500], 1.0, 0.01))  # few points: the exact sum
 
 
+def test_a_crowded_traversal_takes_fewer_groups_at_once_to_the_same_accelerations(monkeypatch):
+    """A small opening angle opens nearly every node for every group: the traversal then takes
+    fewer groups at a time (its frontier held under FRONTIER_LIMIT) and every point's
+    acceleration is the same to the bit (each group's sources in the same order)."""
+    rng = np.random.default_rng(3)
+    x = rng.normal(size=(4000, 3))
+    m = rng.uniform(0.5, 1.5, len(x))
+    whole = bh.Octree(x, m).accelerations(1.0, 0.01, 0.05)
+    frontiers = []
+    interactions = bh.Octree.interactions
+
+    def watched(self, theta, groups=None):
+        try:
+            return interactions(self, theta, groups)
+        except bh.TooManyInteractions as exc:
+            frontiers.append(exc.interactions)
+            raise
+
+    monkeypatch.setattr(bh, "FRONTIER_LIMIT", 3000)
+    monkeypatch.setattr(bh.Octree, "interactions", watched)
+    parts = bh.Octree(x, m).accelerations(1.0, 0.01, 0.05)
+    assert frontiers and min(frontiers) > 3000  # it did split
+    assert np.array_equal(parts, whole)
+
+
+def test_an_opening_angle_too_small_for_the_point_count_is_refused_naming_the_force(
+        monkeypatch):
+    """Nearly the exact sum over many points (a tiny opening angle) would take days a step at
+    240,000 points, and its lists filled the memory: it is refused up front, naming the
+    force, the interactions it would take and what to change (the limit lowered here so a
+    small cloud reaches it)."""
+    from physanim.core.errors import PhysanimError
+
+    monkeypatch.setattr(bh, "MAX_INTERACTIONS", 1_000_000)
+    monkeypatch.setattr(bh, "PER_BODY", 100)
+    rng = np.random.default_rng(5)
+    x = rng.normal(size=(3000, 3))
+    m = np.ones(len(x))
+    with pytest.raises(bh.TooManyInteractions) as caught:
+        bh.accelerations(x, m, 1.0, 0.01, 1e-3)
+    assert caught.value.interactions > 1_000_000
+    bh.accelerations(x, m, 1.0, 0.01, 1.0)  # a wide angle stays within it
+    model = particle_model(EmitterSettings("Stars"))
+    state = model.state()
+    place(state, x, np.zeros_like(x))
+    with pytest.raises(PhysanimError, match=r'force "Pull".*Opening Angle 0.001 over 3,000 '
+                                            r"particles .* raise the Opening Angle"):
+        _run(model, state, [MutualGravity("Pull", 1.0, 0.01, 1e-3)], 1, 0.05)
+
+
 # -- Lennard-Jones ------------------------------------------------------------------------------
 
 def test_lennard_jones_pair_oscillates_about_its_minimum():
