@@ -231,10 +231,12 @@ class Octree:
         indices into :attr:`groups`. A node is far from a group when its side is under theta
         times the distance from its centre of mass to the group's box (so from each of its
         points). Raises :class:`TooManyInteractions` (a :class:`_FrontierFull`) rather than
-        hold more than FRONTIER_LIMIT (group, node) pairs at once."""
+        hold more than FRONTIER_LIMIT (group, node) pairs at once in its frontier, or list
+        more than 4 FRONTIER_LIMIT."""
         far_b, far_n, near_b, near_l = [], [], [], []
         group = np.arange(len(self.groups)) if groups is None else np.asarray(groups)
         node = np.zeros(len(group), np.int64)
+        held = 0  # the pairs listed so far
         while len(group):
             com = self.node_com[node]
             gap = np.maximum(np.maximum(self.group_lo[group] - com, com - self.group_hi[group]),
@@ -245,11 +247,12 @@ class Octree:
             far_n.append(node[far])
             near_b.append(group[leaf])
             near_l.append(node[leaf])
+            held += len(far_n[-1]) + len(near_l[-1])
             opened = ~far & ~leaf
             b, nd = group[opened], node[opened]
             k = self.node_children[nd]
-            if int(k.sum()) > FRONTIER_LIMIT:
-                raise _FrontierFull(int(k.sum()))
+            if int(k.sum()) > FRONTIER_LIMIT or held > 4 * FRONTIER_LIMIT:
+                raise _FrontierFull(max(int(k.sum()), held))
             group = np.repeat(b, k)
             node = _ranges(self.node_child[nd], k)
         return ((np.concatenate(far_b), np.concatenate(far_n)),
