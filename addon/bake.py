@@ -92,9 +92,8 @@ class BakeJob(Resumable, Failures):
         self.suspended = {ob.name: springs.suspend_modifier(ob) for ob in self.roles.spring_meshes}
         # ... and each rigid body from its own animation, not an earlier bake's keys
         self.rigid_suspended = {ob.name: rigid_keys.suspend(ob) for ob in self.roles.rigid_bodies}
-        # sub-steps reuse their freed arrays instead of faulting fresh memory in (glibc), and
-        # BLAS runs on this thread (a busy core stalls OpenBLAS's own); given back by finish()
-        # and abort()
+        # freed arrays reused (glibc) and BLAS on this thread (a busy core stalls OpenBLAS's
+        # own: addon/blas.py) while the bake runs; given back by finish() and abort()
         self.memory = allocator.Hold(allocator.GLIBC, blas.OPENBLAS)
         try:
             self._prepare(context)
