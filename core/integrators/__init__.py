@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 
-from .base import Derivative, Integrator, JacobianSystem, StepReport, System
+from .base import Derivative, Integrator, JacobianSystem, PointSystem, StepReport, System
 from .implicit import ImplicitEuler
 from .krylov import bicgstab, projected_pcg
 from .runge_kutta import (DOPRI5_TABLEAU, EULER_TABLEAU, MAX_ADAPTIVE_STEPS, MIDPOINT_TABLEAU,
@@ -30,7 +30,7 @@ from .runge_kutta import (DOPRI5_TABLEAU, EULER_TABLEAU, MAX_ADAPTIVE_STEPS, MID
 __all__ = [
     "DOPRI5_TABLEAU", "EULER_TABLEAU", "INTEGRATORS", "MAX_ADAPTIVE_STEPS", "MIDPOINT_TABLEAU",
     "RK4_TABLEAU", "AdaptiveRK", "Derivative", "ExplicitRK", "ImplicitEuler", "Integrator",
-    "JacobianSystem", "StepReport", "SymplecticEuler", "System", "Tableau", "bicgstab",
+    "JacobianSystem", "PointSystem", "StepReport", "SymplecticEuler", "System", "Tableau", "bicgstab",
     "make_integrator", "projected_pcg", "rk_step",
 ]
 

@@ -19,7 +19,8 @@ class System(Protocol):
     ``set_state(y)``; ``derivative(t, y) -> (dim,)``, a pure function of ``t`` [s] and ``y``.
 
     Optional capabilities are protocols of their own, which a stepper tests with ``isinstance``:
-    :class:`JacobianSystem` (an exact ``J u`` for implicit Euler). Steppers that need more than
+    :class:`JacobianSystem` (an exact ``J u`` for implicit Euler), :class:`PointSystem`
+    (positions and velocities as they are stored, for symplectic Euler). Steppers that need more than
     this interface name their own protocol (the spring meshes' ``BaraffWitkinSystem``).
     """
 
@@ -39,6 +40,21 @@ class JacobianSystem(System, Protocol):
     of finite differences of ``derivative``."""
 
     def jacobian_vector(self, t: float, y: np.ndarray, u: np.ndarray) -> np.ndarray: ...
+
+
+@runtime_checkable
+class PointSystem(System, Protocol):
+    """A :class:`System` of points whose state is y = [x, v] with x' = v, also seen as it is
+    stored: ``points() -> (x, v)`` (n, 3) each, read only; ``acceleration(t, x, v) -> (n, 3)``,
+    the second half of ``derivative`` (to the bit), as a fresh array the caller may overwrite;
+    ``set_points(x, v)`` stores new arrays. Symplectic Euler steps it without packing the state
+    into y or copying the velocities into a derivative."""
+
+    def points(self) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def acceleration(self, t: float, x: np.ndarray, v: np.ndarray) -> np.ndarray: ...
+
+    def set_points(self, x: np.ndarray, v: np.ndarray) -> None: ...
 
 
 @dataclass
@@ -66,6 +82,15 @@ def non_finite(y: np.ndarray, what: str) -> SimulationError:
     )
 
 
+def check_step(t: float, dt: float) -> None:
+    if not (math.isfinite(dt) and dt > 0.0) or not math.isfinite(t):
+        raise ValueError(f"time step must be finite and > 0 (got dt={dt!r} at t={t!r})")
+
+
+def all_finite(*arrays: np.ndarray) -> bool:
+    return all(bool(np.isfinite(a).all()) for a in arrays)
+
+
 class Integrator:
     """Base class: advances a :class:`System` from ``t`` to ``t + dt``.
 
@@ -89,8 +114,7 @@ class Integrator:
             ValueError: ``dt`` is not positive and finite, or the state has the wrong shape.
             SimulationError: the state became non-finite (the caller adds object and frame).
         """
-        if not (math.isfinite(dt) and dt > 0.0) or not math.isfinite(t):
-            raise ValueError(f"time step must be finite and > 0 (got dt={dt!r} at t={t!r})")
+        check_step(t, dt)
         y = np.array(system.get_state(), dtype=np.float64)
         if y.shape != (system.dim,):
             raise ValueError(f"state must have shape ({system.dim},) (got {y.shape})")

@@ -8,7 +8,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import SimulationError
-from .base import Derivative, Integrator, StepReport, non_finite
+from .base import (Derivative, Integrator, PointSystem, StepReport, all_finite, check_step,
+                   non_finite)
 
 
 @dataclass(frozen=True, eq=False)
@@ -270,6 +271,26 @@ class SymplecticEuler(Integrator):
 
     name = "SYMPLECTIC_EULER"
     stable_h_omega = 1.9  # bounded for h * omega < 2; a margin below it
+
+    def step(self, system, t: float, dt: float) -> StepReport:
+        """As :meth:`Integrator.step`; a :class:`~.base.PointSystem` is stepped on its stored
+        arrays (the same values to the bit, without packing y: a particle step's state is
+        read once instead of copied three times)."""
+        if not isinstance(system, PointSystem):
+            return super().step(system, t, dt)
+        check_step(t, dt)
+        x, v = system.points()
+        if not all_finite(x, v):
+            raise non_finite(np.concatenate([x.ravel(), v.ravel()]), "the state before the step")
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            v_new = np.multiply(system.acceleration(float(t), x, v), float(dt))
+            v_new += v
+            x_new = np.multiply(v_new, float(dt))
+            x_new += x
+        if not all_finite(x_new, v_new):
+            raise non_finite(np.concatenate([x_new.ravel(), v_new.ravel()]), "the new state")
+        system.set_points(x_new, v_new)
+        return StepReport(steps=1, evaluations=1, h_last=dt)
 
     def _step_impl(self, system, t, y, dt):
         n = y.shape[0] // 2

@@ -287,6 +287,93 @@ def test_symplectic_euler_bounds_energy_while_explicit_euler_grows_it():
     assert growth > 100.0
 
 
+class PointOscillator(Oscillator):
+    """The oscillator also as a :class:`~physanim.core.integrators.PointSystem`: (n, 3) points
+    whose x coordinate is the spring's (y and z drift freely)."""
+
+    def __init__(self, omega, x0, v0):
+        x = np.zeros((np.size(x0), 3))
+        x[:, 0], x[:, 1] = x0, 0.25
+        v = np.zeros_like(x)
+        v[:, 0], v[:, 2] = v0, -0.5
+        super().__init__(omega, x.ravel(), v.ravel())
+        self.stored = 0
+
+    def acceleration(self, t, x, v):
+        self.calls += 1
+        return -self.omega**2 * x * np.array([1.0, 0.0, 0.0])
+
+    def derivative(self, t, y):
+        n = self.dim // 2
+        return np.concatenate([y[n:], self.acceleration(t, y[:n].reshape(-1, 3),
+                                                         y[n:].reshape(-1, 3)).ravel()])
+
+    def points(self):
+        n = self.dim // 2
+        return self.y[:n].reshape(-1, 3), self.y[n:].reshape(-1, 3)
+
+    def set_points(self, x, v):
+        self.stored += 1
+        self.y = np.concatenate([x.ravel(), v.ravel()])
+
+
+class Packed:
+    """Only the packed interface of a system (no ``points``)."""
+
+    def __init__(self, system):
+        self.system = system
+        self.dim = system.dim
+
+    def get_state(self):
+        return self.system.get_state()
+
+    def set_state(self, y):
+        self.system.set_state(y)
+
+    def derivative(self, t, y):
+        return self.system.derivative(t, y)
+
+
+def test_symplectic_euler_steps_point_systems_on_their_points_to_the_bit():
+    omega, h = 3.0, 1.0 / 48.0
+    points = PointOscillator(omega, [1.0, -0.3, 2.0], [0.0, 0.7, -1.5])
+    packed = PointOscillator(omega, [1.0, -0.3, 2.0], [0.0, 0.7, -1.5])
+    assert isinstance(points, integrators.PointSystem)
+    assert not isinstance(Packed(packed), integrators.PointSystem)
+    stepper = integrators.make_integrator("SYMPLECTIC_EULER")
+    for i in range(200):
+        report = stepper.step(points, i * h, h)
+        stepper.step(Packed(packed), i * h, h)
+        assert (report.steps, report.evaluations) == (1, 1)
+    assert points.stored == 200  # it went through set_points, not set_state
+    np.testing.assert_array_equal(points.y, packed.y)
+    # and it is symplectic Euler: x advanced with the new velocity
+    q = PointOscillator(omega, [1.0], [0.0])
+    stepper.step(q, 0.0, h)
+    assert q.y[3] == pytest.approx(-omega**2 * h)  # v_x
+    assert q.y[0] == pytest.approx(1.0 - omega**2 * h * h)  # x_x = x + h v_new
+    assert q.y[5] == -0.5 and q.y[2] == pytest.approx(-0.5 * h)  # free z drift
+
+
+def test_symplectic_euler_reports_non_finite_points_and_keeps_the_state():
+    class Broken(PointOscillator):
+        def acceleration(self, t, x, v):
+            out = np.zeros_like(x)
+            out[1, 2] = np.inf
+            return out
+
+    system = Broken(1.0, [1.0, 2.0], [0.0, 0.0])
+    before = system.y.copy()
+    with pytest.raises(SimulationError, match="the new state"):
+        integrators.make_integrator("SYMPLECTIC_EULER").step(system, 0.0, 0.1)
+    np.testing.assert_array_equal(system.y, before)
+    start = PointOscillator(1.0, [np.nan], [0.0])
+    with pytest.raises(SimulationError, match="the state before the step"):
+        integrators.make_integrator("SYMPLECTIC_EULER").step(start, 0.0, 0.1)
+    with pytest.raises(ValueError, match="-0.1"):
+        integrators.make_integrator("SYMPLECTIC_EULER").step(start, 0.0, -0.1)
+
+
 def test_implicit_euler_damps_a_stiff_spring_that_explodes_explicit_euler():
     omega, h, x0 = 1000.0, 1.0 / 24.0, 0.01  # omega^2 = 1e6 [1/s^2], one frame per step
     stiff = Oscillator(omega, x0, 0.0)
