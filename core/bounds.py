@@ -13,6 +13,7 @@ import numpy as np
 
 DEFAULT_POSITION = 1.0e5  # [m]: 100 km from the world origin
 DEFAULT_SPEED = 1.0e5  # [m/s]: the emitters' fastest launch speed
+_COMPONENT = (1.0 - 1e-12) / math.sqrt(3.0)  # of the speed limit: no faster component passes
 
 
 @dataclass(frozen=True)
@@ -37,9 +38,14 @@ class StateBounds:
         """
         if len(x) == 0:
             return None
+        # when all is well, four reductions without a temporary: every coordinate within the
+        # world bound, every velocity component within the speed limit / sqrt(3) (so its speed
+        # is within the limit); a NaN fails every comparison
+        p, s = self.position, self.speed * _COMPONENT
+        if x.max() <= p and -x.min() <= p and v.max() <= s and -v.min() <= s:
+            return None
         with np.errstate(invalid="ignore", over="ignore"):
             speed2 = np.einsum("ij,ij->i", v, v)
-            # one reduction each when all is well (a NaN fails both comparisons)
             if np.abs(x).max() <= self.position and speed2.max() <= self.speed * self.speed:
                 return None
             far = ~(np.abs(x) <= self.position).all(axis=1)  # NaN fails the test too

@@ -82,7 +82,8 @@ class FrameReport:
         deaths: particles that reached their life span, ``born_dead`` included.
         born_dead: births whose whole life span fit inside their birth sub-step: they never
             enter the State (no id, never cached), but their sub-emitters burst where they die.
-        Particles alive at the end = alive at the start + births - deaths.
+        Particles alive at the end = alive at the start + births - deaths. at_rest: of them,
+        those the last sub-step left exactly as they were, which the next skips (:mod:`.rest`).
     """
 
     births: int = 0
@@ -91,4 +92,5 @@ class FrameReport:
     collisions: int = 0
     integrator_steps: int = 0
     alive: int = 0
+    at_rest: int = 0
     per_emitter_births: list[int] = field(default_factory=list)

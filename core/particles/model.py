@@ -177,6 +177,11 @@ class ParticleState:
             for name in ("link_a", "link_b", "link_rest", "link_emitter"):
                 setattr(self, name, getattr(self, name)[alive])
 
+    def subset(self, rows: np.ndarray) -> ParticleState:
+        """The particles at ``rows`` as a state of their own (copies of their values; the
+        random generators, springs and the rest shared)."""
+        return replace(self, **{name: getattr(self, name)[rows] for name in self._PER_PARTICLE})
+
     def append(self, emitter: int, x, v, mass, age, life, size) -> np.ndarray:
         """Add particles born by ``emitter``; returns their new ids."""
         count = len(x)

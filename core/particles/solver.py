@@ -14,6 +14,9 @@ Per sub-step, in order (each a named pass below):
     emit      births of this sub-step, placed at their sub-frame time and advanced to its end;
               a birth whose life span ends before the sub-step does never enters the State and
               dies at its death point, where its sub-emitters burst in this same sub-step
+
+The passes from collide to check leave out the particles at rest: those the last sub-step
+left exactly as they were, while the sub-step stays the function it was (:mod:`.rest`).
 """
 from __future__ import annotations
 
@@ -27,13 +30,15 @@ import numpy as np
 from ..bounds import DEFAULT_BOUNDS, StateBounds
 from ..contact import ColliderPaths, ContactForce, respond, resting_contacts
 from ..errors import PhysanimError, SimulationError
-from ..forces import (DampedSprings, Gravity, HardConstraints, OnCurves, OnPlanes, ParticleView,
+from ..forces import (DampedSprings, Gravity, HardConstraints, OnCurves, OnPlanes,
                       Rods, Tethers, on_circles)
 from ..integrators import make_integrator
 from ..world import SolverSettings, SolverSystem, World, WorldFrame
 from .emit import Births, sample_births, sample_bursts
 from .frame_inputs import FrameInputs, FrameReport, ParticleDrive
 from .model import ParticleModel, ParticleState
+from .ode import ParticleOde
+from .rest import Conditions, Rest, conditions
 from .settings import PointConstraint
 from .ties import TIE, TieFrame
 
@@ -54,6 +59,8 @@ class _FrameStep:
     births: list  # per emitter, this frame's Births (sub-emitters burst during the sub-steps)
     report: FrameReport
     ties: TieFrame | None = None  # particles tied to objects (None: no tie this frame)
+    rest: Conditions | None = None  # what its sub-steps are a function of (:mod:`.rest`)
+    ties_now: tuple = ([], None)  # the ties' rows of the sub-step in progress
 
     @property
     def reactions(self) -> list:
@@ -73,62 +80,16 @@ class ParticleSystem(SolverSystem):
 
     def report(self, step: _FrameStep) -> FrameReport:
         step.report.alive = self.state.particle_count
+        step.report.at_rest = self.solver.at_rest
         return step.report
 
 
-class _ParticleOde:
-    """Witkin & Baraff's particle system seen by an integrator: dim, get/set state, derivative;
-    to symplectic Euler as its points (:class:`~..integrators.PointSystem`)."""
-
-    def __init__(self, state: ParticleState, forces: list, contact: ContactForce,
-                 constraints: HardConstraints | None = None):
-        self.state = state
-        self.forces = forces
-        self.contact = contact
-        self.constraints = constraints
-        n = state.particle_count
-        self.dim = 6 * n
-        self._n = n
-
-    def get_state(self) -> np.ndarray:
-        return np.concatenate([self.state.particle_x.ravel(), self.state.particle_v.ravel()])
-
-    def set_state(self, y: np.ndarray) -> None:
-        n = self._n
-        # views of the integrator's fresh result (it keeps no reference to it)
-        self.state.particle_x = y[:3 * n].reshape(n, 3)
-        self.state.particle_v = y[3 * n:].reshape(n, 3)
-
-    def points(self) -> tuple[np.ndarray, np.ndarray]:
-        return self.state.particle_x, self.state.particle_v
-
-    def set_points(self, x: np.ndarray, v: np.ndarray) -> None:
-        self.state.particle_x, self.state.particle_v = x, v
-
-    def acceleration(self, t: float, x: np.ndarray, v: np.ndarray,
-                     out: np.ndarray | None = None) -> np.ndarray:
-        """(n, 3) the accelerations at positions ``x`` and velocities ``v`` (into ``out``)."""
-        view = ParticleView(x, v, self.state.particle_mass, t)
-        forces = self.forces
-        if forces and isinstance(forces[0], Gravity):  # the accumulator starts as m g
-            f = forces[0].force(view)
-            forces = forces[1:]
-        else:
-            f = np.zeros((self._n, 3))  # clear the accumulator, then every force adds in
-        for force in forces:
-            force.apply(view, f)
-        self.contact.constrain(view, f)  # it cancels what the forces push into surfaces
-        if self.constraints is not None:  # last: holds the rods against every other force
-            self.constraints.constrain(view, f)
-        return np.divide(f, self.state.particle_mass[:, None], out=out if out is not None else f)
-
-    def derivative(self, t: float, y: np.ndarray) -> np.ndarray:
-        n = self._n
-        out = np.empty_like(y)
-        out[:3 * n] = y[3 * n:]
-        self.acceleration(t, y[:3 * n].reshape(n, 3), y[3 * n:].reshape(n, 3),
-                          out[3 * n:].reshape(n, 3))
-        return out
+def _scatter(full: np.ndarray, rows: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """``full`` with ``values`` at ``rows`` (in place where it is writable)."""
+    if not full.flags.writeable:
+        full = full.copy()
+    full[rows] = values
+    return full
 
 
 def point_rows(c: PointConstraint, held: np.ndarray, s0: float, t: float, h: float,
@@ -189,6 +150,12 @@ class ParticleSolver:
         self.integrator = make_integrator(integrator, tolerance)
         self.substeps = self.settings.substeps
         self.colliders = ColliderPaths() if colliders is None else colliders
+        self._rest = Rest()  # the particles at rest, which sub-steps skip
+
+    @property
+    def at_rest(self) -> int:
+        """How many particles the next sub-step skips, at rest (:mod:`.rest`)."""
+        return self._rest.count
 
     # -- the frame ------------------------------------------------------------------------------
     def advance(self, state: ParticleState, inputs: FrameInputs) -> FrameReport:
@@ -221,9 +188,12 @@ class ParticleSolver:
                 f'ties the particles to the rigid body "{body}", which needs the Symplectic '
                 f"Euler integrator (the scene's is {self.settings.integrator}) — choose it in "
                 "the scene's PhysAnim settings", obj=name, frame=inputs.frame, kind="constraint")
+        alone = ties is None and not len(state.link_a) and \
+            not any(ef.constraints for ef in inputs.emitters)
         return _FrameStep(state, inputs, paths, h, g, 2.0 * float(np.linalg.norm(g)) * h + 1e-4,
                           [self._sample(state, inputs, i) for i in range(model.emitter_count)],
-                          FrameReport(per_emitter_births=[0] * model.emitter_count), ties)
+                          FrameReport(per_emitter_births=[0] * model.emitter_count), ties,
+                          conditions(self.settings.integrator, g, h, inputs, paths, alone))
 
     @staticmethod
     def _check_stiffness(state: ParticleState, inputs: FrameInputs, h: float) -> None:
@@ -248,12 +218,47 @@ class ParticleSolver:
                     frame=inputs.frame, kind="force")
 
     def substep(self, step: _FrameStep, k: int) -> None:
-        """Sub-step ``k`` of the interval: the passes of the module docstring."""
+        """Sub-step ``k`` of the interval: the passes of the module docstring, the moving ones
+        over the particles not at rest (:mod:`.rest`)."""
         state, inputs, h = step.state, step.inputs, step.h
         s0, s1 = k / self.substeps, (k + 1) / self.substeps
         t = inputs.t0 + k * h
+        awake = self._rest.awake(state, step.rest)
+        if awake is None:
+            x0, v0 = self._move(step, state, s0, s1, t)
+            self._rest.settle(state, None, x0, v0, state.particle_x, state.particle_v, step.rest)
+        elif len(awake):
+            moving = state.subset(awake)
+            x0, v0 = self._move(step, moving, s0, s1, t)
+            state.particle_x, state.particle_v = (
+                _scatter(state.particle_x, awake, moving.particle_x),
+                _scatter(state.particle_v, awake, moving.particle_v))
+            self._rest.settle(state, awake, x0, v0, moving.particle_x, moving.particle_v,
+                              step.rest)
+        else:  # every particle at rest: the step leaves them as they are
+            step.report.integrator_steps += 1
+        deaths = self._age_kill(state, h)
+        step.report.deaths += sum(len(d[0]) for d in deaths)
+        alive = state.particle_count
+        self._emit(state, inputs, step.births, deaths, s0, s1, step.g, step.report)
+        self._rest.born(state.particle_count - alive)
+        if state.particle_count > alive and any(ef.constraints for ef in inputs.emitters):
+            born = self._constraints(state, inputs, s1, t + h, h, step.ties_now)
+            if born is not None:  # the newborn onto them
+                self._constrain(state, born, None, t + h, h)
+        # the particles at rest are as they were when last checked
+        self._check_bounds(state, inputs, None if awake is None else
+                           np.flatnonzero(~self._rest.mask))
+        state.t = t + h
+
+    def _move(self, step: _FrameStep, state: ParticleState, s0: float, s1: float,
+              t: float) -> tuple[np.ndarray, np.ndarray]:
+        """The passes that move the particles of ``state`` (the frame's, or those of it not at
+        rest), from collide to check; returns their positions and velocities before."""
+        inputs, h = step.inputs, step.h
         tied = ([], None) if step.ties is None else step.ties.substep(
             state, inputs.emitters, s0, s1, t, h)
+        step.ties_now = tied
         still = np.concatenate([p.i for p in tied[0]] + [np.zeros(0, np.int64)] + (
             [] if tied[1] is None else [tied[1].i]))  # tied: no collider moves them
         resting = resting_contacts(step.paths, state.particle_x, state.particle_v, s0,
@@ -279,16 +284,7 @@ class ParticleSolver:
         if held is not None:
             self._constrain(state, held, x0, t + h, h)
         self._check(state, inputs, t + h)
-        deaths = self._age_kill(state, h)
-        step.report.deaths += sum(len(d[0]) for d in deaths)
-        alive = state.particle_count
-        self._emit(state, inputs, step.births, deaths, s0, s1, step.g, step.report)
-        if state.particle_count > alive and any(ef.constraints for ef in inputs.emitters):
-            born = self._constraints(state, inputs, s1, t + h, h, tied)  # the newborn onto them
-            if born is not None:
-                self._constrain(state, born, None, t + h, h)
-        self._check_bounds(state, inputs)
-        state.t = t + h
+        return x0, v0
 
     # -- passes ---------------------------------------------------------------------------------
     def _collide_pairs(self, step: _FrameStep, x0, v0, s1: float, resting) -> None:
@@ -377,7 +373,7 @@ class ParticleSolver:
     def _integrate(self, state, forces, contact, rods, t, h, inputs) -> int:
         if state.particle_count == 0:
             return 0
-        ode = _ParticleOde(state, forces, contact, rods)
+        ode = ParticleOde(state, forces, contact, rods)
         try:
             return self.integrator.step(ode, t, h).steps
         except SimulationError as exc:
@@ -395,10 +391,13 @@ class ParticleSolver:
         if not (np.isfinite(x).all() and np.isfinite(v).all()):
             raise self._blame(state, inputs, "", x, v)
 
-    def _check_bounds(self, state, inputs) -> None:
-        bad = self.bounds.violation(state.particle_x, state.particle_v)
+    def _check_bounds(self, state, inputs, rows: np.ndarray | None = None) -> None:
+        """Every particle (or those at ``rows``) within the bounds, or an error naming one."""
+        x, v = state.particle_x, state.particle_v
+        bad = self.bounds.violation(x if rows is None else x[rows], v if rows is None else v[rows])
         if bad is not None:
             i, what = bad
+            i = i if rows is None else int(rows[i])
             raise SimulationError(
                 f"particle {int(state.particle_id[i])} {what} — check gravity, forces and "
                 "emitter speeds, or raise the limits in Scene > PhysAnim > Limits",
@@ -431,6 +430,7 @@ class ParticleSolver:
                 sel = dead & (state.particle_emitter == e)
                 deaths[int(e)] = (state.particle_x[sel], state.particle_v[sel])
             state.keep(~dead)
+            self._rest.keep(~dead)
         return deaths
 
     def _emit(self, state, inputs, births, deaths, s0, s1, g, report) -> None:

@@ -38,3 +38,18 @@ def test_bounds_must_be_finite_and_positive(bad):
         StateBounds(position=bad)
     with pytest.raises(ValueError, match="bound must be finite and > 0"):
         StateBounds(speed=bad)
+
+
+def test_points_are_judged_as_by_their_definition_near_the_bounds():
+    """Coordinates and speeds scattered around both bounds (the quick test by components and the
+    exact one by speeds must agree with the definition: every |x_k| <= position, every
+    |v| <= speed)."""
+    rng = np.random.default_rng(3)
+    b = StateBounds(position=10.0, speed=5.0)
+    for _ in range(400):
+        n = int(rng.integers(1, 6))
+        x = rng.uniform(-10.2, 10.2, (n, 3)) * rng.choice([0.5, 1.0], (n, 1))
+        v = rng.normal(0.0, 1.0, (n, 3))
+        v *= rng.uniform(2.0, 5.2, (n, 1)) / np.linalg.norm(v, axis=1, keepdims=True)
+        inside = bool((np.abs(x) <= 10.0).all() and (np.einsum("ij,ij->i", v, v) <= 25.0).all())
+        assert (b.violation(x, v) is None) == inside

@@ -1,0 +1,141 @@
+"""Particles at rest (:mod:`physanim.core.particles.rest`): a particle the last sub-step left
+exactly as it was is skipped while the sub-step stays the same function, and nothing about the
+results changes — every frame is compared, bit for bit, with the same scene computed in full
+(the skipping switched off). Scenes settle on still colliders, then something wakes them."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from physanim.core.contact import ColliderFrame
+from physanim.core.forces import Wind
+from physanim.core.particles import EmitterFrame, EmitterSettings, FrameInputs, ParticleSolver
+from physanim.core.particles import solver as solver_module
+from physanim.tests.core.helpers import particle_model, rotation, translation
+
+DT = 1.0 / 24.0
+GROUND = ColliderFrame("Ground", "HALF_SPACE", np.eye(4), np.eye(4), restitution=0.3,
+                       friction=0.6)
+# a 4 x 4 m bounded plane at z = 0.2 and a box, beside the ground
+SHELF = ColliderFrame("Shelf", "PLANE", translation(2.5, 0.0, 0.2) @ np.diag([2.0, 2.0, 1.0, 1.0]),
+                      translation(2.5, 0.0, 0.2) @ np.diag([2.0, 2.0, 1.0, 1.0]), friction=0.4)
+BOX = ColliderFrame("Box", "BOX", translation(-1.5, 0.0, 0.25) @ np.diag([0.5, 0.5, 0.25, 1.0]),
+                    translation(-1.5, 0.0, 0.25) @ np.diag([0.5, 0.5, 0.25, 1.0]))
+SQUARE = np.array([[-3.0, -1.0, 0.0], [3.0, -1.0, 0.0], [-3.0, 1.0, 0.0], [3.0, 1.0, 0.0]])
+
+
+def _emitter(frame: int, speed=1.0, spread=0.6, births_until=12, lifetime=8.0) -> EmitterFrame:
+    m = translation(0.0, 0.0, 1.0)
+    return EmitterFrame(rate=300.0, speed=speed, spread=spread, lifetime=lifetime,
+                        lifetime_random=0.3 * lifetime,
+                        mass=0.1, size=0.02, active=frame < births_until, matrix0=m,
+                        matrix1=m.copy(), verts0=SQUARE, verts1=SQUARE)
+
+
+def _run(monkeypatch, frames: int, inputs_of, integrator="SYMPLECTIC_EULER", substeps=2,
+         skip=True):
+    """Every frame's (ids, x, v, report) of the scene ``inputs_of(frame)`` gives."""
+    if not skip:
+        monkeypatch.setattr(solver_module, "conditions", lambda *args: None)
+    model = particle_model(EmitterSettings(name="Grains", source="FACES", direction="NORMAL",
+                                           triangles=np.array([[0, 1, 3], [0, 3, 2]]),
+                                           vertex_count=4), seed=3)
+    solver = ParticleSolver(model, integrator, substeps)
+    state = model.state(DT)
+    out = []
+    for frame in range(1, frames + 1):
+        report = solver.advance(state, inputs_of(frame))
+        out.append((state.particle_id.copy(), state.particle_x.copy(), state.particle_v.copy(),
+                    report))
+    monkeypatch.undo()
+    return out
+
+
+def _same(skipped, full) -> None:
+    for frame, (a, b) in enumerate(zip(skipped, full), start=1):
+        for name, u, w in zip(("ids", "positions", "velocities"), a[:3], b[:3]):
+            assert np.array_equal(u, w), f"{name} differ at frame {frame}"
+        assert (a[3].births, a[3].deaths, a[3].integrator_steps, a[3].alive) == \
+            (b[3].births, b[3].deaths, b[3].integrator_steps, b[3].alive)
+        # a grain at rest on a box's top is pushed out to where it lies every sub-step: a
+        # collision the full computation counts and the skipped one does not
+        assert a[3].collisions <= b[3].collisions
+
+
+def _inputs(colliders=(GROUND, SHELF, BOX), gravity=(0.0, 0.0, -9.81), forces=(), **emitter):
+    def inputs_of(frame):
+        g = gravity(frame) if callable(gravity) else gravity
+        return FrameInputs(frame=frame, t0=frame * DT, frame_dt=DT, gravity=g,
+                           emitters=[_emitter(frame, **emitter)],
+                           colliders=list(colliders(frame) if callable(colliders) else colliders),
+                           forces=list(forces(frame) if callable(forces) else forces))
+    return inputs_of
+
+
+@pytest.mark.parametrize("integrator", ["SYMPLECTIC_EULER", "RK4"])
+def test_a_settled_pile_is_skipped_and_ends_as_computed_in_full(monkeypatch, integrator):
+    """Grains sprayed onto a ground, a shelf and a box slide, bounce and stop; most end at rest
+    (and die of old age meanwhile) — the same bits as the scene computed in full."""
+    inputs_of = _inputs(lifetime=2.2)
+    skipped = _run(monkeypatch, 60, inputs_of, integrator)
+    full = _run(monkeypatch, 60, inputs_of, integrator, skip=False)
+    _same(skipped, full)
+    alive = skipped[-1][3].alive
+    assert alive > 500 and skipped[-1][3].at_rest > 0.9 * alive
+    assert all(r[3].at_rest == 0 for r in full)
+    assert sum(r[3].deaths for r in skipped) > 1000  # at rest or not, they die on time
+
+
+def test_at_the_defaults_grains_on_the_ground_rest():
+    """A default emitter over a ground (nothing else set): once they stop bouncing they rest."""
+    model = particle_model(EmitterSettings(name="Emitter"))
+    solver = ParticleSolver(model)
+    state = model.state(0.0)
+    for frame in range(1, 97):
+        report = solver.advance(state, FrameInputs(
+            frame=frame, t0=frame * DT, frame_dt=DT, emitters=[EmitterFrame(
+                matrix0=translation(0, 0, 1), matrix1=translation(0, 0, 1), lifetime=10.0)],
+            colliders=[ColliderFrame("Ground", "HALF_SPACE", np.eye(4), np.eye(4))]))
+    assert report.alive > 0 and report.at_rest > 0.5 * report.alive
+    rest = np.flatnonzero(np.all(state.particle_v == 0.0, axis=1))
+    assert len(rest) >= report.at_rest and np.all(state.particle_x[rest, 2] < 0.01)
+
+
+def _wakes(frame_changed, **scene):
+    def inputs_of(frame):
+        return _inputs(**{k: (v(frame >= frame_changed) if callable(v) else v)
+                          for k, v in scene.items()})(frame)
+    return inputs_of
+
+
+@pytest.mark.parametrize("change", ["gravity", "ground moves", "friction keyed", "wind",
+                                    "shelf tilts"])
+def test_what_could_move_particles_at_rest_wakes_them(monkeypatch, change):
+    """The pile settles for 40 frames, then something changes; the particles respond exactly as
+    the full computation's (and, where the change moves them, they do move)."""
+    lifted = translation(0.0, 0.0, 0.05)
+    tilted = translation(2.5, 0.0, 0.2) @ rotation((1.0, 0.0, 0.0), 0.6) @ \
+        np.diag([2.0, 2.0, 1.0, 1.0])
+    scene = {
+        "gravity": dict(gravity=lambda on: (0.0, 0.0, 3.0) if on else (0.0, 0.0, -9.81)),
+        "ground moves": dict(colliders=lambda on: (ColliderFrame(
+            "Ground", "HALF_SPACE", lifted if on else np.eye(4), lifted if on else np.eye(4),
+            restitution=0.3, friction=0.6), SHELF, BOX)),
+        "friction keyed": dict(gravity=(2.0, 0.0, -9.81), colliders=lambda on: (ColliderFrame(
+            "Ground", "HALF_SPACE", np.eye(4), np.eye(4), restitution=0.3,
+            friction=0.05 if on else 0.6), SHELF, BOX)),
+        "wind": dict(forces=lambda on: (Wind("Wind", (1.0, 0.0, 0.0), 0.5),) if on else ()),
+        "shelf tilts": dict(colliders=lambda on: (GROUND, ColliderFrame(
+            "Shelf", "PLANE", tilted if on else SHELF.matrix0, tilted if on else SHELF.matrix0,
+            friction=0.4), BOX)),
+    }[change]
+    inputs_of = _wakes(40, **scene)
+    skipped = _run(monkeypatch, 46, inputs_of)
+    full = _run(monkeypatch, 46, inputs_of, skip=False)
+    _same(skipped, full)
+    assert skipped[38][3].at_rest > 0.8 * skipped[38][3].alive
+    ids0, x0 = skipped[38][0], skipped[38][1]
+    ids1, x1 = skipped[-1][0], skipped[-1][1]
+    both = np.isin(ids1, ids0)
+    moved = np.any(x1[both] != x0[np.isin(ids0, ids1)], axis=1).sum()
+    assert moved > 0.1 * len(ids1)
