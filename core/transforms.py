@@ -327,6 +327,8 @@ def inverse_affine(m: np.ndarray) -> np.ndarray:
 def transform_points(m: np.ndarray, x: np.ndarray) -> np.ndarray:
     """Points (n, 3) mapped by one (4, 4) affine matrix or per-point (n, 4, 4) matrices."""
     if m.ndim == 2:  # x @ A^T sums x0 a0 + x1 a1 + x2 a2 in that order, in one pass
+        if len(x) == 1:  # as a row of many: BLAS rounds one row (gemv) unlike several (gemm)
+            return (np.repeat(x, 2, axis=0) @ m[:3, :3].T + m[:3, 3])[:1]
         return x @ m[:3, :3].T + m[:3, 3]
     return np.einsum("nij,nj->ni", m[:, :3, :3], x) + m[:, :3, 3]
 

@@ -11,7 +11,8 @@ deaths, not every grain in it. The results are the same to the bit (tested).
 
 The sub-step is that function only when each particle moves on its own and the inputs are
 those it rested under (:func:`conditions`): gravity alone (no force object, interaction,
-particle collision, spring, constraint or tie), a fixed-step explicit integrator, and the same
+particle collision, spring, constraint or tie), explicit or symplectic Euler or the midpoint
+method, and the same
 colliders, each still over the interval (no motion, no deformation) and unchanged. Anything
 else — a collider that moves or is keyed, gravity keyed, a force switched on — wakes every
 particle for a sub-step (:class:`Rest`), after which those still at rest sleep again.
@@ -24,7 +25,10 @@ import numpy as np
 
 from ..transforms import row_all
 
-FIXED_STEP = ("EULER", "SYMPLECTIC_EULER", "MIDPOINT", "RK4")  # a function of each particle
+# integrators whose step is a function of each particle alone, to the bit: RK4's weighted sum
+# of its stages is one BLAS product over the whole state, whose last values round by the
+# state's length
+FIXED_STEP = ("EULER", "SYMPLECTIC_EULER", "MIDPOINT")
 
 
 @dataclass(frozen=True)
@@ -50,7 +54,7 @@ def conditions(integrator: str, gravity: np.ndarray, h: float, inputs, paths: li
                alone: bool) -> Conditions | None:
     """The conditions of a frame interval's sub-steps, or None when a particle's sub-step is
     not a function of its own position and velocity under them (``alone``: the caller found
-    no springs, constraints or ties among the particles)."""
+    no springs, constraints or ties among the particles, and no emitter that makes springs)."""
     if (not alone or integrator not in FIXED_STEP or inputs.forces or inputs.interactions
             or inputs.collisions or not all(_still(path) for path in paths)):
         return None

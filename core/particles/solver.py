@@ -152,6 +152,10 @@ class ParticleSolver:
         self.colliders = ColliderPaths() if colliders is None else colliders
         self._rest = Rest()  # the particles at rest, which sub-steps skip
 
+    def __setstate__(self, saved: dict) -> None:
+        """A solver saved before particles at rest were skipped resumes with none at rest."""
+        self.__dict__.update({"_rest": Rest(), **saved})
+
     @property
     def at_rest(self) -> int:
         """How many particles the next sub-step skips, at rest (:mod:`.rest`)."""
@@ -189,7 +193,8 @@ class ParticleSolver:
                 f"Euler integrator (the scene's is {self.settings.integrator}) — choose it in "
                 "the scene's PhysAnim settings", obj=name, frame=inputs.frame, kind="constraint")
         alone = ties is None and not len(state.link_a) and \
-            not any(ef.constraints for ef in inputs.emitters)
+            not any(ef.constraints for ef in inputs.emitters) and \
+            all(e.link is None for e in model.emitters)  # (springs may be born mid-frame)
         return _FrameStep(state, inputs, paths, h, g, 2.0 * float(np.linalg.norm(g)) * h + 1e-4,
                           [self._sample(state, inputs, i) for i in range(model.emitter_count)],
                           FrameReport(per_emitter_births=[0] * model.emitter_count), ties,
