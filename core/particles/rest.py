@@ -12,10 +12,13 @@ deaths, not every grain in it. The results are the same to the bit (tested).
 The sub-step is that function only when each particle moves on its own and the inputs are
 those it rested under (:func:`conditions`): gravity alone (no force object, interaction,
 particle collision, spring, constraint or tie), explicit or symplectic Euler or the midpoint
-method, and the same
-colliders, each still over the interval (no motion, no deformation) and unchanged. Anything
-else — a collider that moves or is keyed, gravity keyed, a force switched on — wakes every
-particle for a sub-step (:class:`Rest`), after which those still at rest sleep again.
+method, and the same colliders, each still over the interval (no motion, no deformation) and
+unchanged. Anything else — a collider that moves or is keyed, gravity keyed, a force switched
+on — wakes every particle for a sub-step (:class:`Rest`), after which those still at rest
+sleep again. To the bit also means no product whose rounding depends on how many particles
+it is given: BLAS rounds a one-row product unlike a several-row one
+(:func:`~..transforms.transform_points` maps a lone point as a row of two), and RK4's sum of
+its stages is one product over the whole state.
 """
 from __future__ import annotations
 
