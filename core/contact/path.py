@@ -146,6 +146,7 @@ class ColliderPath:
 
     offset: float = 0.0
     hits_end_surface: bool = False  # hit points lie on the surface at the sub-step's END
+    deforming: bool = False  # its surface moves in its own frame (a mesh's vertices)
     # a path that is a function of its frame alone (no state, nothing kept for the run): the
     # next interval of a collider standing still can use the same one
     reusable: bool = False

@@ -118,12 +118,12 @@ class Integrator:
         y = np.array(system.get_state(), dtype=np.float64)
         if y.shape != (system.dim,):
             raise ValueError(f"state must have shape ({system.dim},) (got {y.shape})")
-        if not np.all(np.isfinite(y)):
+        if not all_finite(y):
             raise non_finite(y, "the state before the step")
         # Overflow is detected below and reported as SimulationError, not as a numpy warning.
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
             y_new, report = self._step_impl(system, float(t), y, float(dt))
-        if not np.all(np.isfinite(y_new)):
+        if not all_finite(y_new):
             raise non_finite(y_new, "the new state")
         system.set_state(y_new)
         return report

@@ -283,10 +283,8 @@ class SymplecticEuler(Integrator):
         if not all_finite(x, v):
             raise non_finite(np.concatenate([x.ravel(), v.ravel()]), "the state before the step")
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-            v_new = np.multiply(system.acceleration(float(t), x, v), float(dt))
-            v_new += v
-            x_new = np.multiply(v_new, float(dt))
-            x_new += x
+            a = system.acceleration(float(t), x, v)
+            v_new, x_new = _kick_drift(a, x, v, float(dt), a, np.empty_like(x))
         if not all_finite(x_new, v_new):
             raise non_finite(np.concatenate([x_new.ravel(), v_new.ravel()]), "the new state")
         system.set_points(x_new, v_new)
@@ -298,8 +296,15 @@ class SymplecticEuler(Integrator):
             raise ValueError(f"symplectic Euler needs y = [x, v] with even dim (got {y.shape[0]})")
         a = system.derivative(t, y)[n:]
         out = np.empty_like(y)  # [x_new, v_new], filled without temporaries
-        v_new = np.multiply(a, dt, out=out[n:])
-        v_new += y[n:]
-        np.multiply(v_new, dt, out=out[:n])
-        out[:n] += y[:n]
+        _kick_drift(a, y[:n], y[n:], dt, out[n:], out[:n])
         return out, StepReport(steps=1, evaluations=1, h_last=dt)
+
+
+def _kick_drift(a, x, v, dt: float, v_out, x_out):
+    """Symplectic Euler's arithmetic: v_out = a dt + v, then x_out = v_out dt + x (``v_out``
+    may be ``a``); returns (v_out, x_out)."""
+    np.multiply(a, dt, out=v_out)
+    v_out += v
+    np.multiply(v_out, dt, out=x_out)
+    x_out += x
+    return v_out, x_out

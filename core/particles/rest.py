@@ -67,11 +67,7 @@ def conditions(integrator: str, gravity: np.ndarray, h: float, inputs, paths: li
 
 def _still(path) -> bool:
     """Whether a collider's path neither moves nor deforms over its interval."""
-    frame = path.frame
-    if not path.path.static:
-        return False
-    return frame.vertices0 is None or frame.vertices0 is frame.vertices1 or \
-        np.array_equal(frame.vertices0, frame.vertices1)
+    return path.path.static and not path.deforming
 
 
 class Rest:

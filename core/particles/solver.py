@@ -60,7 +60,6 @@ class _FrameStep:
     report: FrameReport
     ties: TieFrame | None = None  # particles tied to objects (None: no tie this frame)
     rest: Conditions | None = None  # what its sub-steps are a function of (:mod:`.rest`)
-    ties_now: tuple = ([], None)  # the ties' rows of the sub-step in progress
 
     @property
     def reactions(self) -> list:
@@ -229,12 +228,13 @@ class ParticleSolver:
         s0, s1 = k / self.substeps, (k + 1) / self.substeps
         t = inputs.t0 + k * h
         awake = self._rest.awake(state, step.rest)
+        tied = ([], None)  # (a sub-step with particles at rest has no ties)
         if awake is None:
-            x0, v0 = self._move(step, state, s0, s1, t)
+            x0, v0, tied = self._move(step, state, s0, s1, t)
             self._rest.settle(state, None, x0, v0, state.particle_x, state.particle_v, step.rest)
         elif len(awake):
             moving = state.subset(awake)
-            x0, v0 = self._move(step, moving, s0, s1, t)
+            x0, v0, _ = self._move(step, moving, s0, s1, t)
             state.particle_x, state.particle_v = (
                 _scatter(state.particle_x, awake, moving.particle_x),
                 _scatter(state.particle_v, awake, moving.particle_v))
@@ -248,7 +248,7 @@ class ParticleSolver:
         self._emit(state, inputs, step.births, deaths, s0, s1, step.g, step.report)
         self._rest.born(state.particle_count - alive)
         if state.particle_count > alive and any(ef.constraints for ef in inputs.emitters):
-            born = self._constraints(state, inputs, s1, t + h, h, step.ties_now)
+            born = self._constraints(state, inputs, s1, t + h, h, tied)
             if born is not None:  # the newborn onto them
                 self._constrain(state, born, None, t + h, h)
         # the particles at rest are as they were when last checked
@@ -257,13 +257,13 @@ class ParticleSolver:
         state.t = t + h
 
     def _move(self, step: _FrameStep, state: ParticleState, s0: float, s1: float,
-              t: float) -> tuple[np.ndarray, np.ndarray]:
+              t: float) -> tuple[np.ndarray, np.ndarray, tuple]:
         """The passes that move the particles of ``state`` (the frame's, or those of it not at
-        rest), from collide to check; returns their positions and velocities before."""
+        rest), from collide to check; returns their positions and velocities before, and the
+        sub-step's ties (:meth:`TieFrame.substep`)."""
         inputs, h = step.inputs, step.h
         tied = ([], None) if step.ties is None else step.ties.substep(
             state, inputs.emitters, s0, s1, t, h)
-        step.ties_now = tied
         still = np.concatenate([p.i for p in tied[0]] + [np.zeros(0, np.int64)] + (
             [] if tied[1] is None else [tied[1].i]))  # tied: no collider moves them
         resting = resting_contacts(step.paths, state.particle_x, state.particle_v, s0,
@@ -289,7 +289,7 @@ class ParticleSolver:
         if held is not None:
             self._constrain(state, held, x0, t + h, h)
         self._check(state, inputs, t + h)
-        return x0, v0
+        return x0, v0, tied
 
     # -- passes ---------------------------------------------------------------------------------
     def _collide_pairs(self, step: _FrameStep, x0, v0, s1: float, resting) -> None:
