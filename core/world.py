@@ -38,7 +38,7 @@ import numpy as np
 from .bounds import DEFAULT_BOUNDS, StateBounds
 from .contact import ColliderFrame, ColliderPath, ColliderPaths
 from .errors import PhysanimError
-from .integrators import INTEGRATORS
+from .integrators import SPRING_INTEGRATORS
 
 MAX_SUBSTEPS = 10_000  # per frame: keeps a bake finite
 
@@ -48,7 +48,8 @@ class SolverSettings:
     """How a system steps: the scene's solver options (a system may override its own).
 
     Attributes:
-        integrator: one of :data:`physanim.core.integrators.INTEGRATORS`.
+        integrator: one of :data:`physanim.core.integrators.INTEGRATORS` (spring meshes also
+            ``"BDF2"``: :data:`~physanim.core.integrators.SPRING_INTEGRATORS`).
         substeps: sub-steps per frame (1..MAX_SUBSTEPS).
         tolerance: relative tolerance of the adaptive integrator (RK45) and implicit solves.
         bounds: a simulated point beyond them (position or speed) stops the run with an error.
@@ -60,9 +61,9 @@ class SolverSettings:
     bounds: StateBounds = DEFAULT_BOUNDS
 
     def __post_init__(self):
-        if self.integrator not in INTEGRATORS:
+        if self.integrator not in SPRING_INTEGRATORS:
             raise ValueError(f"unknown integrator {self.integrator!r}; choose one of "
-                             f"{', '.join(INTEGRATORS)}")
+                             f"{', '.join(SPRING_INTEGRATORS)}")
         if isinstance(self.substeps, bool) or int(self.substeps) != self.substeps \
                 or self.substeps < 1:
             raise ValueError(f"substeps must be an integer >= 1 (got {self.substeps})")

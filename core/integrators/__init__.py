@@ -29,12 +29,15 @@ from .runge_kutta import (DOPRI5_TABLEAU, EULER_TABLEAU, MAX_ADAPTIVE_STEPS, MID
 
 __all__ = [
     "DOPRI5_TABLEAU", "EULER_TABLEAU", "INTEGRATORS", "MAX_ADAPTIVE_STEPS", "MIDPOINT_TABLEAU",
-    "RK4_TABLEAU", "AdaptiveRK", "Derivative", "ExplicitRK", "ImplicitEuler", "Integrator",
-    "JacobianSystem", "PointSystem", "StepReport", "SymplecticEuler", "System", "Tableau", "bicgstab",
-    "make_integrator", "projected_pcg", "rk_step",
+    "RK4_TABLEAU", "SPRING_INTEGRATORS", "AdaptiveRK", "Derivative", "ExplicitRK",
+    "ImplicitEuler", "Integrator", "JacobianSystem", "PointSystem", "StepReport",
+    "SymplecticEuler", "System", "Tableau", "bicgstab", "make_integrator", "projected_pcg",
+    "rk_step",
 ]
 
 INTEGRATORS = ("EULER", "SYMPLECTIC_EULER", "MIDPOINT", "RK4", "RK45", "IMPLICIT")
+#: spring meshes also step with BDF2 (:mod:`physanim.core.springs.bdf2`)
+SPRING_INTEGRATORS = INTEGRATORS + ("BDF2",)
 
 
 def make_integrator(name: str, tolerance: float = 1e-4) -> Integrator:

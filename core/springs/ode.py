@@ -34,11 +34,14 @@ class MeshOde:
     ``contact``: the vertices touching colliders. Explicit integrators see them as a constraint
     on the accumulated forces (``constraint``, a :class:`ContactForce`); the implicit stepper
     enforces ``contact`` as velocity constraints instead (``constraint`` None). ``bodies``: the
-    colliders (``contact.collider`` values) that are two-way coupled bodies (None: none)."""
+    colliders (``contact.collider`` values) that are two-way coupled bodies (None: none).
+    ``coupled``: vertices are attached to bodies that take their impulses back (a second-order
+    stepper then takes a backward Euler step: :mod:`.bdf2`)."""
 
     def __init__(self, state: SpringMeshState, mass: np.ndarray, free: np.ndarray,
                  forces: SubstepForces, pin_v: np.ndarray, contact: Contacts,
-                 constraint: ContactForce | None, bodies: np.ndarray | None = None):
+                 constraint: ContactForce | None, bodies: np.ndarray | None = None,
+                 coupled: bool = False):
         self.state = state
         self.mass = mass
         self.free = free
@@ -46,6 +49,7 @@ class MeshOde:
         self.contact = contact
         self.constraint = constraint
         self.bodies = np.zeros(0, np.int64) if bodies is None else bodies
+        self.coupled = coupled
         self._pin_v = pin_v
         self.n = len(mass)
         self.dim = 6 * self.n

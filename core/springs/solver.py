@@ -25,6 +25,7 @@ from ..integrators import make_integrator
 from ..transforms import TransformPath, inverse_affine, transform_points
 from ..world import SolverSettings, SolverSystem, World, WorldFrame, merged
 from .forces import AngularSprings, ConstantForces, LinearDrag, MassShared
+from .bdf2 import BDF2
 from .implicit import BaraffWitkin
 from .inputs import SpringDrive, SpringFrameInputs
 from . import attach
@@ -94,8 +95,8 @@ class SpringMeshSolver:
         self.colliders = ColliderPaths() if colliders is None else colliders
         self.substeps = self.settings.substeps
         self.integrator_name = integrator
-        self.integrator = (BaraffWitkin() if integrator == "IMPLICIT"
-                           else make_integrator(integrator, tolerance))
+        self.integrator = (BaraffWitkin() if integrator == "IMPLICIT" else BDF2()
+                           if integrator == "BDF2" else make_integrator(integrator, tolerance))
         s = model.settings
         self.springs = DampedSprings(model.spring_i, model.spring_j, model.spring_rest,
                                  model.spring_stiffness, model.spring_damping)
@@ -361,7 +362,8 @@ class SpringMeshSolver:
 
         def ode_with(constraints: Contacts) -> MeshOde:
             return MeshOde(state, self.model.vertex_mass, self.free, forces, pin_v, constraints,
-                           None if implicit else ContactForce(constraints, h), bodies)
+                           None if implicit else ContactForce(constraints, h), bodies,
+                           step.held is not None)
 
         ode = ode_with(contact)
         x0, v0 = state.x.copy(), state.v.copy()
@@ -458,6 +460,6 @@ class SpringMeshSolver:
                     f"{self._advice()}", frame, SimulationError)
 
     def _advice(self) -> str:
-        if self.integrator_name == "IMPLICIT":
+        if self.integrator_name in ("IMPLICIT", "BDF2"):
             return "use more substeps or lower stiffness"
         return "use the IMPLICIT integrator, more substeps or lower stiffness"

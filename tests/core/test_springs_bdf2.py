@@ -1,0 +1,195 @@
+"""BDF2 for spring meshes (:mod:`physanim.core.springs.bdf2`): against the textbook recurrence on
+the linear oscillator, its order of convergence, its damping against backward Euler's, and the
+steps it must take as backward Euler (contacts, coupling, a changed sub-step).
+
+Oscillator: two equal masses on one spring along x (no gravity, damping, shear, bending or drag)
+move only in q = |x1 - x0| - r, q'' = -omega^2 q: linear, so BDF2 on it is a linear recurrence
+the test computes on its own (first step backward Euler: no history yet).
+"""
+from __future__ import annotations
+
+import math
+import pickle
+
+import numpy as np
+import pytest
+
+from physanim.core.contact import ColliderFrame
+from physanim.core.springs import (SpringFrameInputs, SpringMeshBuilder, SpringMeshSettings,
+                                   SpringMeshSolver)
+from physanim.core.springs.bdf2 import BDF2
+from physanim.core.springs.implicit import BaraffWitkin
+from physanim.tests.core.helpers import grid
+
+MASS = 2.0  # [kg], 1 kg per vertex: reduced mass 0.5 kg
+MU = 0.25 * MASS
+OMEGA = 2.0 * math.pi  # [rad/s]: a 1 s period
+K = MU * OMEGA ** 2
+STRETCH = 0.1  # [m]
+
+
+def _pair(integrator: str, h: float):
+    settings = SpringMeshSettings("Pair", mass=MASS, stiffness=K, damping=0.0,
+                                  shear_stiffness=0.0, bend_mode="NONE", drag=0.0)
+    model = SpringMeshBuilder(settings, [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], [[0, 1]],
+                              np.zeros((0, 3))).finalize(1)
+    return model, SpringMeshSolver(model, integrator, 1, frame_dt=h, frame=1)
+
+
+def _oscillate(integrator: str, h: float, steps: int) -> np.ndarray:
+    """(steps + 1, 2) [q, q'] after every step from q = STRETCH at rest."""
+    model, solver = _pair(integrator, h)
+    state = model.state()
+    state.x[1, 0] += STRETCH
+    out = [(STRETCH, 0.0)]
+    for k in range(steps):
+        solver.advance(state, SpringFrameInputs(k + 1, k * h, h, gravity=(0.0, 0.0, 0.0)))
+        assert np.all(state.x[:, 1:] == 0.0)  # on the axis: the force is linear in q
+        out.append((state.x[1, 0] - state.x[0, 0] - 1.0, state.v[1, 0] - state.v[0, 0]))
+    return np.array(out)
+
+
+def _recurrence(h: float, steps: int) -> np.ndarray:
+    """BDF2 on u' = J u, u = [q, q'], started by one backward Euler step, computed here."""
+    jac = np.array([[0.0, 1.0], [-OMEGA ** 2, 0.0]])
+    u = [np.array([STRETCH, 0.0])]
+    u.append(np.linalg.solve(np.eye(2) - h * jac, u[0]))
+    step = np.linalg.inv(np.eye(2) - (2.0 * h / 3.0) * jac)
+    while len(u) <= steps:
+        u.append(step @ ((4.0 * u[-1] - u[-2]) / 3.0))
+    return np.array(u)
+
+
+@pytest.mark.parametrize("per_period", [24, 200])
+def test_bdf2_is_the_textbook_recurrence_on_the_oscillator(per_period):
+    """Three periods. The implicit solve here is direct (two vertices), so each step is exact to
+    rounding except for CG's accepted residual (1e-3 of the right-hand side): allowance 1e-3 of
+    the amplitude per step's change, summed over the run."""
+    h = 1.0 / per_period
+    steps = 3 * per_period
+    got = _oscillate("BDF2", h, steps)
+    want = _recurrence(h, steps)
+    change = np.abs(np.diff(want[:, 0])).sum()
+    assert np.abs(got[:, 0] - want[:, 0]).max() <= 1e-3 * change + 1e-12
+    assert np.abs(got[:, 1] - want[:, 1]).max() <= 1e-3 * OMEGA * change + 1e-12
+
+
+def test_bdf2_converges_at_second_order_backward_euler_at_first():
+    """Error at t = 1 s against STRETCH cos(omega t) for h and h / 2: BDF2's error ratio near 4
+    (second order), backward Euler's near 2."""
+    def error(integrator, per_period):
+        q = _oscillate(integrator, 1.0 / per_period, per_period)[-1, 0]
+        return abs(q - STRETCH * math.cos(OMEGA))
+    bdf = error("BDF2", 100) / error("BDF2", 200)
+    euler = error("IMPLICIT", 100) / error("IMPLICIT", 200)
+    assert 3.5 < bdf < 4.5, bdf
+    assert 1.7 < euler < 2.3, euler
+
+
+def test_bdf2_damps_a_resolved_swing_far_less_than_backward_euler():
+    """At 24 steps per period (a cloth swinging once a second at one step per frame) backward
+    Euler keeps |1 / (1 - i omega h)|^24 = 0.62 of the amplitude per period; BDF2's principal
+    root keeps 0.98 (both read off the characteristic equations: z = omega h = 0.26)."""
+    z = 2.0 * math.pi / 24
+    be = abs(1.0 / (1.0 - 1j * z)) ** 24
+    roots = np.roots([1.5 - 1j * z, -2.0, 0.5])  # (3/2 - i z) r^2 - 2 r + 1/2 = 0
+    bdf = max(abs(roots)) ** 24
+    assert be < 0.63 and bdf > 0.97
+    for integrator, keep in (("IMPLICIT", be), ("BDF2", bdf)):
+        u = _oscillate(integrator, 1.0 / 24, 24 * 6)
+        amplitude = np.hypot(u[:, 0], u[:, 1] / OMEGA)
+        ratio = amplitude[24 * 5] / amplitude[24 * 4]  # one period, after the start-up
+        assert ratio == pytest.approx(keep, rel=0.01), integrator
+
+
+def _cloth(n: int = 12, pins: bool = True):
+    x, edges, tris, ls, lt, lv = grid(n, n, 1.0)
+    x = np.stack([x[:, 0], x[:, 1], np.full(len(x), 1.0)], axis=1)
+    weight = np.zeros(len(x))
+    if pins:
+        weight[[0, n - 1]] = 1.0
+    return SpringMeshBuilder(SpringMeshSettings("Cloth"), x, edges, tris, ls, lt, lv,
+                             pin_weight=weight).finalize(1)
+
+
+def _frames(solver, state, first, last, colliders=()):
+    for f in range(first, last + 1):
+        solver.advance(state, SpringFrameInputs(f, (f - 1) / 24, 1 / 24, gravity=(0, 0, -9.81),
+                                                colliders=list(colliders)))
+
+
+def test_a_pinned_cloth_takes_bdf2_steps_and_swings_more_than_with_backward_euler():
+    """The default cloth hanging from two corners, let swing for 4 s: BDF2 steps throughout
+    (after the first), pins on their targets, and at the same two sub-steps it keeps more of the
+    swing's kinetic energy than backward Euler (its damping is the springs' own, not the
+    method's)."""
+    energy = {}
+    for integrator in ("IMPLICIT", "BDF2"):
+        model = _cloth()
+        solver = SpringMeshSolver(model, integrator, 2, frame_dt=1 / 24, frame=1)
+        state = model.state()
+        _frames(solver, state, 1, 96)
+        assert np.array_equal(state.x[[0, 11]], model.rest_x[[0, 11]])
+        energy[integrator] = 0.5 * np.sum(model.vertex_mass[:, None] * state.v ** 2)
+        if integrator == "BDF2":
+            assert isinstance(solver.integrator, BDF2) and solver.integrator.last_second_order
+    assert energy["BDF2"] > 2.0 * energy["IMPLICIT"], energy
+
+
+def test_bdf2_at_its_defaults_drops_a_cloth_onto_the_ground_and_it_rests():
+    """Only the integrator chosen: the cloth falls (BDF2 steps), lands (backward Euler steps
+    while vertices touch the ground) and lies still on it, nothing below it."""
+    model = _cloth(pins=False)
+    solver = SpringMeshSolver(model, "BDF2", 2, frame_dt=1 / 24, frame=1)
+    state = model.state()
+    ground = ColliderFrame("Ground", "PLANE", np.diag([10.0, 10.0, 1.0, 1.0]),
+                           np.diag([10.0, 10.0, 1.0, 1.0]))
+    second = []
+    for f in range(1, 73):
+        _frames(solver, state, f, f, [ground])
+        second.append(solver.integrator.last_second_order)
+        assert state.x[:, 2].min() > -1e-6
+    assert any(second[:8]) and not second[-1]  # free fall in BDF2, resting contacts in BE
+    assert np.abs(state.v).max() < 1e-3 and np.ptp(state.x[:, 2]) < 1e-3
+
+
+def test_a_bdf2_bake_resumed_from_a_pickle_is_the_same_to_the_bit():
+    model = _cloth()
+    solver = SpringMeshSolver(model, "BDF2", 2, frame_dt=1 / 24, frame=1)
+    state = model.state()
+    _frames(solver, state, 1, 10)
+    copy_solver, copy_state = pickle.loads(pickle.dumps((solver, state)))
+    _frames(solver, state, 11, 20)
+    _frames(copy_solver, copy_state, 11, 20)
+    assert np.array_equal(state.x, copy_state.x) and np.array_equal(state.v, copy_state.v)
+
+
+def test_bdf2_restarts_its_history_where_the_state_was_changed_between_steps():
+    """A vertex moved between two steps (as pins, self-collision or strain limiting do) starts
+    again as if at constant velocity; the others keep their history. Checked on the history the
+    stepper takes: x_-1 = x0 - h v0 and v_-1 = v0 for the moved vertex only."""
+    model = _cloth(pins=False)
+    solver = SpringMeshSolver(model, "BDF2", 1, frame_dt=1 / 24, frame=1)
+    state = model.state()
+    _frames(solver, state, 1, 3)
+    stepper = solver.integrator
+    past = stepper.history
+    state.x[5, 2] += 1e-3
+    x0, v0 = state.x.copy(), state.v.copy()
+    before = stepper._before(past.t + past.h, past.h, x0, v0)
+    h = past.h
+    assert np.array_equal(before[0][5], x0[5] - h * v0[5]) and np.array_equal(before[1][5], v0[5])
+    others = np.arange(len(x0)) != 5
+    assert np.array_equal(before[0][others], past.start[0][others])
+    assert np.array_equal(before[1][others], past.start[1][others])
+    # a step of another length, or from another time, is backward Euler's
+    fresh = BDF2()
+    fresh.history = past
+    assert fresh._before(past.t + past.h, 0.5 * past.h, x0, v0) is None
+
+
+def test_bdf2_is_a_baraff_witkin_stepper_and_the_solver_names_it():
+    assert issubclass(BDF2, BaraffWitkin) and BDF2.name == "BDF2"
+    model = _cloth()
+    solver = SpringMeshSolver(model, "BDF2", 1, frame_dt=1 / 24, frame=1)
+    assert "more substeps or lower stiffness" in solver._advice()
