@@ -12,25 +12,27 @@ resolved motion by about (omega h)^4 / 4 per step: that swing keeps 99.7 % of it
 period at 24 steps a second. With x^ = (4 x0 - x_-1) / 3, v^ = (4 v0 - v_-1) / 3 and
 h^ = 2 h / 3 the formula reads x1 = x^ + h^ v1, v1 = v^ + h^ M^-1 f(x1, v1): one backward Euler
 step of h^ from (x^, v^). So a BDF2 step is a :class:`~.implicit.BaraffWitkin` step from the
-extrapolated state — the same linearisation, assembled matrix, multigrid and Newton safeguard —
-with each pinned vertex given the velocity that puts it where backward Euler would, at its pin.
+extrapolated state — the same linearisation, assembled matrix, multigrid, Newton safeguard,
+contacts and friction — with every prescribed velocity (a pin's, a pressed vertex's along its
+normal, a vertex static friction holds, one landing on a collider) turned into the one that
+ends the step where backward Euler's prescription would: w' = (x0 + h w - x^) / h^.
 
 The previous step's start is the history. A vertex whose state was changed between the steps
-(pins put on their targets, self-collision, strain limiting, a landing round) starts its history
-again as if it had moved at its current velocity (x_-1 = x0 - h v0, v_-1 = v0); the first step,
-a step after the sub-step length changed, and steps with vertices on colliders or coupled to
-bodies are backward Euler steps (contacts, friction and two-way coupling prescribe and exchange
-velocities over the whole step, as backward Euler takes it).
+(pins put on their targets, a collision's response, self-collision, strain limiting) takes as
+its history a step that ends at its state now with the last step's velocity change dv
+(v_-1 = v0 - dv, x_-1 = x0 - h v0 + h dv / 2: exact for a constant acceleration); the first step, a step after the sub-step length changed, and steps of a mesh coupled to
+bodies (which exchange impulses with it over the whole step, as backward Euler takes it) are
+backward Euler steps.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..transforms import row_all
+from ..transforms import dot_rows, row_all
 from .implicit import BaraffWitkin
-from .implicit_parts import BaraffWitkinSystem, positions_and_velocities
+from .implicit_parts import BaraffWitkinSystem, VelocityFilter, positions_and_velocities
 
 
 @dataclass
@@ -51,23 +53,6 @@ class History:
     before: tuple | None = None
 
 
-class _Extrapolated:
-    """The system as the backward Euler step of h^ from (x^, v^) must see it: pinned vertices
-    move to where backward Euler from (x0, h) puts them, x0 + h u, at u' = (x0 + h u - x^) / h^;
-    everything else is the system's own."""
-
-    def __init__(self, system: BaraffWitkinSystem, x0: np.ndarray, h: float, x_hat: np.ndarray,
-                 h_hat: float):
-        self._system, self._x0, self._h, self._x_hat, self._h_hat = system, x0, h, x_hat, h_hat
-
-    def __getattr__(self, name):
-        return getattr(self._system, name)
-
-    def pinned_velocity(self, t: float) -> np.ndarray:
-        u = self._system.pinned_velocity(t)
-        return (self._x0 + self._h * u - self._x_hat) / self._h_hat
-
-
 class BDF2(BaraffWitkin):
     """Second-order implicit stepper for spring meshes (module docstring); the arguments are
     :class:`~.implicit.BaraffWitkin`'s."""
@@ -79,16 +64,14 @@ class BDF2(BaraffWitkin):
         self.history = History()
         #: whether the last step was a BDF2 step (False: backward Euler)
         self.last_second_order = False
-
-    def __setstate__(self, state):  # a stepper pickled before it kept these
-        self.__dict__.update(state)
-        self.__dict__.setdefault("history", History())
-        self.__dict__.setdefault("last_second_order", False)
+        self._start: tuple | None = None  # (x0, h, x^) of a BDF2 step while it is solved
 
     def _step_impl(self, system: BaraffWitkinSystem, t: float, y: np.ndarray, h: float):
         x0, v0 = positions_and_velocities(y)
         before = self._before(t, h, x0, v0)
-        coupled = len(system.contact) or len(system.bodies) or getattr(system, "coupled", False)
+        contact = system.contact
+        coupled = getattr(system, "coupled", False) or (
+            len(system.bodies) and np.isin(contact.collider, system.bodies).any())
         self.last_second_order = before is not None and not coupled
         if not self.last_second_order:
             y1, report = super()._step_impl(system, t, y, h)
@@ -97,13 +80,36 @@ class BDF2(BaraffWitkin):
             v_hat = (4.0 * v0 - before[1]) / 3.0
             h_hat = 2.0 * h / 3.0
             # the step of h^ ends where this one does, at t + h
-            y1, report = super()._step_impl(_Extrapolated(system, x0, h, x_hat, h_hat),
-                                            t + h - h_hat,
-                                            np.concatenate([x_hat.ravel(), v_hat.ravel()]),
-                                            h_hat)
+            self._start = (x0, h, x_hat)
+            try:
+                y1, report = super()._step_impl(system, t + h - h_hat,
+                                                np.concatenate([x_hat.ravel(), v_hat.ravel()]),
+                                                h_hat)
+            finally:
+                self._start = None
         x1, v1 = positions_and_velocities(y1)
         self.history.end = (x1.copy(), v1.copy())
         return y1, report
+
+    def _constraints(self, system: BaraffWitkinSystem, t: float, h: float, v0: np.ndarray,
+                     f0: np.ndarray, slipping: np.ndarray | None = None,
+                     leaving: np.ndarray | None = None) -> VelocityFilter:
+        """Backward Euler's filter (:meth:`.implicit.BaraffWitkin._constraints`) from the
+        extrapolated state, its prescribed velocities w turned into the ones that end a BDF2
+        step where w ends a backward Euler step: w' = (x0 + h w - x^) / h^ — all three
+        directions of pinned and held vertices, the normal of pressed ones."""
+        out = super()._constraints(system, t, h, v0, f0, slipping, leaving)
+        if self._start is None:
+            return out
+        x0, h0, x_hat = self._start
+        turned = (x0 + h0 * (v0 + out.given) - x_hat) / h - v0
+        given = out.given.copy()
+        fixed = out.free_scale[:, 0] == 0.0
+        given[fixed] = turned[fixed]
+        sliding = np.ones(len(out.pressed), bool) if out.stuck is None else ~out.stuck
+        rows, normal = out.pressed[sliding], out.normal[sliding]
+        given[rows] = dot_rows(turned[rows], normal)[:, None] * normal
+        return replace(out, given=given)
 
     def _before(self, t: float, h: float, x0: np.ndarray, v0: np.ndarray):
         """(x_-1, v_-1) for the step of h from (x0, v0) at t, or None for a backward Euler one;
@@ -116,8 +122,11 @@ class BDF2(BaraffWitkin):
         if past.end is not None and past.h == h and \
                 abs(t - (past.t + h)) <= 1e-9 * max(1.0, abs(t)):  # the next step
             same = row_all(past.end[0] == x0) & row_all(past.end[1] == v0)
-            if same.any():
-                before = (np.where(same[:, None], past.start[0], x0 - h * v0),
-                          np.where(same[:, None], past.start[1], v0))
+            # changed rows: a step before this one ending at their state now, accelerating by
+            # the last step's velocity change dv (without it this step would give them only
+            # 2/3 of their forces' impulse); exact for a constant acceleration
+            dv = past.end[1] - past.start[1]
+            before = (np.where(same[:, None], past.start[0], x0 - h * v0 + 0.5 * h * dv),
+                      np.where(same[:, None], past.start[1], v0 - dv))
         self.history = History(t, h, (x0.copy(), v0.copy()), None, before)
         return before

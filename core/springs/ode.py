@@ -35,8 +35,8 @@ class MeshOde:
     on the accumulated forces (``constraint``, a :class:`ContactForce`); the implicit stepper
     enforces ``contact`` as velocity constraints instead (``constraint`` None). ``bodies``: the
     colliders (``contact.collider`` values) that are two-way coupled bodies (None: none).
-    ``coupled``: vertices are attached to bodies that take their impulses back (a second-order
-    stepper then takes a backward Euler step: :mod:`.bdf2`)."""
+    ``coupled``: vertices are attached to bodies that take their impulses back (two-way; a
+    second-order stepper then takes a backward Euler step: :mod:`.bdf2`)."""
 
     def __init__(self, state: SpringMeshState, mass: np.ndarray, free: np.ndarray,
                  forces: SubstepForces, pin_v: np.ndarray, contact: Contacts,

@@ -363,7 +363,7 @@ class SpringMeshSolver:
         def ode_with(constraints: Contacts) -> MeshOde:
             return MeshOde(state, self.model.vertex_mass, self.free, forces, pin_v, constraints,
                            None if implicit else ContactForce(constraints, h), bodies,
-                           step.held is not None)
+                           step.held is not None and any(b is not None for b in step.held.coupled))
 
         ode = ode_with(contact)
         x0, v0 = state.x.copy(), state.v.copy()

@@ -40,31 +40,36 @@ def _on_slope(mu: float):
     return model, slope, m[:3, 2], -m[:3, 1]  # normal, downhill
 
 
-def _run(model, slope, frames: int):
-    solver = SpringMeshSolver(model, "IMPLICIT", 2, frame_dt=DT, frame=1)
+def _run(model, slope, frames: int, integrator: str = "IMPLICIT"):
+    solver = SpringMeshSolver(model, integrator, 2, frame_dt=DT, frame=1)
     state = model.state()
     for frame in range(1, frames + 1):
         solver.advance(state, SpringFrameInputs(frame, frame * DT, DT, colliders=[slope]))
         yield frame, state, solver
 
 
-def test_cloth_on_a_slope_steeper_than_its_friction_slides_at_the_coulomb_rate():
+@pytest.mark.parametrize("integrator", ["IMPLICIT", "BDF2"])
+def test_cloth_on_a_slope_steeper_than_its_friction_slides_at_the_coulomb_rate(integrator):
+    """(BDF2: its steps on the slope are second-order ones, contacts and friction included.)"""
     mu = 0.2  # < tan 30 = 0.577
     model, slope, normal, downhill = _on_slope(mu)
     speed = {}
-    for frame, state, _ in _run(model, slope, 36):
+    for frame, state, solver in _run(model, slope, 36, integrator):
         assert (state.x @ normal).min() >= -1e-6
         speed[frame] = float(state.v.mean(axis=0) @ downhill)
+        if integrator == "BDF2" and frame > 1:
+            assert solver.integrator.last_second_order, frame
     expected = G * (math.sin(THETA) - mu * math.cos(THETA))
     measured = (speed[36] - speed[12]) / (24 * DT)
     assert measured == pytest.approx(expected, rel=0.02)
 
 
-def test_cloth_on_a_slope_shallower_than_its_friction_stays_where_it_lies():
+@pytest.mark.parametrize("integrator", ["IMPLICIT", "BDF2"])
+def test_cloth_on_a_slope_shallower_than_its_friction_stays_where_it_lies(integrator):
     mu = 0.8  # > tan 30
     model, slope, normal, downhill = _on_slope(mu)
     centre = None
-    for frame, state, solver in _run(model, slope, 72):
+    for frame, state, solver in _run(model, slope, 72, integrator):
         assert (state.x @ normal).min() >= -1e-6
         if frame == 12:
             centre = state.x.mean(axis=0)
