@@ -314,7 +314,7 @@ VIRTUAL_ITEMS = [
 ]
 SPRING_INTEGRATOR_ITEMS = [('SCENE', "Scene", "Use the scene's integrator")] + INTEGRATOR_ITEMS + [
     ('BDF2', "Implicit BDF2", "Second-order implicit (BDF2): stable for stiff springs and damps "
-     "swings far less than implicit Euler (backward Euler steps while touching colliders)"),
+     "swings far less than implicit Euler"),
 ]
 assert tuple(i[0] for i in SPRING_INTEGRATOR_ITEMS[1:]) == SPRING_INTEGRATORS
 
