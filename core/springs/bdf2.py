@@ -20,9 +20,10 @@ ends the step where backward Euler's prescription would: w' = (x0 + h w - x^) / 
 The previous step's start is the history. A vertex whose state was changed between the steps
 (pins put on their targets, a collision's response, self-collision, strain limiting) takes as
 its history a step that ends at its state now with the last step's velocity change dv
-(v_-1 = v0 - dv, x_-1 = x0 - h v0 + h dv / 2: exact for a constant acceleration); the first step, a step after the sub-step length changed, and steps of a mesh coupled to
-bodies (which exchange impulses with it over the whole step, as backward Euler takes it) are
-backward Euler steps.
+(v_-1 = v0 - dv, x_-1 = x0 - h v0 + h dv / 2: exact for a constant acceleration). The first
+step, a step after the sub-step length changed, and steps of a mesh that exchanges impulses
+with a body (two-way attachments, contacts with bodies: the coupling hands over the impulses
+of a whole step, as backward Euler takes it) are backward Euler steps.
 """
 from __future__ import annotations
 
