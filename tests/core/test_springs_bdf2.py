@@ -272,3 +272,24 @@ def test_a_cloth_on_one_way_attachments_takes_bdf2_steps():
         second.append(solver.integrator.last_second_order)
     assert all(second)
     np.testing.assert_allclose(state.x[[0, n - 1]], model.rest_x[[0, n - 1]], atol=1e-9)
+
+
+def test_bdf2_keeps_a_stiff_grid_bounded_at_one_step_per_frame():
+    """A-stability on a stiff, nonlinear mesh: the 10 x 10 grid of k = 1e5 N/m of the implicit
+    Euler test (omega h of an edge spring 186) at one step per frame stays near its springs'
+    rest lengths, hangs from its corners and loses energy overall (BDF2 need not lose it in
+    every frame)."""
+    from physanim.tests.core.test_springs_implicit import (ENERGY_SCALE, PINNED, SIZE,
+                                                           _energy, _inputs, _stiff_grid)
+    model = _stiff_grid()
+    solver = SpringMeshSolver(model, "BDF2", 1, frame_dt=1 / 24, frame=1)
+    state = model.state()
+    start = _energy(model, state)
+    for frame in range(1, 101):
+        solver.advance(state, _inputs(frame))
+        assert frame == 1 or solver.integrator.last_second_order
+        length = np.linalg.norm(state.x[model.spring_i] - state.x[model.spring_j], axis=1)
+        assert np.all(length < 1.05 * model.spring_rest)
+        reach = np.linalg.norm(state.x[:, None, :] - model.rest_x[None, PINNED], axis=2).min(1)
+        assert np.all(reach < 1.01 * np.hypot(SIZE, SIZE))
+    assert _energy(model, state) < start - 0.3 * ENERGY_SCALE
