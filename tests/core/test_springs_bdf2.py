@@ -293,3 +293,32 @@ def test_bdf2_keeps_a_stiff_grid_bounded_at_one_step_per_frame():
         reach = np.linalg.norm(state.x[:, None, :] - model.rest_x[None, PINNED], axis=2).min(1)
         assert np.all(reach < 1.01 * np.hypot(SIZE, SIZE))
     assert _energy(model, state) < start - 0.3 * ENERGY_SCALE
+
+
+def test_bdf2_steps_by_whether_the_mesh_exchanges_impulses_with_a_body():
+    """A rope holding a box (two-way: the box and the rope exchange impulses) takes backward
+    Euler steps; a cloth with a rigid body in the world that it does not touch takes BDF2
+    steps."""
+    from physanim.tests.core.test_coupling import DT, box, coupled, rope, run
+    builder = rope(11)
+    builder.add_attachment(Attachment([10], "Box"))
+    world, rstate, model, mstate = coupled(builder, box("Box", (0.1, 0.1, 0.1), (0.0, 0.0, 0.9),
+                                                       mass=1.0), integrator="BDF2")
+    stepper = world.systems[1].solver.integrator
+    steps = []
+    run(world, 24, each=lambda f: steps.append(stepper.last_second_order))
+    assert isinstance(stepper, BDF2) and not any(steps)
+    assert np.isfinite(mstate.x).all() and 0.5 < rstate.body_x[0, 2] < 1.0  # it hangs
+
+    x, edges, tris, ls, lt, lv = grid(6, 6, 1.0)
+    x = np.stack([x[:, 0], x[:, 1], np.full(len(x), 1.0)], axis=1)
+    weight = np.zeros(len(x))
+    weight[[0, 5]] = 1.0
+    builder = SpringMeshBuilder(SpringMeshSettings("Cloth"), x, edges, tris, ls, lt, lv,
+                                pin_weight=weight)
+    world, rstate, model, mstate = coupled(builder, box("Far", (0.1, 0.1, 0.1), (5.0, 0.0, 3.0),
+                                                       mass=1.0), integrator="BDF2")
+    stepper = world.systems[1].solver.integrator
+    steps = []
+    run(world, 12, each=lambda f: steps.append(stepper.last_second_order))
+    assert all(steps[1:]) and rstate.body_x[0, 2] < 3.0 - 0.5 * 9.81 * (11 * DT) ** 2 * 0.9
