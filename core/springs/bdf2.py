@@ -70,9 +70,8 @@ class BDF2(BaraffWitkin):
     def _step_impl(self, system: BaraffWitkinSystem, t: float, y: np.ndarray, h: float):
         x0, v0 = positions_and_velocities(y)
         before = self._before(t, h, x0, v0)
-        contact = system.contact
-        coupled = getattr(system, "coupled", False) or (
-            len(system.bodies) and np.isin(contact.collider, system.bodies).any())
+        coupled = system.coupled or (
+            len(system.bodies) and np.isin(system.contact.collider, system.bodies).any())
         self.last_second_order = before is not None and not coupled
         if not self.last_second_order:
             y1, report = super()._step_impl(system, t, y, h)

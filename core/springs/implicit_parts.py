@@ -45,12 +45,14 @@ class BaraffWitkinSystem(System, Protocol):
             forces press them into it (or always, if ``held``).
         bodies: (b,) the colliders (as in ``contact.collider``) that are bodies taking the
             contacts' impulses back (two-way coupling): their contacts only push.
+        coupled: vertices are attached to bodies that take their impulses back (two-way).
     """
 
     mass: np.ndarray
     free: np.ndarray
     contact: Contacts
     bodies: np.ndarray
+    coupled: bool
 
     def pinned_velocity(self, t: float) -> np.ndarray:
         """(n, 3) velocity of the pinned vertices at ``t`` [m/s] (rows of free ones unused)."""
