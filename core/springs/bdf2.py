@@ -65,7 +65,7 @@ class BDF2(BaraffWitkin):
         self.history = History()
         #: whether the last step was a BDF2 step (False: backward Euler)
         self.last_second_order = False
-        self._start: tuple | None = None  # (x0, h, x^) of a BDF2 step while it is solved
+        self._start: tuple | None = None  # (x0, v0, h, x^) of a BDF2 step while it is solved
 
     def _step_impl(self, system: BaraffWitkinSystem, t: float, y: np.ndarray, h: float):
         x0, v0 = positions_and_velocities(y)
@@ -80,7 +80,7 @@ class BDF2(BaraffWitkin):
             v_hat = (4.0 * v0 - before[1]) / 3.0
             h_hat = 2.0 * h / 3.0
             # the step of h^ ends where this one does, at t + h
-            self._start = (x0, h, x_hat)
+            self._start = (x0, v0, h, x_hat)
             try:
                 y1, report = super()._step_impl(system, t + h - h_hat,
                                                 np.concatenate([x_hat.ravel(), v_hat.ravel()]),
@@ -101,7 +101,7 @@ class BDF2(BaraffWitkin):
         out = super()._constraints(system, t, h, v0, f0, slipping, leaving)
         if self._start is None:
             return out
-        x0, h0, x_hat = self._start
+        x0, _, h0, x_hat = self._start
         turned = (x0 + h0 * (v0 + out.given) - x_hat) / h - v0
         given = out.given.copy()
         fixed = out.free_scale[:, 0] == 0.0
@@ -110,6 +110,15 @@ class BDF2(BaraffWitkin):
         rows, normal = out.pressed[sliding], out.normal[sliding]
         given[rows] = dot_rows(turned[rows], normal)[:, None] * normal
         return replace(out, given=given)
+
+    def _start_energy(self, system: BaraffWitkinSystem, x: np.ndarray, v: np.ndarray) -> float:
+        """The energy of the step's real start (x0, v0), not of the extrapolated state the
+        step of h^ starts from: extrapolating a turning edge stretches it, and that spring
+        energy let steps that gained energy pass the Newton safeguard unrefined (a flag's
+        flapping edges stretched to three times their length at one step per frame)."""
+        if self._start is None:
+            return super()._start_energy(system, x, v)
+        return super()._start_energy(system, self._start[0], self._start[1])
 
     def _before(self, t: float, h: float, x0: np.ndarray, v0: np.ndarray):
         """(x_-1, v_-1) for the step of h from (x0, v0) at t, or None for a backward Euler one;

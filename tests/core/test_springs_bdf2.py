@@ -184,7 +184,7 @@ def test_held_vertices_end_a_bdf2_step_where_backward_euler_would_put_them():
     before = (x0 - h * v0 + rng.normal(0, 1e-6, x0.shape), v0 + rng.normal(0, 1e-3, x0.shape))
     x_hat, v_hat, h_hat = (4 * x0 - before[0]) / 3, (4 * v0 - before[1]) / 3, 2 * h / 3
     be = BaraffWitkin._constraints(system, t, h, v0, system.forces_at(t, x0, v0))
-    stepper._start = (x0, h, x_hat)
+    stepper._start = (x0, v0, h, x_hat)
     bdf = stepper._constraints(system, t + h / 3, h_hat, v_hat,
                                system.forces_at(t + h / 3, x_hat, v_hat))
     stepper._start = None
