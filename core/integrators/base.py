@@ -87,6 +87,21 @@ def check_step(t: float, dt: float) -> None:
         raise ValueError(f"time step must be finite and > 0 (got dt={dt!r} at t={t!r})")
 
 
+_KINDS: dict = {}
+
+
+def is_a(system, protocol) -> bool:
+    """``isinstance(system, protocol)`` for a runtime-checkable protocol, remembered per class:
+    the structural check reads every member of the protocol (about 30 us in Python 3.11), once
+    per step of every system otherwise — a tenth of a 10,000-particle step. Systems are classes
+    whose methods do not come and go per instance."""
+    key = (type(system), protocol)
+    known = _KINDS.get(key)
+    if known is None:
+        known = _KINDS[key] = isinstance(system, protocol)
+    return known
+
+
 def all_finite(*arrays: np.ndarray) -> bool:
     return all(bool(np.isfinite(a).all()) for a in arrays)
 

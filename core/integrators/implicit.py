@@ -6,7 +6,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .base import Integrator, JacobianSystem, StepReport, non_finite
+from .base import Integrator, JacobianSystem, StepReport, is_a, non_finite
 from .krylov import bicgstab
 
 
@@ -68,7 +68,7 @@ class ImplicitEuler(Integrator):
                           report: StepReport) -> Callable[[np.ndarray], np.ndarray]:
         """``u -> J u`` at ``(t, y)``: the system's own product, or a forward difference of
         ``derivative`` from ``f0`` (each counted in ``report.evaluations``)."""
-        if isinstance(system, JacobianSystem):
+        if is_a(system, JacobianSystem):
             return lambda u: np.asarray(system.jacobian_vector(t, y, u), dtype=np.float64)
         y_scale = 1.0 + float(np.linalg.norm(y))
 

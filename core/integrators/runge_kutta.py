@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import SimulationError
-from .base import (Derivative, Integrator, PointSystem, StepReport, all_finite, check_step,
+from .base import (Derivative, Integrator, PointSystem, StepReport, all_finite, check_step, is_a,
                    non_finite)
 
 
@@ -276,7 +276,7 @@ class SymplecticEuler(Integrator):
         """As :meth:`Integrator.step`; a :class:`~.base.PointSystem` is stepped on its stored
         arrays (the same values to the bit, without packing y: a particle step's state is
         read once instead of copied three times)."""
-        if not isinstance(system, PointSystem):
+        if not is_a(system, PointSystem):
             return super().step(system, t, dt)
         check_step(t, dt)
         x, v = system.points()

@@ -167,3 +167,25 @@ def test_a_warm_start_without_friction_impulses_still_resumes():
                          state.particle_emitter, 0.01, 0.0, ids=state.particle_id,
                          warm=warm[:2])
     assert np.isfinite(again[1]).all()
+
+
+def test_a_grain_landing_beside_one_on_the_ground_does_not_push_it_into_the_ground():
+    """A grain resting on the ground (held by it) and one that landed beside it in this sub-step
+    (it fell 2.4 mm; the ground stopped it) a little inside it (3 % of a radius): a sub-step of
+    the default emitter's pile. The position passes part them; the pair's friction, taking back
+    the newcomer's slide down along the other, must not drag the resting grain into the
+    ground: the colliders' response after the pass would carry it back along its path and
+    undo the parting (those two grains were left 1.6 % of a radius inside each other)."""
+    r, h = 0.05, 1.0 / 48
+    spec = ParticleCollisions("Pile")
+    x = np.array([[0.0, 0.0, 1e-4], [0.02154109, 0.09542365, 1e-4]])
+    x0 = np.array([[0.0, 0.0, 1e-4], [0.02173372, 0.09587866, 2.5212e-3]])
+    v0 = np.array([[0.0, 0.0, 0.0], [-0.05004, -0.11820, -0.45057]])
+    support = (np.array([0]), np.array([[0.0, 0.0, 1.0]]), np.array([0.3]), np.zeros((1, 3)))
+    assert 2 * r - np.linalg.norm(x[0] - x[1]) > 0.03 * r
+    out = spec.resolve(x, np.zeros((2, 3)), x0, v0, np.full(2, r), np.full(2, 0.1),
+                       np.zeros(2, np.int64), h, 0.40885, support, np.arange(2), None,
+                       np.array([0.0, 0.0, 1.0]))[0]
+    assert out[0, 2] >= 1e-4 - 1e-12  # not moved into the ground
+    depth = 2 * r - np.linalg.norm(out[0] - out[1])
+    assert depth <= 0.01 * r  # parted: at most 1 % of a radius (the passes stop at 0.75 %)
