@@ -34,6 +34,7 @@ from ..forces import (DampedSprings, Gravity, HardConstraints, OnCurves, OnPlane
                       Rods, Tethers, on_circles)
 from ..integrators import make_integrator
 from ..world import SolverSettings, SolverSystem, World, WorldFrame
+from .blocks import in_blocks, separable
 from .emit import Births, sample_births, sample_bursts
 from .frame_inputs import FrameInputs, FrameReport, ParticleDrive
 from .model import ParticleModel, ParticleState
@@ -60,6 +61,7 @@ class _FrameStep:
     report: FrameReport
     ties: TieFrame | None = None  # particles tied to objects (None: no tie this frame)
     rest: Conditions | None = None  # what its sub-steps are a function of (:mod:`.rest`)
+    blocks: bool = False  # whether its particles move on their own, in blocks (:mod:`.blocks`)
 
     @property
     def reactions(self) -> list:
@@ -197,7 +199,8 @@ class ParticleSolver:
         return _FrameStep(state, inputs, paths, h, g, 2.0 * float(np.linalg.norm(g)) * h + 1e-4,
                           [self._sample(state, inputs, i) for i in range(model.emitter_count)],
                           FrameReport(per_emitter_births=[0] * model.emitter_count), ties,
-                          conditions(self.settings.integrator, g, h, inputs, paths, alone))
+                          conditions(self.settings.integrator, g, h, inputs, paths, alone),
+                          separable(self.settings.integrator, alone, inputs))
 
     @staticmethod
     def _check_stiffness(state: ParticleState, inputs: FrameInputs, h: float) -> None:
@@ -230,7 +233,7 @@ class ParticleSolver:
         awake = self._rest.awake(state, step.rest)
         tied = ([], None)  # (a sub-step with particles at rest has no ties)
         if awake is None:
-            x0, v0, tied = self._move(step, state, s0, s1, t)
+            x0, v0, tied = in_blocks(self._move, step, state, s0, s1, t)
             self._rest.settle(state, None, x0, v0, state.particle_x, state.particle_v, step.rest)
         elif len(awake):
             moving = state.subset(awake)
