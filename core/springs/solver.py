@@ -307,11 +307,11 @@ class SpringMeshSolver:
         virtual = self._virtual(step.state, inputs, t, step.h, s0, s1)
         carried = self.itself.forces(model.vertex_count) if self.itself is not None else None
         carried = [ConstantForces(carried)] if carried is not None else []
+        winds = [FaceWind(model.triangles, w) for w in inputs.winds if len(model.triangles)]
         return SubstepForces(
-            all=[Gravity(tuple(step.g)), self.springs, self.bending, self.drag, *virtual,
-                 *(FaceWind(model.triangles, w) for w in inputs.winds if len(model.triangles)),
+            all=[Gravity(tuple(step.g)), self.springs, self.bending, self.drag, *virtual, *winds,
                  *(MassShared(f, self._mass_share) for f in inputs.fields), *carried],
-            stiff=[self.springs, self.bending, self.drag, *virtual],
+            stiff=[self.springs, self.bending, self.drag, *virtual, *winds],
             potentials=[self.springs, self.bending, *carried], gravity=step.g)
 
     def _virtual(self, state: SpringMeshState, inputs: SpringFrameInputs, t0: float, h: float,

@@ -185,6 +185,17 @@ class MatrixBuilder:
             blocks *= -coefficient
             self._subtract(positions, blocks.reshape(-1, 9))  # (unique positions)
 
+    def add_shared(self, clique: np.ndarray, blocks: np.ndarray, coefficient: float) -> None:
+        """Terms c C_m (C (m, 3, 3) symmetric) on every pair of vertices of clique row m, each
+        vertex with itself included: block (a, b) = c C_m (a force on a face's mean velocity,
+        shared by its corners)."""
+        k = clique.shape[1]
+        table = blocks.reshape(-1, 9)
+        for positions, a, _ in self.pattern._groups(clique):
+            values = np.take(table, a // k, axis=0, mode="clip").sum(axis=1)
+            values *= -coefficient
+            self._subtract(positions, values)
+
     def finish(self) -> BlockMatrix:
         p = self.pattern
         data = self._data
