@@ -75,7 +75,7 @@ class FaceWind:
         f = (area / 3.0)[:, None] * (normal + self.SKIN_FRICTION * (pressure - normal))
         scatter_add(f_out, None, np.concatenate([f, f, f]), self._flat)
 
-    def linearize(self, p: ParticleView) -> "LinearizedFaces":
+    def linearize(self, p: ParticleView) -> LinearizedFaces:
         """df/dv at ``p``: every corner's force depends on the face's mean velocity, so each
         face couples its three corners by the block -(A / 9) s B, with B = (1 - c_t) n n^T +
         c_t I and s = 2 K |u|, the drag's steepest slope (along u; across it, half that): a
