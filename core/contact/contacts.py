@@ -9,6 +9,9 @@ import numpy as np
 from ..transforms import norm_rows, row_indices, rows_at, take
 
 
+_NONE: dict = {}  # Contacts.none()'s instance
+
+
 @dataclass(frozen=True)
 class Contacts:
     """Points of one system touching colliders (k of them), one row each, sorted by index.
@@ -50,8 +53,14 @@ class Contacts:
 
     @classmethod
     def none(cls) -> Contacts:
-        return cls.of(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)),
-                      np.zeros((0, 3)), np.zeros(0), np.zeros(0))
+        """No contacts: one shared instance (frozen, and its arrays hold nothing to change;
+        most sub-steps of most systems ask for it, several times)."""
+        empty = _NONE.get(cls)
+        if empty is None:
+            empty = _NONE[cls] = cls.of(np.zeros(0, np.int64), np.zeros((0, 3)),
+                                        np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0),
+                                        np.zeros(0))
+        return empty
 
     @classmethod
     def of(cls, index, point, normal, surface_velocity, friction, restitution, depth=None,

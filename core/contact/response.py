@@ -41,7 +41,8 @@ def reflect(u: np.ndarray, n: np.ndarray, restitution: float, friction: float,
 
 
 def respond(colliders: list[ColliderPath], x0: np.ndarray, x1: np.ndarray, v0: np.ndarray,
-            v1: np.ndarray, s0: float, s1: float, h: float, rest_speed: float) -> Response:
+            v1: np.ndarray, s0: float, s1: float, h: float, rest_speed: float,
+            own: bool = False) -> Response:
     """Continuous collision response for a sub-step [s0, s1] of the frame interval.
 
     Up to :data:`PASSES` passes: find each remaining path's first hit, bounce the points that
@@ -50,6 +51,8 @@ def respond(colliders: list[ColliderPath], x0: np.ndarray, x1: np.ndarray, v0: n
     Args:
         x0, v0: (n, 3) state before the sub-step; x1, v1: after integration (collision-free).
         h: sub-step length [s]. rest_speed: bounces slower than this become contact [m/s].
+        own: x1 and v1 are the caller's to give away: when nothing hits they are returned as
+            they are, not copied.
 
     Returns:
         The corrected positions and velocities, the number of collisions handled and each hit
@@ -58,22 +61,23 @@ def respond(colliders: list[ColliderPath], x0: np.ndarray, x1: np.ndarray, v0: n
         velocity change the bounce gave it).
     """
     first = _FirstHits(len(x1))
+    untouched = Response(x1, v1, 0, Contacts.none()) if own else None
     if not colliders or len(x1) == 0:
-        return Response(x1.copy(), v1.copy(), 0, first.contacts())
+        return untouched or Response(x1.copy(), v1.copy(), 0, Contacts.none())
     # pass 1 tests everyone (no gather) on the paths as given: most sub-steps hit nothing
     nearest = _nearest_hits(colliders, (x0, x1, np.full(len(x1), float(s0)),
                                         np.full(len(x1), float(s1))))
-    if not (nearest.collider >= 0).any():
-        return Response(x1.copy(), v1.copy(), 0, first.contacts())
+    if nearest is None:
+        return untouched or Response(x1.copy(), v1.copy(), 0, Contacts.none())
     remainder = _Remainder(x0, x1, v0, v1, s0, s1, h)
     active = None  # later passes only re-test the hit ones
     hits, touched = 0, []
     for pass_ in range(PASSES):
         if pass_:
             nearest = _nearest_hits(colliders, remainder.segments(active))
+            if nearest is None:
+                break
         hit = nearest.collider >= 0
-        if not hit.any():
-            break
         hits += _bounce(colliders, remainder, active, nearest, rest_speed, first)
         active = np.nonzero(hit)[0] if active is None else active[hit]
         touched.append(active)
@@ -159,15 +163,20 @@ class _Nearest(NamedTuple):
         return _Nearest(*(a[sub] for a in self))
 
 
-def _nearest_hits(colliders: list[ColliderPath], segments: tuple) -> _Nearest:
+def _nearest_hits(colliders: list[ColliderPath], segments: tuple) -> _Nearest | None:
     """Earliest collider entry of each path of ``segments`` (start, end, s_start, s_end:
-    :meth:`_Remainder.segments`)."""
+    :meth:`_Remainder.segments`); None when no path enters any collider."""
     start, x, s_start, s_end = segments
     count = len(x)
-    nearest = _Nearest(np.full(count, -1), np.full(count, np.inf), np.zeros((count, 3)),
-                       np.zeros((count, 3)), np.full(count, -1, dtype=np.int64))
+    nearest = None  # made at the first hit (most sub-steps have none)
     for ci, col in enumerate(colliders):
         hits = col.first_hits(start, x, s_start, s_end)
+        if not len(hits.index):
+            continue
+        if nearest is None:
+            nearest = _Nearest(np.full(count, -1), np.full(count, np.inf),
+                               np.zeros((count, 3)), np.zeros((count, 3)),
+                               np.full(count, -1, dtype=np.int64))
         better = hits.t < nearest.t[hits.index]
         g = hits.index[better]
         nearest.t[g] = hits.t[better]
@@ -229,14 +238,18 @@ class _FirstHits:
     """Each point's first collision in one :func:`respond` call."""
 
     def __init__(self, count: int):
-        self.seen = np.zeros(count, dtype=bool)
-        self.vectors = {k: np.zeros((count, 3)) for k in _VECTORS}
-        self.scalars = {k: np.zeros(count) for k in _SCALARS}
-        self.collider = np.full(count, -1, np.int64)
+        self.count = count
+        self.seen = None  # the tables, made at the first hit (most sub-steps have none)
 
     def note(self, idx, n_w, v_c, col, point, du, which: int) -> None:
         """Points ``idx`` hit ``col`` (normals n_w, surface velocity v_c) and were placed at
         ``point``; ``du`` is their velocity change relative to the surface."""
+        if self.seen is None:
+            count = self.count
+            self.seen = np.zeros(count, dtype=bool)
+            self.vectors = {k: np.zeros((count, 3)) for k in _VECTORS}
+            self.scalars = {k: np.zeros(count) for k in _SCALARS}
+            self.collider = np.full(count, -1, np.int64)
         new = ~self.seen[idx]
         i = idx[new]
         self.seen[i] = True
@@ -248,6 +261,8 @@ class _FirstHits:
         self.collider[i] = which
 
     def contacts(self) -> Contacts:
+        if self.seen is None:
+            return Contacts.none()
         idx = np.nonzero(self.seen)[0]
         v, s = ({k: a[idx] for k, a in table.items()} for table in (self.vectors, self.scalars))
         return Contacts.of(idx, v["point"], v["normal"], v["surface_velocity"], s["friction"],

@@ -26,8 +26,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..transforms import row_all
-
 # integrators whose step is a function of each particle alone, to the bit: RK4's weighted sum
 # of its stages is one BLAS product over the whole state, whose last values round by the
 # state's length
@@ -70,6 +68,23 @@ def _still(path) -> bool:
     return path.path.static and not path.deforming
 
 
+def _unchanged(x0, v0, x1, v1) -> np.ndarray:
+    """(n,) whether each row of x1, v1 equals x0, v0: ``row_all(x1 == x0) & row_all(v1 ==
+    v0)``, column by column, velocities first (gravity changes them in flight), stopping when
+    no row is left (one compare for particles in the air instead of six)."""
+    out = None
+    for a, b in ((v1, v0), (x1, x0)):
+        for k in (2, 0, 1):
+            same = a[:, k] == b[:, k]
+            if out is None:
+                out = same
+            else:
+                out &= same
+            if not out.any():
+                return out
+    return out
+
+
 class Rest:
     """Which particles of a state are at rest (a mask aligned with its particles), under which
     :class:`Conditions`; the solver keeps it aligned through deaths and births."""
@@ -97,7 +112,7 @@ class Rest:
         if now is None:
             self.mask = None
             return
-        still = row_all(x1 == x0) & row_all(v1 == v0)
+        still = _unchanged(x0, v0, x1, v1)
         if awake is None:
             self.mask = still
         else:

@@ -281,7 +281,7 @@ class ParticleSolver:
         if tied[1] is not None:  # the bodies take what the step's tie forces gave them
             tied[1].commit(h)
         done = respond(step.paths, x0, state.particle_x, v0, state.particle_v, s0, s1, h,
-                       step.rest_speed)
+                       step.rest_speed, own=not len(still))  # (the tied keep their own)
         if len(still):
             done.x[still], done.v[still] = state.particle_x[still], state.particle_v[still]
         state.particle_x, state.particle_v = done.x, done.v

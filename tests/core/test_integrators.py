@@ -495,3 +495,17 @@ def test_make_integrator_names_the_bad_value():
     for tolerance in (0.0, -1e-3, math.nan, math.inf):
         with pytest.raises(ValueError, match=repr(tolerance).replace(".", r"\.")):
             integrators.make_integrator("RK45", tolerance)
+
+
+def test_all_finite_tells_finite_states_from_nan_and_infinities():
+    from physanim.core.integrators.base import all_finite
+
+    big = np.full(8, 1e308)  # every value finite (their sum would overflow)
+    assert all_finite(big, np.zeros(3), np.zeros((0, 3)))
+    for bad in (np.nan, np.inf, -np.inf):
+        a = np.arange(12.0).reshape(4, 3)
+        a[2, 1] = bad
+        assert not all_finite(np.zeros(3), a)
+    both = np.array([np.inf, -np.inf, 1.0])  # sums to NaN
+    assert not all_finite(both)
+    assert not all_finite(np.array([1e308, 1e308, np.nan]))

@@ -332,3 +332,24 @@ def test_respond_records_each_hit_for_the_spring_solver():
     np.testing.assert_allclose(first.point[0, 2], DT + SKIN, atol=1e-9)
     # it met the ground at 5 m/s relative to it and left at 0.25 of that: a 6.25 m/s change
     np.testing.assert_allclose(first.impulse, [5.0 * 1.25], rtol=1e-9)
+
+
+def test_a_response_that_hits_nothing_gives_back_the_paths_it_owns_and_copies_the_others():
+    """``respond(own=True)``: the caller's integrated arrays come back as they are when no path
+    enters a collider (a particle step's common case), copied when not owned; a hit corrects
+    them as ever."""
+    ground = ColliderFrame("Ground", "HALF_SPACE", np.eye(4), np.eye(4), restitution=0.5)
+    paths = coll.ColliderPaths().of([ground], DT)
+    x0 = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 2.0]])
+    v0 = np.array([[0.0, 0.0, -1.0], [0.0, 0.0, 0.0]])
+    x1, v1 = x0 + DT * v0, v0.copy()
+    owned = coll.respond(paths, x0, x1, v0, v1, 0.0, 1.0, DT, 0.01, own=True)
+    assert owned.x is x1 and owned.v is v1 and owned.count == 0 and len(owned.first) == 0
+    copied = coll.respond(paths, x0, x1, v0, v1, 0.0, 1.0, DT, 0.01)
+    assert copied.x is not x1 and np.array_equal(copied.x, x1) and np.array_equal(copied.v, v1)
+    falling = np.array([[0.0, 0.0, 0.01], [1.0, 0.0, 2.0]])
+    v_fall = np.array([[0.0, 0.0, -2.0], [0.0, 0.0, 0.0]])
+    hit = coll.respond(paths, falling, falling + DT * v_fall, v_fall, v_fall.copy(), 0.0, 1.0,
+                       DT, 0.01, own=True)
+    assert hit.count == 1 and hit.v[0, 2] == pytest.approx(1.0)  # bounced at e = 0.5
+    assert list(hit.first.index) == [0]
