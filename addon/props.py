@@ -241,7 +241,8 @@ class PHYSANIM_PG_force(bpy.types.PropertyGroup):
     type: EnumProperty(name="Type", items=FORCE_ITEMS, default='WIND', options=STATIC)
     strength: FloatProperty(name="Strength", min=-1.0e6, max=1.0e6, soft_min=-100.0,
                             soft_max=100.0, default=1.0, description="N per particle; a spring mesh feels it as one particle (shared "
-                                        "by vertex mass), except wind: N/m² of facing area on its faces")
+                                        "by vertex mass), except wind: N/m² on its faces held still "
+                                        "across it (faces moving with the air feel less, against it more)")
     noise: FloatProperty(name="Gusts", min=0.0, max=100.0, soft_max=2.0,
                          description="Strength of gusts relative to the steady wind")
     noise_scale: FloatProperty(name="Gust Size", min=1.0e-3, max=1.0e4, default=2.0,
