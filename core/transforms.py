@@ -217,6 +217,26 @@ def take(a: np.ndarray, index: np.ndarray) -> np.ndarray:
     return np.take(a, index, axis=0)
 
 
+def scale_rows(a: np.ndarray, s: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """``a * s[:, None]`` for (n, k) ``a`` and (n,) ``s``, column by column (into ``out``, which
+    may be ``a``): numpy 1.26 runs that broadcast row by row, 5-10 x slower than k passes over
+    the columns (4,096 x 3: 66 us against 12 us). The same values."""
+    if out is None:
+        out = np.empty(a.shape, np.result_type(a, s))
+    for k in range(a.shape[1]):
+        np.multiply(a[:, k], s, out=out[:, k])
+    return out
+
+
+def divide_rows(a: np.ndarray, s: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """``a / s[:, None]`` as :func:`scale_rows` does its product. The same values."""
+    if out is None:
+        out = np.empty(a.shape, np.result_type(a, s))
+    for k in range(a.shape[1]):
+        np.divide(a[:, k], s, out=out[:, k])
+    return out
+
+
 def row_indices(rows) -> np.ndarray:
     """Row indices for :func:`take` from ``rows``: indices, or a boolean mask."""
     rows = np.asarray(rows)

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..transforms import dot_rows
+from ..transforms import divide_rows, dot_rows, scale_rows
 from .fields import ParticleView
 
 
@@ -44,7 +44,7 @@ def spring_geometry(l: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     0: a spring of zero length pushes nowhere) of spring vectors l (s, 3)."""
     length = np.sqrt(dot_rows(l, l))
     safe = np.where(length > 1e-12, length, 1.0)
-    return l / safe[:, None], length, safe
+    return divide_rows(l, safe), length, safe
 
 
 def spring_forces(l: np.ndarray, ldot: np.ndarray, rest, stiffness, damping):
@@ -55,7 +55,7 @@ def spring_forces(l: np.ndarray, ldot: np.ndarray, rest, stiffness, damping):
     Returns: (f (s, 3), u, |l|, safe |l|) as :func:`spring_geometry`.
     """
     u, length, safe = spring_geometry(l)
-    f = -(stiffness * (length - rest) + damping * dot_rows(ldot, u))[:, None] * u
+    f = scale_rows(u, -(stiffness * (length - rest) + damping * dot_rows(ldot, u)))
     return f, u, length, safe
 
 

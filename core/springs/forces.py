@@ -10,7 +10,7 @@ import numpy as np
 
 from ..forces import ParticleView
 from ..forces.springs import LinearizedVertices, flat_index, scatter_add
-from ..transforms import dot_rows
+from ..transforms import dot_rows, scale_rows
 from . import topology
 
 
@@ -141,7 +141,7 @@ class LinearDrag:
 
     def apply(self, p: ParticleView, f_out: np.ndarray) -> None:
         if self.k:
-            f_out -= (self.k * p.mass)[:, None] * p.v
+            f_out -= scale_rows(p.v, self.k * p.mass)
 
     def linearize(self, p: ParticleView) -> LinearizedVertices:
         n = len(p.mass)

@@ -25,7 +25,7 @@ import numpy as np
 
 from ..integrators import Integrator, StepReport
 from ..integrators.krylov import projected_pcg
-from ..transforms import inverse3
+from ..transforms import inverse3, scale_rows
 from .implicit_parts import (BaraffWitkinSystem, BlockJacobi, Linearisation, MatrixFree,
                              NewtonResult, SolvePattern, StepMemory, VelocityFilter,
                              diagonal_filter, filtered_diagonal, filtered_one_normal,
@@ -292,7 +292,7 @@ class BaraffWitkin(Integrator):
         """-g(dv) (n, 3) [N s] for Newton on g(dv) = M dv - h f(x0 + h (v0 + dv), v0 + dv):
         the right-hand side of a later Newton iteration."""
         v1 = v0 + dv
-        return h * system.forces_at(t + h, x0 + h * v1, v1) - system.mass[:, None] * dv
+        return h * system.forces_at(t + h, x0 + h * v1, v1) - scale_rows(dv, system.mass)
 
     def _linear_system(self, system: BaraffWitkinSystem, h: float, blocks: list,
                        rhs: np.ndarray, constraints: VelocityFilter,

@@ -5,13 +5,14 @@ carried from step to step."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import TYPE_CHECKING, NamedTuple, Protocol
 
 import numpy as np
 
 from ..integrators import System
 from ..integrators.krylov import Product
-from ..transforms import transform_vectors
+from ..transforms import scale_rows, transform_vectors
 from .multigrid import AggregationHierarchy
 from .sparse import BlockMatrix, BlockPattern, MatrixBuilder
 
@@ -110,12 +111,18 @@ class VelocityFilter:
         """(k,) bool: the pressed vertices free to slide along their surface."""
         return np.ones(len(self.pressed), bool) if self.stuck is None else ~self.stuck
 
+    @cached_property
+    def _scale(self) -> np.ndarray:
+        """``free_scale`` as (n, 3): numpy multiplies an (n, 3) by an (n, 1) row by row, ten
+        times slower than two (n, 3) arrays (every CG iteration projects)."""
+        return np.repeat(self.free_scale, 3, axis=1)
+
     def project(self, u: np.ndarray) -> np.ndarray:
         """Remove the constrained directions, in place (callers pass fresh arrays)."""
         if self.diagonal is not None:  # one pass; the same values as the general route
             u *= self.diagonal
             return u
-        u *= self.free_scale
+        u *= self._scale
         if len(self.pressed):
             un = np.einsum("ij,ij->i", u[self.pressed], self.normal)
             u[self.pressed] -= un[:, None] * self.normal
@@ -220,7 +227,7 @@ class MatrixFree:
         self.blocks, self.mass, self.h = blocks, mass, h
 
     def __call__(self, u: np.ndarray) -> np.ndarray:
-        out = self.mass[:, None] * u
+        out = scale_rows(u, self.mass)
         for blk in self.blocks:
             blk.product(-self.h * self.h, -self.h, u, out)
         return out

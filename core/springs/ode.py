@@ -7,6 +7,7 @@ import numpy as np
 
 from ..contact import ContactForce, Contacts
 from ..forces import ParticleView
+from ..transforms import scale_rows
 from .model import SpringMeshState
 
 
@@ -85,7 +86,7 @@ class MeshOde:
         """Kinetic + gravitational + spring + bending energy [J] of the free vertices' motion
         (what an implicit step must not increase when nothing drives the mesh)."""
         m = self.mass
-        e = 0.5 * float(np.sum(m[:, None] * v * v))
+        e = 0.5 * float(np.sum(scale_rows(v, m) * v))  # (m v) v, by columns
         if np.any(self.forces.gravity):
             e -= float(np.sum(m * (x @ self.forces.gravity)))
         for force in self.forces.potentials:
