@@ -6,7 +6,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from ..transforms import norm_rows, row_indices, rows_at, take
+from ..transforms import norm_rows, row_indices, rows_at, scale_rows, take
 
 
 _NONE: dict = {}  # Contacts.none()'s instance
@@ -136,17 +136,17 @@ class ContactForce:
         push = np.minimum(fn, 0.0)  # only the component into the surface is cancelled
         rel = rows_at(p.v, idx) - c.surface_velocity
         # the tangential parts of the velocity and of the force (f_n drops out of both)
-        vt = rel - np.einsum("ij,ij->i", rel, normal)[:, None] * normal
-        ft = f - fn[:, None] * normal
+        # (by columns: numpy runs (k, 1) x (k, 3) broadcasts row by row; the same values)
+        vt = rel - scale_rows(normal, np.einsum("ij,ij->i", rel, normal))
+        ft = f - scale_rows(normal, fn)
         # friction that would stop the sliding within this step (static friction) ...
-        need = vt
-        need *= -rows_at(p.mass, idx)[:, None] / self.h
+        need = scale_rows(vt, -rows_at(p.mass, idx) / self.h, out=vt)
         need -= ft
         need_mag = norm_rows(need)
         cap = c.friction * -push  # ... limited by Coulomb's mu |f_n| (kinetic friction)
         scale = np.minimum(1.0, cap / np.where(need_mag > 0.0, need_mag, np.inf))
-        need *= scale[:, None]
-        need -= push[:, None] * normal
+        scale_rows(need, scale, out=need)
+        need -= scale_rows(normal, push)
         if f is f_out:
             f_out += need
         else:

@@ -38,7 +38,8 @@ from ..collision.crossing import barycentric
 from ..collision.distance import CORNER, EDGE, closest_on_triangles, closest_points
 from ..collision.mesh import TriangleMesh
 from ..collision.raycast import segment_hits
-from ..transforms import cross, inverse_affine, norm_rows, take, transform_vectors
+from ..transforms import (cross, divide_rows, inverse_affine, norm_rows, scale_rows, take,
+                          transform_vectors)
 from .frame import ColliderFrame
 from .path import CONTACT_DISTANCE, ColliderPath, Features, Hits, SurfacePoints
 
@@ -133,7 +134,7 @@ class MeshPath(ColliderPath):
         else:
             corners = take(bvh.mesh.triangle_vertices, tri)
         face = cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-        face /= np.maximum(norm_rows(face), 1e-300)[:, None]
+        divide_rows(face, np.maximum(norm_rows(face), 1e-300), out=face)
         diff = l - q
         dist = norm_rows(diff)
         on_boundary = self._boundary[tri, np.maximum(feature, 0)]
@@ -151,9 +152,11 @@ class MeshPath(ColliderPath):
         ``prefer`` where the side is undefined); beside an open boundary, the direction from
         the closest point to the query point."""
         sign = np.where(side != 0.0, side, prefer)
-        n = face * sign[:, None]
+        n = scale_rows(face, sign)
         around = (side == 0.0) & (dist > 0.0)
-        return np.where(around[:, None], diff / np.where(around, dist, 1.0)[:, None], n)
+        if not around.any():
+            return n
+        return np.where(around[:, None], divide_rows(diff, np.where(around, dist, 1.0)), n)
 
     def _world_length(self, vec: np.ndarray, s) -> np.ndarray:
         lin = self._at(s)[..., :3, :3]

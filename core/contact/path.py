@@ -22,8 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..transforms import (TransformPath, inverse3, inverse_affine, norm_rows, row_indices, take,
-                          transform_points, transform_vectors)
+from ..transforms import (TransformPath, divide_rows, inverse3, inverse_affine, norm_rows,
+                          row_indices, take, transform_points, transform_vectors)
 from .frame import ColliderFrame
 
 SKIN = 1e-4  # [m] particles are placed this far outside a surface after a hit
@@ -191,7 +191,7 @@ class ColliderPath:
         normals = (self._normals0 if self.path.static  # the inverse-transpose
                    else np.swapaxes(inverse3(m[..., :3, :3]), -1, -2))
         n = transform_vectors(normals, n_local)
-        n /= norm_rows(n)[:, None]
+        divide_rows(n, norm_rows(n), out=n)
         return p, n
 
     def surface_velocity(self, l: np.ndarray, s, element: np.ndarray | None = None) -> np.ndarray:

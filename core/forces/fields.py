@@ -14,7 +14,7 @@ from typing import Protocol
 
 import numpy as np
 
-from ..transforms import cross
+from ..transforms import cross, scale_rows
 from ..validate import finite, non_negative
 
 
@@ -65,10 +65,10 @@ class Drag:
         non_negative(f'force "{self.name}"', linear=self.linear, quadratic=self.quadratic)
 
     def apply(self, p: ParticleView, f_out: np.ndarray) -> None:
-        k = self.linear
-        if self.quadratic:
-            k = k + self.quadratic * np.linalg.norm(p.v, axis=1)[:, None]
-        f_out -= k * p.v
+        if self.quadratic:  # by columns (numpy runs an (n, 1) x (n, 3) broadcast row by row)
+            f_out -= scale_rows(p.v, self.linear + self.quadratic * np.linalg.norm(p.v, axis=1))
+        else:
+            f_out -= self.linear * p.v
 
 
 @dataclass(frozen=True)

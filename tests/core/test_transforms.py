@@ -281,3 +281,28 @@ def test_one_point_is_mapped_as_it_is_among_many():
         many = transform_points(m, x)
         for i in range(0, 50, 7):
             assert np.array_equal(transform_points(m, x[i:i + 1])[0], many[i])
+
+
+def test_row_scaling_and_single_matrix_maps_by_columns_equal_the_broadcasts_to_the_bit():
+    """scale_rows / divide_rows and transform_vectors / transform_points with one matrix work
+    column by column (numpy runs (n, 1) x (n, 3) and (n, 3) x (3,) broadcasts row by row); the
+    values must be the broadcasts' exactly, including empty and single-row inputs."""
+    from physanim.core.transforms import divide_rows, scale_rows, transform_points, \
+        transform_vectors
+
+    rng = np.random.default_rng(11)
+    for n in (0, 1, 2, 257):
+        a = rng.normal(size=(n, 3)) * 10.0 ** rng.integers(-5, 5, size=(n, 1))
+        s = rng.normal(size=n)
+        assert np.array_equal(scale_rows(a, s), a * s[:, None])
+        assert np.array_equal(divide_rows(a, s), a / s[:, None])
+        out = a.copy()
+        scale_rows(out, s, out=out)
+        assert np.array_equal(out, a * s[:, None])
+        m = rng.normal(size=(4, 4))
+        assert np.array_equal(transform_vectors(m[:3, :3], a),
+                              a[:, 0:1] * m[:3, 0] + a[:, 1:2] * m[:3, 1] + a[:, 2:3] * m[:3, 2])
+        if n != 1:  # (one row goes through its own branch, unchanged)
+            assert np.array_equal(transform_points(m, a), a @ m[:3, :3].T + m[:3, 3])
+    wide = rng.normal(size=(5, 12))
+    assert np.array_equal(scale_rows(wide, np.arange(5.0)), wide * np.arange(5.0)[:, None])
