@@ -90,8 +90,16 @@ class TriangleCells:
         """Cell coordinates of points x (n, 3) as the triangles' were computed, clamped to the
         grid's border cells, which hold no triangle (the grid has one empty cell on each side),
         so that a query reaching outside looks up empty cells there."""
-        u = np.clip((x - self.origin) * (1.0 / self.cell_size), 0.0, self.dims - 1.0)
-        return u.astype(np.int64)  # truncation is floor for u >= 0
+        # by columns (numpy broadcasts the (3,) origin and bounds over (n, 3) row by row)
+        u = np.empty((len(x), 3), np.int64)
+        scale = 1.0 / self.cell_size
+        for j in range(3):
+            c = np.subtract(x[:, j], self.origin[j])
+            c *= scale
+            np.maximum(c, 0.0, out=c)
+            np.minimum(c, self.dims[j] - 1.0, out=c)
+            u[:, j] = c  # truncation is floor for c >= 0
+        return u
 
     def candidates(self, lo: np.ndarray, hi: np.ndarray):
         """Candidate triangles of query boxes [lo, hi] (n, 3).
@@ -102,7 +110,7 @@ class TriangleCells:
         """
         first, last = self._cell(lo), self._cell(hi)
         span = last - first + 1
-        count = span.prod(axis=1)
+        count = span[:, 0] * span[:, 1] * span[:, 2]  # (a reduction along 3 is slow in numpy)
         use = count <= QUERY_CELLS
         ok = np.nonzero(use)[0]
         query, cell = _entries(ok, first, span)

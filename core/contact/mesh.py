@@ -164,8 +164,11 @@ class MeshPath(ColliderPath):
 
     def _near_box(self, lo: np.ndarray, hi: np.ndarray, reach) -> np.ndarray:
         """Indices of boxes [lo, hi] (k, 3) within ``reach`` of the mesh's interval bounds."""
-        r = np.asarray(reach, float).reshape(-1, 1)
-        return np.nonzero(np.all((lo <= self._hi + r) & (hi >= self._lo - r), axis=1))[0]
+        r = np.broadcast_to(np.asarray(reach, float), (len(lo),))
+        near = np.ones(len(lo), bool)
+        for j in range(3):  # by columns: numpy broadcasts over (k, 3) row by row
+            near &= (lo[:, j] <= self._hi[j] + r) & (hi[:, j] >= self._lo[j] - r)
+        return np.nonzero(near)[0]
 
     # -- the three questions --------------------------------------------------------------------
     def first_hits(self, start, end, s_start, s_end) -> Hits:
