@@ -237,6 +237,17 @@ def divide_rows(a: np.ndarray, s: np.ndarray, out: np.ndarray | None = None) -> 
     return out
 
 
+def where_rows(cond: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.where(cond[:, None], a, b)`` for (n,) ``cond`` and (n, k) or (k,) ``a``, ``b``, by
+    columns (the same values; the (n, 1) condition is broadcast row by row by numpy)."""
+    a, b = np.asarray(a), np.asarray(b)
+    k = a.shape[-1] if a.ndim else b.shape[-1]
+    out = np.empty((len(cond), k), np.result_type(a, b))
+    for j in range(k):
+        out[:, j] = np.where(cond, a[..., j], b[..., j])
+    return out
+
+
 def row_indices(rows) -> np.ndarray:
     """Row indices for :func:`take` from ``rows``: indices, or a boolean mask."""
     rows = np.asarray(rows)

@@ -22,7 +22,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..transforms import column_max, cross, dot_rows, norm_rows, row_any, row_max
+from ..transforms import (column_max, cross, divide_rows, dot_rows, norm_rows, row_any, row_max,
+                          scale_rows, where_rows)
 from .broadphase_base import keep_overlapping, transposed
 from .broadphase_grid import (TooManyCandidates, UniformGrid, _auto_cell_size, _cell_ranges,
                               _entries, _keys)
@@ -72,13 +73,13 @@ def barycentric(p: np.ndarray, corners: np.ndarray) -> np.ndarray:
 
 def _unit(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     length = norm_rows(v)
-    return v / np.where(length > 0.0, length, 1.0)[:, None], length
+    return divide_rows(v, np.where(length > 0.0, length, 1.0)), length
 
 
 def _direction(diff: np.ndarray, fallback: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unit ``diff`` rows, ``fallback`` where they are shorter than TINY; and the lengths."""
     unit, length = _unit(diff)
-    return np.where((length > TINY)[:, None], unit, fallback), length
+    return where_rows(length > TINY, unit, fallback), length
 
 
 def _cubic(r0, dr, u0, du, w0, dw) -> tuple[np.ndarray, ...]:
@@ -164,12 +165,14 @@ def triangle_point(t0: np.ndarray, t1: np.ndarray, p0: np.ndarray,
     z1 = sum(k)  # f(1): the point's side of the triangle's winding at the end
     crossed = ever & (np.sign(z1) != side)
     q, _, _ = closest_on_triangles(p1, t1)
-    plane = -side[:, None] * n1  # from the point towards the triangle, as it came
+    plane = scale_rows(n1, -side)  # from the point towards the triangle, as it came
     normal, _ = _direction(q - p1, plane)
-    normal = np.where(crossed[:, None], plane, normal)
+    normal = where_rows(crossed, plane, normal)
     # without a plane (zero area) or a direction: the start's
-    normal = np.where((norm_rows(normal) == 0.0)[:, None], _direction(
-        t0.mean(axis=1) - p0, np.array([0.0, 0.0, 1.0]))[0], normal)
+    flat = norm_rows(normal) == 0.0
+    if flat.any():
+        normal = where_rows(flat, _direction(t0.mean(axis=1) - p0,
+                                             np.array([0.0, 0.0, 1.0]))[0], normal)
     ones = np.zeros((len(p1), 2))
     ones[:, 0] = 1.0
     return Separation(barycentric(q, t1), ones, normal, dot_rows(q - p1, normal), crossed)
@@ -208,11 +211,11 @@ def segment_segment(a0, b0, c0, d0, a1, b1, c1, d1) -> Separation:
     meet = np.zeros(times.shape, bool)
     row, r = np.nonzero(np.isfinite(times))
     if len(row):
-        at = times[row, r][:, None]
-        a, b = a0[row] + at * da[row], b0[row] + at * db[row]
-        c, d = c0[row] + at * dc[row], d0[row] + at * dd[row]
+        at = times[row, r]  # (rows by columns: numpy broadcasts (k, 1) over (k, 3) slowly)
+        a, b = a0[row] + scale_rows(da[row], at), b0[row] + scale_rows(db[row], at)
+        c, d = c0[row] + scale_rows(dc[row], at), d0[row] + scale_rows(dd[row], at)
         s, t = closest_on_segments(a, b, c, d)
-        gap = norm_rows(a + s[:, None] * (b - a) - c - t[:, None] * (d - c))
+        gap = norm_rows(a + scale_rows(b - a, s) - c - scale_rows(d - c, t))
         scale = np.maximum(norm_rows(b - a), norm_rows(d - c))
         meet[row, r] = gap <= MEET * scale
     ever, before = _first_crossing(times, signs, meet, k)
@@ -221,14 +224,14 @@ def segment_segment(a0, b0, c0, d0, a1, b1, c1, d1) -> Separation:
     reliable = length > PARALLEL * norm_rows(b1 - a1) * norm_rows(d1 - c1)
     crossed = ever & reliable & (-np.sign(sum(k)) != side)
     s, t = closest_on_segments(a1, b1, c1, d1)
-    q = a1 + s[:, None] * (b1 - a1)
-    p = c1 + t[:, None] * (d1 - c1)
-    plane = side[:, None] * m1
+    q = a1 + scale_rows(b1 - a1, s)
+    p = c1 + scale_rows(d1 - c1, t)
+    plane = scale_rows(m1, side)
     s0, t0 = closest_on_segments(a0, b0, c0, d0)
-    before_dir, _ = _direction(a0 + s0[:, None] * (b0 - a0) - c0 - t0[:, None] * (d0 - c0),
+    before_dir, _ = _direction(a0 + scale_rows(b0 - a0, s0) - c0 - scale_rows(d0 - c0, t0),
                                np.array([0.0, 0.0, 1.0]))
-    normal, _ = _direction(q - p, np.where(reliable[:, None], plane, before_dir))
-    normal = np.where(crossed[:, None], plane, normal)
+    normal, _ = _direction(q - p, where_rows(reliable, plane, before_dir))
+    normal = where_rows(crossed, plane, normal)
     return Separation(np.stack([1.0 - s, s], axis=1), np.stack([1.0 - t, t], axis=1), normal,
                       dot_rows(q - p, normal), crossed)
 

@@ -288,7 +288,7 @@ def test_row_scaling_and_single_matrix_maps_by_columns_equal_the_broadcasts_to_t
     column by column (numpy runs (n, 1) x (n, 3) and (n, 3) x (3,) broadcasts row by row); the
     values must be the broadcasts' exactly, including empty and single-row inputs."""
     from physanim.core.transforms import divide_rows, scale_rows, transform_points, \
-        transform_vectors
+        transform_vectors, where_rows
 
     rng = np.random.default_rng(11)
     for n in (0, 1, 2, 257):
@@ -304,5 +304,10 @@ def test_row_scaling_and_single_matrix_maps_by_columns_equal_the_broadcasts_to_t
                               a[:, 0:1] * m[:3, 0] + a[:, 1:2] * m[:3, 1] + a[:, 2:3] * m[:3, 2])
         if n != 1:  # (one row goes through its own branch, unchanged)
             assert np.array_equal(transform_points(m, a), a @ m[:3, :3].T + m[:3, 3])
+        cond = rng.random(n) < 0.5
+        other = rng.normal(size=(n, 3))
+        assert np.array_equal(where_rows(cond, a, other), np.where(cond[:, None], a, other))
+        up = np.array([0.0, 0.0, 1.0])
+        assert np.array_equal(where_rows(cond, a, up), np.where(cond[:, None], a, up))
     wide = rng.normal(size=(5, 12))
     assert np.array_equal(scale_rows(wide, np.arange(5.0)), wide * np.arange(5.0)[:, None])
