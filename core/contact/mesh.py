@@ -39,7 +39,7 @@ from ..collision.distance import CORNER, EDGE, closest_on_triangles, closest_poi
 from ..collision.mesh import TriangleMesh
 from ..collision.raycast import segment_hits
 from ..transforms import (cross, divide_rows, inverse_affine, norm_rows, scale_rows, take,
-                          transform_vectors)
+                          transform_vectors, where_rows)
 from .frame import ColliderFrame
 from .path import CONTACT_DISTANCE, ColliderPath, Features, Hits, SurfacePoints
 
@@ -156,7 +156,7 @@ class MeshPath(ColliderPath):
         around = (side == 0.0) & (dist > 0.0)
         if not around.any():
             return n
-        return np.where(around[:, None], divide_rows(diff, np.where(around, dist, 1.0)), n)
+        return where_rows(around, divide_rows(diff, np.where(around, dist, 1.0)), n)
 
     def _world_length(self, vec: np.ndarray, s) -> np.ndarray:
         lin = self._at(s)[..., :3, :3]

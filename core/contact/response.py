@@ -60,15 +60,13 @@ def respond(colliders: list[ColliderPath], x0: np.ndarray, x1: np.ndarray, v0: n
         the surface, carried to the sub-step's end with the surface; ``impulse``: the normal
         velocity change the bounce gave it).
     """
-    first = _FirstHits(len(x1))
-    untouched = Response(x1, v1, 0, Contacts.none()) if own else None
-    if not colliders or len(x1) == 0:
-        return untouched or Response(x1.copy(), v1.copy(), 0, Contacts.none())
     # pass 1 tests everyone (no gather) on the paths as given: most sub-steps hit nothing
-    nearest = _nearest_hits(colliders, (x0, x1, np.full(len(x1), float(s0)),
-                                        np.full(len(x1), float(s1))))
+    nearest = None if not colliders or len(x1) == 0 else _nearest_hits(
+        colliders, (x0, x1, np.full(len(x1), float(s0)), np.full(len(x1), float(s1))))
     if nearest is None:
-        return untouched or Response(x1.copy(), v1.copy(), 0, Contacts.none())
+        return (Response(x1, v1, 0, Contacts.none()) if own else
+                Response(x1.copy(), v1.copy(), 0, Contacts.none()))
+    first = _FirstHits(len(x1))
     remainder = _Remainder(x0, x1, v0, v1, s0, s1, h)
     active = None  # later passes only re-test the hit ones
     hits, touched = 0, []
@@ -238,18 +236,14 @@ class _FirstHits:
     """Each point's first collision in one :func:`respond` call."""
 
     def __init__(self, count: int):
-        self.count = count
-        self.seen = None  # the tables, made at the first hit (most sub-steps have none)
+        self.seen = np.zeros(count, dtype=bool)
+        self.vectors = {k: np.zeros((count, 3)) for k in _VECTORS}
+        self.scalars = {k: np.zeros(count) for k in _SCALARS}
+        self.collider = np.full(count, -1, np.int64)
 
     def note(self, idx, n_w, v_c, col, point, du, which: int) -> None:
         """Points ``idx`` hit ``col`` (normals n_w, surface velocity v_c) and were placed at
         ``point``; ``du`` is their velocity change relative to the surface."""
-        if self.seen is None:
-            count = self.count
-            self.seen = np.zeros(count, dtype=bool)
-            self.vectors = {k: np.zeros((count, 3)) for k in _VECTORS}
-            self.scalars = {k: np.zeros(count) for k in _SCALARS}
-            self.collider = np.full(count, -1, np.int64)
         new = ~self.seen[idx]
         i = idx[new]
         self.seen[i] = True
@@ -261,8 +255,6 @@ class _FirstHits:
         self.collider[i] = which
 
     def contacts(self) -> Contacts:
-        if self.seen is None:
-            return Contacts.none()
         idx = np.nonzero(self.seen)[0]
         v, s = ({k: a[idx] for k, a in table.items()} for table in (self.vectors, self.scalars))
         return Contacts.of(idx, v["point"], v["normal"], v["surface_velocity"], s["friction"],

@@ -5,6 +5,7 @@ import numpy as np
 
 from ..contact import ContactForce
 from ..forces import Gravity, HardConstraints, ParticleView
+from ..transforms import divide_rows
 from .model import ParticleState
 
 
@@ -52,12 +53,7 @@ class ParticleOde:
         self.contact.constrain(view, f)  # it cancels what the forces push into surfaces
         if self.constraints is not None:  # last: holds the rods against every other force
             self.constraints.constrain(view, f)
-        # column by column: numpy divides an (n, 3) by (n, 1) three times slower, row by row
-        out = f if out is None else out
-        mass = self.state.particle_mass
-        for k in range(3):
-            np.divide(f[:, k], mass, out=out[:, k])
-        return out
+        return divide_rows(f, self.state.particle_mass, out=f if out is None else out)
 
     def derivative(self, t: float, y: np.ndarray) -> np.ndarray:
         n = self._n

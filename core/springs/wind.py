@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..transforms import cross
+from ..transforms import cross, divide_rows, scale_rows
 from ..forces import ParticleView, Wind
 from ..forces.springs import flat_index, scatter_add
 
@@ -60,19 +60,19 @@ class FaceWind:
         if w.noise:
             pressure = pressure + (w.strength * w.noise) * w.field((a + b + c) / 3.0, p.t)
         size = np.sqrt(np.einsum("ij,ij->i", pressure, pressure))
-        air = pressure / np.sqrt(self.K * np.where(size > 0.0, size, 1.0))[:, None]
+        air = divide_rows(pressure, np.sqrt(self.K * np.where(size > 0.0, size, 1.0)))
         v = p.v
         u = air - (v[tri[:, 0]] + v[tri[:, 1]] + v[tri[:, 2]]) / 3.0
         norm = np.sqrt(np.einsum("ij,ij->i", doubled, doubled))
-        n = doubled / np.where(norm > 0, norm, 1.0)[:, None]
+        n = divide_rows(doubled, np.where(norm > 0, norm, 1.0))
         return 0.5 * norm, n, u
 
     def apply(self, p: ParticleView, f_out: np.ndarray) -> None:
         area, n, u = self._faces(p)
         speed = np.sqrt(np.einsum("ij,ij->i", u, u))
-        pressure = (self.K * speed)[:, None] * u
-        normal = np.einsum("ij,ij->i", pressure, n)[:, None] * n
-        f = (area / 3.0)[:, None] * (normal + self.SKIN_FRICTION * (pressure - normal))
+        pressure = scale_rows(u, self.K * speed)
+        normal = scale_rows(n, np.einsum("ij,ij->i", pressure, n))
+        f = scale_rows(normal + self.SKIN_FRICTION * (pressure - normal), area / 3.0)
         scatter_add(f_out, None, np.concatenate([f, f, f]), self._flat)
 
     def linearize(self, p: ParticleView) -> LinearizedFaces:
@@ -113,6 +113,6 @@ class LinearizedFaces:
         """out += cv df/dv u, matrix-free."""
         tri = self.triangles
         total = u[tri[:, 0]] + u[tri[:, 1]] + u[tri[:, 2]]
-        along = np.einsum("ij,ij->i", total, self.normal)[:, None] * self.normal
-        w = -(cv * self.scale)[:, None] * ((1.0 - self.skin) * along + self.skin * total)
+        along = scale_rows(self.normal, np.einsum("ij,ij->i", total, self.normal))
+        w = scale_rows((1.0 - self.skin) * along + self.skin * total, -cv * self.scale)
         scatter_add(out, None, np.concatenate([w, w, w]), self.flat)
