@@ -204,6 +204,31 @@ def closest_on_segments(a, b, c, d) -> tuple[np.ndarray, np.ndarray]:
 
 def segment_segment(a0, b0, c0, d0, a1, b1, c1, d1) -> Separation:
     """Segments a-b against segments c-d ((c, 3) each), at the step's start and end."""
+    s, t = closest_on_segments(a1, b1, c1, d1)
+    q = a1 + scale_rows(b1 - a1, s)
+    p = c1 + scale_rows(d1 - c1, t)
+    apart = norm_rows(q - p)
+    # Over the step the segments' distance changes by at most their points' largest relative
+    # motion: pairs further apart at the end than that (and than meeting's tolerance, with a
+    # margin for rounding) cannot have met, and need no crossing test (most of a mesh resting
+    # near another's edges: the same result, for a few of the operations)
+    motion = np.maximum(norm_rows(a1 - a0), norm_rows(b1 - b0)) + \
+        np.maximum(norm_rows(c1 - c0), norm_rows(d1 - d0))
+    longest = np.maximum(np.maximum(norm_rows(b0 - a0), norm_rows(b1 - a1)),
+                         np.maximum(norm_rows(d0 - c0), norm_rows(d1 - c1)))
+    met = np.flatnonzero(~(apart > (1.0 + 1e-6) * (motion + MEET * longest) + 2.0 * TINY))
+    normal = divide_rows(q - p, np.where(apart > 0.0, apart, 1.0))  # (as _direction's)
+    crossed = np.zeros(len(s), bool)
+    if len(met):
+        pick = (a0, b0, c0, d0, a1, b1, c1, d1, s, t, q, p)
+        normal[met], crossed[met] = _moving_segments(*(x[met] for x in pick))
+    return Separation(np.stack([1.0 - s, s], axis=1), np.stack([1.0 - t, t], axis=1), normal,
+                      dot_rows(q - p, normal), crossed)
+
+
+def _moving_segments(a0, b0, c0, d0, a1, b1, c1, d1, s, t, q, p):
+    """:func:`segment_segment`'s (normal, crossed) of pairs that may have met during the step,
+    given their nearest points at the end (parameters s, t; points q, p)."""
     da, db, dc, dd = a1 - a0, b1 - b0, c1 - c0, d1 - d0
     # f = (c - a) . ((b - a) x (d - c)) = -(a - c) . m: its sign is minus the first's side
     k = _cubic(c0 - a0, dc - da, b0 - a0, db - da, d0 - c0, dd - dc)
@@ -214,8 +239,8 @@ def segment_segment(a0, b0, c0, d0, a1, b1, c1, d1) -> Separation:
         at = times[row, r]  # (rows by columns: numpy broadcasts (k, 1) over (k, 3) slowly)
         a, b = a0[row] + scale_rows(da[row], at), b0[row] + scale_rows(db[row], at)
         c, d = c0[row] + scale_rows(dc[row], at), d0[row] + scale_rows(dd[row], at)
-        s, t = closest_on_segments(a, b, c, d)
-        gap = norm_rows(a + scale_rows(b - a, s) - c - scale_rows(d - c, t))
+        sr, tr = closest_on_segments(a, b, c, d)
+        gap = norm_rows(a + scale_rows(b - a, sr) - c - scale_rows(d - c, tr))
         scale = np.maximum(norm_rows(b - a), norm_rows(d - c))
         meet[row, r] = gap <= MEET * scale
     ever, before = _first_crossing(times, signs, meet, k)
@@ -223,17 +248,12 @@ def segment_segment(a0, b0, c0, d0, a1, b1, c1, d1) -> Separation:
     m1, length = _unit(cross(b1 - a1, d1 - c1))
     reliable = length > PARALLEL * norm_rows(b1 - a1) * norm_rows(d1 - c1)
     crossed = ever & reliable & (-np.sign(sum(k)) != side)
-    s, t = closest_on_segments(a1, b1, c1, d1)
-    q = a1 + scale_rows(b1 - a1, s)
-    p = c1 + scale_rows(d1 - c1, t)
     plane = scale_rows(m1, side)
     s0, t0 = closest_on_segments(a0, b0, c0, d0)
     before_dir, _ = _direction(a0 + scale_rows(b0 - a0, s0) - c0 - scale_rows(d0 - c0, t0),
                                np.array([0.0, 0.0, 1.0]))
     normal, _ = _direction(q - p, where_rows(reliable, plane, before_dir))
-    normal = where_rows(crossed, plane, normal)
-    return Separation(np.stack([1.0 - s, s], axis=1), np.stack([1.0 - t, t], axis=1), normal,
-                      dot_rows(q - p, normal), crossed)
+    return where_rows(crossed, plane, normal), crossed
 
 
 def box_pairs(lo_a: np.ndarray, hi_a: np.ndarray, lo_b: np.ndarray,

@@ -111,6 +111,56 @@ def test_segment_crossings_agree_with_brute_force():
     assert decided > 500 and crossed > 20
 
 
+def test_segments_too_far_apart_to_meet_skip_the_crossing_test_with_the_same_answer(
+        monkeypatch):
+    """A mesh resting near another's edges: pairs a few millimetres apart moving by about as
+    much. Those further apart at the end than their points' relative motion cannot have met;
+    they are answered from their nearest points at the end (never crossed; the normal from the
+    second's nearest point to the first's, the gap their distance) without the crossing test —
+    and crossings among the others still agree with brute force."""
+    from physanim.core.collision import crossing
+    rng = np.random.default_rng(11)
+    count = 600
+    ends0 = rng.normal(size=(count, 4, 3)) * 0.02
+    ends0[:, 2:] += ends0[:, :2].mean(axis=1)[:, None] - ends0[:, 2:].mean(axis=1)[:, None] + \
+        rng.normal(size=(count, 1, 3)) * 0.004  # the second segment across the first's middle
+    ends1 = ends0 + rng.normal(size=(count, 4, 3)) * rng.choice([1e-4, 1e-3, 4e-3], (count, 1, 1))
+    tested = []
+    moving = crossing._moving_segments
+    monkeypatch.setattr(crossing, "_moving_segments",
+                        lambda *a: tested.append(len(a[0])) or moving(*a))
+    sep = segment_segment(*(ends0[:, k] for k in range(4)), *(ends1[:, k] for k in range(4)))
+    assert 0 < sum(tested) < 0.7 * count  # many pairs skip it, not all
+    decided = crossed = 0
+    for i in range(count):
+        truth, ok = _truth_segments(*ends0[i], *ends1[i])
+        if ok:
+            decided += 1
+            crossed += truth
+            assert sep.crossed[i] == truth, i
+    assert decided > 500 and crossed > 5
+    a1, b1, c1, d1 = (ends1[:, k] for k in range(4))
+    s, t = closest_on_segments(a1, b1, c1, d1)
+    diff = (a1 + s[:, None] * (b1 - a1)) - (c1 + t[:, None] * (d1 - c1))
+    apart = np.linalg.norm(diff, axis=1)
+    far = ~sep.crossed
+    assert np.allclose(sep.gap[far], apart[far], rtol=1e-12, atol=0.0)
+    assert np.allclose(sep.normal[far], diff[far] / apart[far, None], rtol=0.0, atol=1e-12)
+    # brute force: every pair that skipped the test stays apart throughout the step
+    ts = np.linspace(0.0, 1.0, 201)
+    lows = []
+    for tt in ts:
+        e = ends0 + tt * (ends1 - ends0)
+        u, w = closest_on_segments(e[:, 0], e[:, 1], e[:, 2], e[:, 3])
+        lows.append(np.linalg.norm(e[:, 0] + u[:, None] * (e[:, 1] - e[:, 0]) - e[:, 2]
+                                   - w[:, None] * (e[:, 3] - e[:, 2]), axis=1))
+    motion = np.maximum(*(np.linalg.norm(ends1[:, k] - ends0[:, k], axis=1) for k in (0, 1))) + \
+        np.maximum(*(np.linalg.norm(ends1[:, k] - ends0[:, k], axis=1) for k in (2, 3)))
+    skipped = apart > 1.01 * motion + 1e-9
+    assert skipped.sum() > 0.3 * count
+    assert (np.min(lows, axis=0)[skipped] > 0.0).all()
+
+
 def test_a_point_falling_through_a_still_triangle_crosses_and_is_sent_back():
     tri = np.array([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]])
     for end, crossed in ((-0.1, True), (0.05, False)):
