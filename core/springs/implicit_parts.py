@@ -170,7 +170,8 @@ class NewtonResult:
         scale: the size of the step's right-hand side [N s] its solves were relative to (the
             tolerance times this is the step's accuracy).
         first: the first linearisation's (Jacobian blocks, right-hand side, assembled matrix
-            or None): the same for a step solved again with other constraints.
+            or None, its preconditioner or None): the same for a step solved again with other
+            constraints (the preconditioner for looser ones).
     """
 
     dv: np.ndarray
