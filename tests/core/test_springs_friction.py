@@ -12,6 +12,7 @@ import pytest
 from physanim.core.contact import ColliderFrame
 from physanim.core.springs import (SpringFrameInputs, SpringMeshBuilder, SpringMeshSettings,
                                    SpringMeshSolver)
+from physanim.core.springs.implicit import BaraffWitkin
 from physanim.tests.core.helpers import grid as _grid
 
 DT = 1.0 / 24.0
@@ -156,3 +157,37 @@ def test_a_newton_iteration_whose_start_solves_the_step_builds_nothing():
     assert checks, "no step looked again at its end: the scene does not test it"
     assert all(iterations > 0 for iterations in later)
     assert state.x[:, 2].min() >= 0.002 - 1e-6  # pushed out onto the surface
+
+
+@pytest.mark.parametrize("preconditioner", BaraffWitkin.PRECONDITIONERS)
+def test_a_step_solved_again_with_vertices_let_slide_keeps_its_preconditioner(
+        monkeypatch, preconditioner):
+    """Half of the patch at rest on a slope steeper than its friction angle, the other half
+    2 cm above it (it does not land within the step): the lying vertices start held by static friction, which cannot hold them,
+    and the step is solved again with them sliding. That solve reuses the first one's
+    preconditioner (built for the tighter filter; SPD on the whole space) and ends where a
+    solve with its own fresh preconditioner ends, within the solve's tolerance."""
+    from physanim.core.springs.implicit import BaraffWitkin
+
+    def one_frame():
+        model, slope, normal, downhill = _on_slope(0.2)
+        state = model.state()
+        state.x = state.x + np.where((state.x @ downhill)[:, None] < 0.0, 0.02 * normal, 0.0)
+        built = []
+        make = BaraffWitkin._preconditioner
+        monkeypatch.setattr(BaraffWitkin, "_preconditioner",
+                            lambda self, *a: built.append(1) or make(self, *a))
+        solver = SpringMeshSolver(model, "IMPLICIT", 1, frame_dt=DT, frame=1)  # (one step:
+        solver.integrator = BaraffWitkin(preconditioner=preconditioner)
+        solver.advance(state, SpringFrameInputs(1, DT, DT, colliders=[slope]))  # none lands)
+        return state.v.copy(), len(built), solver
+
+    v_kept, built_kept, solver = one_frame()
+    fresh = BaraffWitkin._linear_system
+    monkeypatch.setattr(BaraffWitkin, "_linear_system",
+                        lambda self, *a: fresh(self, *a[:6]))  # no preconditioner passed on
+    v_fresh, built_fresh, _ = one_frame()
+    assert built_kept < built_fresh  # re-solves happened, and kept theirs
+    dv = np.linalg.norm(v_fresh)  # (from rest: the frame's velocity change)
+    assert np.linalg.norm(v_kept - v_fresh) <= 10 * solver.integrator.tolerance * dv
+    assert not np.array_equal(v_kept, v_fresh)  # two solves, each within the tolerance
