@@ -146,6 +146,28 @@ def _first_crossing(times: np.ndarray, signs: np.ndarray, valid: np.ndarray, k):
 def triangle_point(t0: np.ndarray, t1: np.ndarray, p0: np.ndarray,
                    p1: np.ndarray) -> Separation:
     """Triangles (c, 3, 3) against points (c, 3), at the step's start and end."""
+    q, _, _ = closest_on_triangles(p1, t1)
+    apart = norm_rows(q - p1)
+    # as for segments (:func:`segment_segment`): a point further from the triangle at the end
+    # than their relative motion over the step (and meeting's tolerance) cannot have met it
+    motion = norm_rows(p1 - p0) + np.maximum(
+        np.maximum(norm_rows(t1[:, 0] - t0[:, 0]), norm_rows(t1[:, 1] - t0[:, 1])),
+        norm_rows(t1[:, 2] - t0[:, 2]))
+    size = np.sqrt(np.maximum(row_max(np.einsum("ckj,ckj->ck", t0 - t0[:, :1], t0 - t0[:, :1])),
+                              row_max(np.einsum("ckj,ckj->ck", t1 - t1[:, :1], t1 - t1[:, :1]))))
+    met = np.flatnonzero(~(apart > (1.0 + 1e-6) * (motion + MEET * size) + 2.0 * TINY))
+    normal = divide_rows(q - p1, np.where(apart > 0.0, apart, 1.0))  # (as _direction's)
+    crossed = np.zeros(len(p1), bool)
+    if len(met):
+        normal[met], crossed[met] = _moving_point(t0[met], t1[met], p0[met], p1[met], q[met])
+    ones = np.zeros((len(p1), 2))
+    ones[:, 0] = 1.0
+    return Separation(barycentric(q, t1), ones, normal, dot_rows(q - p1, normal), crossed)
+
+
+def _moving_point(t0, t1, p0, p1, q):
+    """:func:`triangle_point`'s (normal, crossed) of pairs that may have met during the step,
+    given the triangles' points q nearest the points at the end."""
     dt = t1 - t0
     k = _cubic(p0 - t0[:, 0], (p1 - p0) - dt[:, 0], t0[:, 1] - t0[:, 0], dt[:, 1] - dt[:, 0],
                t0[:, 2] - t0[:, 0], dt[:, 2] - dt[:, 0])
@@ -164,7 +186,6 @@ def triangle_point(t0: np.ndarray, t1: np.ndarray, p0: np.ndarray,
     n1, _ = _unit(cross(t1[:, 1] - t1[:, 0], t1[:, 2] - t1[:, 0]))
     z1 = sum(k)  # f(1): the point's side of the triangle's winding at the end
     crossed = ever & (np.sign(z1) != side)
-    q, _, _ = closest_on_triangles(p1, t1)
     plane = scale_rows(n1, -side)  # from the point towards the triangle, as it came
     normal, _ = _direction(q - p1, plane)
     normal = where_rows(crossed, plane, normal)
@@ -173,9 +194,7 @@ def triangle_point(t0: np.ndarray, t1: np.ndarray, p0: np.ndarray,
     if flat.any():
         normal = where_rows(flat, _direction(t0.mean(axis=1) - p0,
                                              np.array([0.0, 0.0, 1.0]))[0], normal)
-    ones = np.zeros((len(p1), 2))
-    ones[:, 0] = 1.0
-    return Separation(barycentric(q, t1), ones, normal, dot_rows(q - p1, normal), crossed)
+    return normal, crossed
 
 
 def closest_on_segments(a, b, c, d) -> tuple[np.ndarray, np.ndarray]:

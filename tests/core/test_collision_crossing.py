@@ -161,6 +161,48 @@ def test_segments_too_far_apart_to_meet_skip_the_crossing_test_with_the_same_ans
     assert (np.min(lows, axis=0)[skipped] > 0.0).all()
 
 
+def test_points_too_far_from_a_triangle_to_meet_it_skip_the_crossing_test(monkeypatch):
+    """A mesh resting on another's faces: points a few millimetres from triangles, moving by
+    about as much. Those further away at the end than the pair's relative motion cannot have
+    met the triangle; they are answered from the nearest point at the end without the
+    crossing test — and crossings among the others still agree with brute force."""
+    from physanim.core.collision import crossing
+    from physanim.core.collision.distance import closest_on_triangles
+    rng = np.random.default_rng(12)
+    count = 600
+    t0 = rng.normal(size=(count, 3, 3)) * 0.03
+    p0 = t0.mean(axis=1) + rng.normal(size=(count, 3)) * 0.004
+    step = rng.choice([1e-4, 1e-3, 4e-3], (count, 1))
+    t1 = t0 + rng.normal(size=(count, 3, 3)) * step[:, :, None]
+    p1 = p0 + rng.normal(size=(count, 3)) * step
+    tested = []
+    moving = crossing._moving_point
+    monkeypatch.setattr(crossing, "_moving_point",
+                        lambda *a: tested.append(len(a[0])) or moving(*a))
+    sep = triangle_point(t0, t1, p0, p1)
+    assert 0 < sum(tested) < 0.7 * count  # many pairs skip it, not all
+    decided = crossed = 0
+    for i in range(count):
+        truth, ok = _truth_point(t0[i], t1[i], p0[i], p1[i])
+        if ok:
+            decided += 1
+            crossed += truth
+            assert sep.crossed[i] == truth, i
+    assert decided > 500 and crossed > 5
+    q = closest_on_triangles(p1, t1)[0]
+    apart = np.linalg.norm(q - p1, axis=1)
+    far = ~sep.crossed
+    assert np.allclose(sep.gap[far], apart[far], rtol=1e-12, atol=0.0)
+    assert np.allclose(sep.normal[far], (q - p1)[far] / apart[far, None], rtol=0.0, atol=1e-12)
+    # brute force: the pairs far enough apart never touch during the step
+    lows = [np.linalg.norm(closest_on_triangles(p0 + tt * (p1 - p0), t0 + tt * (t1 - t0))[0]
+                           - (p0 + tt * (p1 - p0)), axis=1) for tt in np.linspace(0, 1, 201)]
+    motion = np.linalg.norm(p1 - p0, axis=1) + np.linalg.norm(t1 - t0, axis=2).max(axis=1)
+    skipped = apart > 1.01 * motion + 1e-9
+    assert skipped.sum() > 0.3 * count
+    assert (np.min(lows, axis=0)[skipped] > 0.0).all()
+
+
 def test_a_point_falling_through_a_still_triangle_crosses_and_is_sent_back():
     tri = np.array([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]])
     for end, crossed in ((-0.1, True), (0.05, False)):
