@@ -161,8 +161,10 @@ def _closed_mesh_mass(mesh, name: str, amount: dict):
         return None
 
 
-def body_settings(ob, depsgraph, frame: int) -> RigidBodySettings:
-    """Core settings of a rigid-body object at the bake's first frame."""
+def body_settings(ob, depsgraph, frame: int, shapes: dict | None = None) -> RigidBodySettings:
+    """Core settings of a rigid-body object at the bake's first frame. ``shapes``: the shapes
+    found so far in this bake, by shape choice and scaled mesh — bodies that share a mesh and
+    scale (duplicates: crates, dominoes, a pile's cubes) have it analysed once."""
     if ob.type != 'MESH':
         raise PhysanimError(f"a rigid body must be a mesh object (this is {object_kind(ob)})",
                             obj=ob.name, frame=frame, kind="rigid body")
@@ -177,7 +179,13 @@ def body_settings(ob, depsgraph, frame: int) -> RigidBodySettings:
         raise PhysanimError("the mesh has no vertices", obj=ob.name, frame=frame,
                             kind="rigid body")
     co = mesh.co * scale
-    shape, params = shape_of(co, mesh.triangles, p.shape)
+    key = (p.shape, co.shape, co.tobytes(), mesh.triangles.tobytes())
+    found = shapes.get(key) if shapes is not None else None
+    if found is None:
+        found = shape_of(co, mesh.triangles, p.shape)
+        if shapes is not None:
+            shapes[key] = found
+    shape, params = found
     try:
         props = mass_of(shape, params, p, ob.name, mesh=(co, mesh.triangles))
         return RigidBodySettings(
@@ -246,8 +254,9 @@ class RigidBake:
 
     def prepare(self, depsgraph, frame: int, colliders: ColliderPaths) -> None:
         builder = RigidBodyBuilder()
+        shapes: dict = {}
         for ob in self.objects:
-            builder.add_body(body_settings(ob, depsgraph, frame))
+            builder.add_body(body_settings(ob, depsgraph, frame, shapes))
         index = {ob.name: i for i, ob in enumerate(self.objects)}
         self.index = index
         self.joint_values = [joint_settings(ob, index, frame) for ob in self.constraints]

@@ -34,11 +34,19 @@ def _tracks(folder: str, frame_start: int, frame_end: int):
 
 
 def _continuous(q: np.ndarray) -> np.ndarray:
-    """(f, 4) quaternions with signs chosen so that consecutive keys interpolate the short way."""
+    """(f, 4) quaternions with signs chosen so that consecutive keys interpolate the short way:
+    a key turns over when it points away from the key before as keyed (q_k . q'_k-1 < 0). With
+    d_k = q_k . q_k-1 of the keys as given, the sign of key k is the product of the signs of
+    the d since the last key with d = 0 (which keeps its own sign): a parity of counts, for
+    every key at once."""
     q = q.copy()
-    for k in range(1, len(q)):
-        if q[k] @ q[k - 1] < 0.0:
-            q[k] = -q[k]
+    if len(q) < 2:
+        return q
+    d = np.einsum("ij,ij->i", q[1:], q[:-1])
+    against = np.concatenate([[0], np.cumsum(d < 0.0)])  # keys pointing away up to each key
+    start = np.maximum.accumulate(np.concatenate([[0], np.where(d == 0.0,
+                                                                np.arange(1, len(q)), 0)]))
+    q[(against - against[start]) % 2 == 1] *= -1.0
     return q
 
 

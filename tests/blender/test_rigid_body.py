@@ -487,3 +487,54 @@ def test_a_rebake_starts_from_the_pose_the_user_set(physanim_ext, tmp_path, mode
     assert ob.rotation_mode == mode
     assert (tuple(ob.location), tuple(ob.rotation_euler), tuple(ob.rotation_quaternion),
             tuple(ob.rotation_axis_angle), tuple(ob.scale)) == pose
+
+
+def test_keyed_quaternions_take_the_short_way_between_frames(physanim_ext):
+    """Each key's sign is chosen against the key before as keyed (q and -q are one rotation):
+    the same signs as flipping key by key, through runs of turned-over keys and keys at right
+    angles (a zero dot keeps the key's own sign)."""
+    keys = _addon(physanim_ext, "rigid_keys")
+    rng = np.random.default_rng(3)
+    q = rng.normal(size=(400, 4))
+    q /= np.linalg.norm(q, axis=1)[:, None]
+    q[100:140] = q[99] * np.where(rng.random(40) < 0.5, -1.0, 1.0)[:, None]  # one rotation
+    q[200] = [-q[199, 1], q[199, 0], -q[199, 3], q[199, 2]]  # at right angles to the one before
+    expected = q.copy()
+    for k in range(1, len(expected)):
+        if expected[k] @ expected[k - 1] < 0.0:
+            expected[k] = -expected[k]
+    got = keys._continuous(q)
+    assert np.array_equal(got, expected)
+    assert (np.einsum("ij,ij->i", got[1:], got[:-1]) >= 0.0).all()
+    assert np.array_equal(keys._continuous(q[:1]), q[:1])
+
+
+def test_bodies_sharing_a_mesh_have_their_shape_found_once(physanim_ext, tmp_path, monkeypatch):
+    """Duplicates (one mesh, one scale) are analysed once per bake and get the same shape as
+    each alone; another scale or mesh is analysed on its own."""
+    rigid = _addon(physanim_ext, "rigid")
+    _scene(tmp_path)
+    _ground()
+    first = _body("monkey")
+    linked = [first.copy() for _ in range(3)]
+    for k, ob in enumerate(linked):
+        ob.location = (3.0 * (k + 1), 0.0, 3.0)
+        bpy.context.scene.collection.objects.link(ob)
+    linked[2].scale = (1.0, 2.0, 1.0)
+    other = _body("cylinder", location=(-3.0, 0.0, 3.0))
+    seen = []
+    found = rigid.shape_of
+    monkeypatch.setattr(rigid, "shape_of", lambda co, *a: seen.append(len(co)) or found(co, *a))
+    bake = rigid.RigidBake(bpy.context.scene, [first, *linked, other], "", [])
+    bake.prepare(bpy.context.evaluated_depsgraph_get(), FRAME_START, None)
+    assert len(seen) == 3  # the monkey, the stretched monkey, the cylinder
+    builder = sys.modules[f"{physanim_ext.__name__}.core.rigid"].RigidBodyBuilder()
+    for ob in (first, *linked, other):  # each analysed alone
+        builder.add_body(rigid.body_settings(ob, bpy.context.evaluated_depsgraph_get(),
+                                             FRAME_START))
+    assert len(seen) == 8
+    alone, model = builder.finalize(), bake.model
+    for name in ("body_shape", "body_com", "body_bound", "body_mass", "body_inertia",
+                 "hull_points", "body_hull_start", "body_hull_count"):
+        assert np.array_equal(getattr(model, name), getattr(alone, name)), name
+    assert not np.allclose(model.body_inertia[3], model.body_inertia[0])  # (stretched)
