@@ -163,8 +163,10 @@ def _closed_mesh_mass(mesh, name: str, amount: dict):
 
 def body_settings(ob, depsgraph, frame: int, shapes: dict | None = None) -> RigidBodySettings:
     """Core settings of a rigid-body object at the bake's first frame. ``shapes``: the shapes
-    found so far in this bake, by shape choice and scaled mesh — bodies that share a mesh and
-    scale (duplicates: crates, dominoes, a pile's cubes) have it analysed once."""
+    found so far in this bake, by shape choice, mesh and scale — bodies that share a mesh and
+    a scale (duplicates: crates, dominoes, a pile's cubes) have it analysed once. Scales are
+    compared in single precision, as the mesh's own vertices are stored: a turned duplicate's
+    scale, read back from its world matrix, differs from its twin's in the last digits."""
     if ob.type != 'MESH':
         raise PhysanimError(f"a rigid body must be a mesh object (this is {object_kind(ob)})",
                             obj=ob.name, frame=frame, kind="rigid body")
@@ -179,7 +181,8 @@ def body_settings(ob, depsgraph, frame: int, shapes: dict | None = None) -> Rigi
         raise PhysanimError("the mesh has no vertices", obj=ob.name, frame=frame,
                             kind="rigid body")
     co = mesh.co * scale
-    key = (p.shape, co.shape, co.tobytes(), mesh.triangles.tobytes())
+    key = (p.shape, scale.astype(np.float32).tobytes(), mesh.co.shape, mesh.co.tobytes(),
+           mesh.triangles.tobytes())
     found = shapes.get(key) if shapes is not None else None
     if found is None:
         found = shape_of(co, mesh.triangles, p.shape)

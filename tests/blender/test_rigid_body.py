@@ -511,7 +511,8 @@ def test_keyed_quaternions_take_the_short_way_between_frames(physanim_ext):
 
 def test_bodies_sharing_a_mesh_have_their_shape_found_once(physanim_ext, tmp_path, monkeypatch):
     """Duplicates (one mesh, one scale) are analysed once per bake and get the same shape as
-    each alone; another scale or mesh is analysed on its own."""
+    each alone — a turned one, whose scale read from its world matrix differs in the last
+    digits, within single precision; another scale or mesh is analysed on its own."""
     rigid = _addon(physanim_ext, "rigid")
     _scene(tmp_path)
     _ground()
@@ -521,6 +522,7 @@ def test_bodies_sharing_a_mesh_have_their_shape_found_once(physanim_ext, tmp_pat
         ob.location = (3.0 * (k + 1), 0.0, 3.0)
         bpy.context.scene.collection.objects.link(ob)
     linked[2].scale = (1.0, 2.0, 1.0)
+    linked[1].rotation_euler = (0.3, 1.1, -0.7)
     other = _body("cylinder", location=(-3.0, 0.0, 3.0))
     seen = []
     found = rigid.shape_of
@@ -536,5 +538,9 @@ def test_bodies_sharing_a_mesh_have_their_shape_found_once(physanim_ext, tmp_pat
     alone, model = builder.finalize(), bake.model
     for name in ("body_shape", "body_com", "body_bound", "body_mass", "body_inertia",
                  "hull_points", "body_hull_start", "body_hull_count"):
-        assert np.array_equal(getattr(model, name), getattr(alone, name)), name
+        assert np.allclose(getattr(model, name), getattr(alone, name), rtol=1e-6,
+                           atol=1e-7 * float(model.body_bound.max())), name
+        if name.startswith("body_"):  # the unturned duplicates: exactly
+            assert np.array_equal(getattr(model, name)[[0, 1, 3, 4]],
+                                  getattr(alone, name)[[0, 1, 3, 4]]), name
     assert not np.allclose(model.body_inertia[3], model.body_inertia[0])  # (stretched)
