@@ -23,7 +23,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..transforms import (column_max, cross, divide_rows, dot_rows, norm_rows, row_any, row_max,
-                          scale_rows, where_rows)
+                          scale_rows, take, where_rows)
 from .broadphase_base import keep_overlapping, transposed
 from .broadphase_grid import (TooManyCandidates, UniformGrid, _auto_cell_size, _cell_ranges,
                               _entries, _keys)
@@ -298,11 +298,12 @@ def box_pairs(lo_a: np.ndarray, hi_a: np.ndarray, lo_b: np.ndarray,
 def element_boxes(low: np.ndarray, high: np.ndarray, ids: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray]:
     """Boxes (m, 3) of elements ``ids`` (m, k) — triangles, edges — of points whose own boxes
-    are low, high (n, 3): k gathers, not a reduction over an (m, k, 3) copy."""
-    lo, hi = low[ids[:, 0]], high[ids[:, 0]]
+    are low, high (n, 3): k gathers (``np.take``: 3 x faster than fancy indexing of rows), not
+    a reduction over an (m, k, 3) copy."""
+    lo, hi = take(low, ids[:, 0]), take(high, ids[:, 0])
     for c in range(1, ids.shape[1]):
-        np.minimum(lo, low[ids[:, c]], out=lo)
-        np.maximum(hi, high[ids[:, c]], out=hi)
+        np.minimum(lo, take(low, ids[:, c]), out=lo)
+        np.maximum(hi, take(high, ids[:, c]), out=hi)
     return lo, hi
 
 

