@@ -70,6 +70,19 @@ def _truth_segments(a0, b0, c0, d0, a1, b1, c1, d1):
     return False, True
 
 
+def _agreed(crossed: np.ndarray, truth, cases) -> tuple[int, int]:
+    """Each case's crossing against brute force ``truth(*case) -> (crossed, decided)``:
+    (cases decided, of them crossed); every decided one must agree."""
+    decided = count = 0
+    for i, case in enumerate(cases):
+        answer, ok = truth(*case)
+        if ok:
+            decided += 1
+            count += answer
+            assert crossed[i] == answer, i
+    return decided, count
+
+
 def test_point_triangle_crossings_agree_with_brute_force():
     rng = np.random.default_rng(4)
     count = 800
@@ -78,13 +91,7 @@ def test_point_triangle_crossings_agree_with_brute_force():
     p0 = t0.mean(axis=1) + rng.normal(size=(count, 3))
     p1 = p0 + 1.5 * rng.normal(size=(count, 3))
     sep = triangle_point(t0, t1, p0, p1)
-    decided = crossed = 0
-    for i in range(count):
-        truth, ok = _truth_point(t0[i], t1[i], p0[i], p1[i])
-        if ok:
-            decided += 1
-            crossed += truth
-            assert sep.crossed[i] == truth, i
+    decided, crossed = _agreed(sep.crossed, _truth_point, zip(t0, t1, p0, p1))
     assert decided > 600 and crossed > 20  # the sample holds both answers
     # a crossed pair's gap is minus the point's distance behind the plane, its normal the
     # plane's, pointing from the point back to where the triangle was
@@ -101,13 +108,8 @@ def test_segment_crossings_agree_with_brute_force():
     ends0 = rng.normal(size=(count, 4, 3))
     ends1 = ends0 + 0.8 * rng.normal(size=(count, 4, 3))
     sep = segment_segment(*(ends0[:, k] for k in range(4)), *(ends1[:, k] for k in range(4)))
-    decided = crossed = 0
-    for i in range(count):
-        truth, ok = _truth_segments(*ends0[i], *ends1[i])
-        if ok:
-            decided += 1
-            crossed += truth
-            assert sep.crossed[i] == truth, i
+    decided, crossed = _agreed(sep.crossed, _truth_segments,
+                               (np.concatenate([e0, e1]) for e0, e1 in zip(ends0, ends1)))
     assert decided > 500 and crossed > 20
 
 
@@ -131,13 +133,8 @@ def test_segments_too_far_apart_to_meet_skip_the_crossing_test_with_the_same_ans
                         lambda *a: tested.append(len(a[0])) or moving(*a))
     sep = segment_segment(*(ends0[:, k] for k in range(4)), *(ends1[:, k] for k in range(4)))
     assert 0 < sum(tested) < 0.7 * count  # many pairs skip it, not all
-    decided = crossed = 0
-    for i in range(count):
-        truth, ok = _truth_segments(*ends0[i], *ends1[i])
-        if ok:
-            decided += 1
-            crossed += truth
-            assert sep.crossed[i] == truth, i
+    decided, crossed = _agreed(sep.crossed, _truth_segments,
+                               (np.concatenate([e0, e1]) for e0, e1 in zip(ends0, ends1)))
     assert decided > 500 and crossed > 5
     a1, b1, c1, d1 = (ends1[:, k] for k in range(4))
     s, t = closest_on_segments(a1, b1, c1, d1)
@@ -181,13 +178,7 @@ def test_points_too_far_from_a_triangle_to_meet_it_skip_the_crossing_test(monkey
                         lambda *a: tested.append(len(a[0])) or moving(*a))
     sep = triangle_point(t0, t1, p0, p1)
     assert 0 < sum(tested) < 0.7 * count  # many pairs skip it, not all
-    decided = crossed = 0
-    for i in range(count):
-        truth, ok = _truth_point(t0[i], t1[i], p0[i], p1[i])
-        if ok:
-            decided += 1
-            crossed += truth
-            assert sep.crossed[i] == truth, i
+    decided, crossed = _agreed(sep.crossed, _truth_point, zip(t0, t1, p0, p1))
     assert decided > 500 and crossed > 5
     q = closest_on_triangles(p1, t1)[0]
     apart = np.linalg.norm(q - p1, axis=1)
