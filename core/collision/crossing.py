@@ -143,11 +143,19 @@ def _first_crossing(times: np.ndarray, signs: np.ndarray, valid: np.ndarray, k):
     return ever, np.where(side != 0.0, side, 1.0)
 
 
+def _may_have_met(apart: np.ndarray, motion: np.ndarray, size: np.ndarray) -> np.ndarray:
+    """Rows of pairs ``apart`` [m] at the step's end that may have met during it: their
+    distance changed by at most ``motion`` (their points' largest relative motion), and
+    meeting counts within MEET of the primitives' largest ``size`` (with a margin for
+    rounding). NaN rows may have."""
+    return np.flatnonzero(~(apart > (1.0 + 1e-6) * (motion + MEET * size) + 2.0 * TINY))
+
+
 def triangle_point(t0: np.ndarray, t1: np.ndarray, p0: np.ndarray,
                    p1: np.ndarray) -> Separation:
     """Triangles (c, 3, 3) against points (c, 3), at the step's start and end."""
     q, _, _ = closest_on_triangles(p1, t1)
-    apart = norm_rows(q - p1)
+    normal, apart = _unit(q - p1)  # (as _direction's where apart > TINY: every row not met)
     # as for segments (:func:`segment_segment`): a point further from the triangle at the end
     # than their relative motion over the step (and meeting's tolerance) cannot have met it
     motion = norm_rows(p1 - p0) + np.maximum(
@@ -155,8 +163,7 @@ def triangle_point(t0: np.ndarray, t1: np.ndarray, p0: np.ndarray,
         norm_rows(t1[:, 2] - t0[:, 2]))
     size = np.sqrt(np.maximum(row_max(np.einsum("ckj,ckj->ck", t0 - t0[:, :1], t0 - t0[:, :1])),
                               row_max(np.einsum("ckj,ckj->ck", t1 - t1[:, :1], t1 - t1[:, :1]))))
-    met = np.flatnonzero(~(apart > (1.0 + 1e-6) * (motion + MEET * size) + 2.0 * TINY))
-    normal = divide_rows(q - p1, np.where(apart > 0.0, apart, 1.0))  # (as _direction's)
+    met = _may_have_met(apart, motion, size)
     crossed = np.zeros(len(p1), bool)
     if len(met):
         normal[met], crossed[met] = _moving_point(t0[met], t1[met], p0[met], p1[met], q[met])
@@ -226,7 +233,7 @@ def segment_segment(a0, b0, c0, d0, a1, b1, c1, d1) -> Separation:
     s, t = closest_on_segments(a1, b1, c1, d1)
     q = a1 + scale_rows(b1 - a1, s)
     p = c1 + scale_rows(d1 - c1, t)
-    apart = norm_rows(q - p)
+    normal, apart = _unit(q - p)  # (as _direction's where apart > TINY: every row not met)
     # Over the step the segments' distance changes by at most their points' largest relative
     # motion: pairs further apart at the end than that (and than meeting's tolerance, with a
     # margin for rounding) cannot have met, and need no crossing test (most of a mesh resting
@@ -235,8 +242,7 @@ def segment_segment(a0, b0, c0, d0, a1, b1, c1, d1) -> Separation:
         np.maximum(norm_rows(c1 - c0), norm_rows(d1 - d0))
     longest = np.maximum(np.maximum(norm_rows(b0 - a0), norm_rows(b1 - a1)),
                          np.maximum(norm_rows(d0 - c0), norm_rows(d1 - c1)))
-    met = np.flatnonzero(~(apart > (1.0 + 1e-6) * (motion + MEET * longest) + 2.0 * TINY))
-    normal = divide_rows(q - p, np.where(apart > 0.0, apart, 1.0))  # (as _direction's)
+    met = _may_have_met(apart, motion, longest)
     crossed = np.zeros(len(s), bool)
     if len(met):
         pick = (a0, b0, c0, d0, a1, b1, c1, d1, s, t, q, p)
