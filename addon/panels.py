@@ -354,6 +354,7 @@ class PHYSANIM_PT_spring_mesh(_PhysicsPanel, bpy.types.Panel):
             layout.prop(p, "pin_stiffness")
         layout.prop(p, "integrator")
         layout.prop(p, "substeps")
+        layout.prop(p, "sleep")
 
 
 class PHYSANIM_PT_spring_virtual(_PhysicsPanel, bpy.types.Panel):

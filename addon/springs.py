@@ -133,7 +133,7 @@ class SpringMeshBake:
             bend_mode=p.bend_mode, bend_stiffness=p.bend_stiffness, bend_damping=p.bend_damping,
             drag=p.drag, pin_stiffness=p.pin_stiffness, max_stretch=p.max_stretch,
             self_collision=p.self_collision, self_distance=p.self_distance,
-            self_friction=p.self_friction)
+            self_friction=p.self_friction, sleep=p.sleep)
         builder = SpringMeshBuilder(settings, rest, mesh.edges, mesh.triangles, mesh.loop_start,
                                     mesh.loop_total, mesh.loop_vertices, pin)
         if pin is not None:

@@ -80,7 +80,7 @@ class MeshPath(ColliderPath):
         # the most local units a world metre can span over the interval (distance conversions)
         self._local_metre = max(float(np.linalg.norm(inverse_affine(m)[:3, :3], axis=1).max())
                                 for m in self.path.samples)
-        self._still = self.path.static and not self.deforming
+        self._still = self.still
 
     # -- geometry at a time s ---------------------------------------------------------------------
     def bvh_at(self, s: float) -> BVH:

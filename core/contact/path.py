@@ -160,6 +160,11 @@ class ColliderPath:
         self._normals0 = np.swapaxes(self._inverse0[:3, :3], -1, -2)
         self.per_metre = np.linalg.norm(self._inverse0[:3, :3], axis=1)
 
+    @property
+    def still(self) -> bool:
+        """Whether the collider neither moves nor deforms over its interval."""
+        return self.path.static and not self.deforming
+
     @classmethod
     def build(cls, frame: ColliderFrame, frame_dt: float, owner) -> ColliderPath:
         """The path of ``frame``; ``owner`` (a :class:`~.kinds.ColliderPaths`) keeps what lasts

@@ -57,15 +57,10 @@ def conditions(integrator: str, gravity: np.ndarray, h: float, inputs, paths: li
     not a function of its own position and velocity under them (``alone``: the caller found
     no springs, constraints or ties among the particles, and no emitter that makes springs)."""
     if (not alone or integrator not in FIXED_STEP or inputs.forces or inputs.interactions
-            or inputs.collisions or not all(_still(path) for path in paths)):
+            or inputs.collisions or not all(path.still for path in paths)):
         return None
     return Conditions(integrator, tuple(float(g) for g in gravity), float(h),
                       tuple(path.frame for path in paths))
-
-
-def _still(path) -> bool:
-    """Whether a collider's path neither moves nor deforms over its interval."""
-    return path.path.static and not path.deforming
 
 
 def _unchanged(x0, v0, x1, v1) -> np.ndarray:

@@ -39,7 +39,8 @@ class SpringMeshSettings:
         never stretch past 110 %; 0 = no limit), Provot's deformation constraints.
         self_collision: keep the mesh off itself (:mod:`.self_collision`). self_distance:
         kept between its vertices and triangles, edges and edges [m]. self_friction: Coulomb
-        mu between its layers.
+        mu between its layers. sleep: the mesh stops being simulated while it is at rest
+        and nothing around it changes (:mod:`.sleep`).
     """
 
     name: str
@@ -58,6 +59,7 @@ class SpringMeshSettings:
     self_collision: bool = False
     self_distance: float = 0.01
     self_friction: float = 0.2
+    sleep: bool = True
 
     def __post_init__(self):
         owner = f'spring mesh "{self.name}"'

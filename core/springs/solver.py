@@ -30,6 +30,7 @@ from .implicit import BaraffWitkin
 from .inputs import SpringDrive, SpringFrameInputs
 from . import attach
 from . import landing as landing_
+from . import sleep as sleep_
 from .model import SpringMeshModel, SpringMeshState
 from .self_collision import SelfCollision
 from .ode import MeshOde, SubstepForces
@@ -57,6 +58,9 @@ class _FrameStep:
     hits: int = 0  # collisions handled
     held: attach.Held | None = None  # the attachments' paths this frame
     reactions: list = field(default_factory=list)  # impulses on bodies held by attachments
+    conditions: sleep_.Conditions | None = None  # what its sub-steps are a function of (:mod:`.sleep`)
+    asleep: bool = False  # the mesh sleeps through the interval: its sub-steps do nothing
+    start: np.ndarray | None = None  # (n, 3) positions at the interval's start (for sleeping)
 
 
 class SpringMeshSystem(SolverSystem):
@@ -118,7 +122,18 @@ class SpringMeshSolver:
         self.itself = SelfCollision(self.faces, model.vertex_mass, self._inv_mass,
                                     s.self_distance, s.self_friction) \
             if s.self_collision else None
+        self._sleep = sleep_.Sleep.for_mesh(model.rest_x) if s.sleep else None
         self._check_stability(frame_dt / self.substeps, frame)
+
+    def __setstate__(self, saved: dict) -> None:
+        """A solver saved before spring meshes slept resumes awake, never sleeping."""
+        self.__dict__.update({"_sleep": None, **saved})
+
+    @property
+    def asleep(self) -> bool:
+        """Whether the mesh sleeps (:mod:`.sleep`): its next frame is skipped if nothing
+        around it changes."""
+        return self._sleep is not None and self._sleep.asleep
 
     def _fail(self, message: str, frame, cls=PhysanimError):
         return cls(message, obj=self.model.settings.name, frame=frame, kind="spring mesh")
@@ -164,11 +179,20 @@ class SpringMeshSolver:
             raise self._fail(f'an attachment to the rigid body "{body}" moves it with the '
                              f"mesh, which needs the IMPLICIT integrator (this mesh uses "
                              f"{self.integrator_name})", inputs.frame)
-        return _FrameStep(state, inputs, paths, h, g, rest0, rest1,
+        step = _FrameStep(state, inputs, paths, h, g, rest0, rest1,
                           2.0 * float(np.linalg.norm(g)) * h + 1e-4, held=held)
+        if self._sleep is not None:
+            coupled = held is not None and any(b is not None for b in held.coupled)
+            step.conditions = sleep_.conditions(self.integrator_name, h, inputs, paths, ~self.free,
+                                          rest0, rest1, coupled)
+            step.asleep = self._sleep.sleeps(step.conditions)
+            step.start = None if step.asleep else state.x.copy()
+        return step
 
     def substep(self, step: _FrameStep, k: int) -> None:
-        """Sub-step ``k``: the passes of the module docstring."""
+        """Sub-step ``k``: the passes of the module docstring (none while the mesh sleeps)."""
+        if step.asleep:
+            return
         state, inputs, h = step.state, step.inputs, step.h
         s0, s1 = k / self.substeps, (k + 1) / self.substeps
         t = inputs.t0 + k * h
@@ -203,6 +227,9 @@ class SpringMeshSolver:
         if outside is not None:
             self._react(step, touched, outside, s1)
         self._check(state, inputs.frame)
+        if step.start is not None and k == self.substeps - 1 and self._sleep.settle(
+                step.conditions, self.free, step.start, state.x, state.v, inputs.frame_dt):
+            state.v = np.zeros_like(state.v)
 
     def _keep_off(self, step: _FrameStep, x0: np.ndarray, x: np.ndarray, v: np.ndarray,
                   s0: float, s1: float, outside: np.ndarray | None) -> Contacts:

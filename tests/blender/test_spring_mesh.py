@@ -274,6 +274,37 @@ def test_animated_object_carries_its_pinned_vertices(physanim_ext, tmp_path):
     assert lag.max() < -0.02, lag
 
 
+def test_a_hanging_cloth_sleeps_at_rest_and_wakes_when_its_object_moves(physanim_ext, tmp_path):
+    """An upright cloth hanging from its pinned top edge, at the defaults: it settles and
+    sleeps (its cached frames stop changing, to the bit), lying where the same cloth with
+    Sleep When Still off lies (within 0.1 mm; that one keeps solving), until the object's
+    animation carries the pins off at frame 40: it wakes, its free rows lag behind, and it
+    swings on as the other one does."""
+    _scene(1, 56)
+    ob = _grid(segments=8)
+    ob.rotation_euler = (0.5 * np.pi, 0.0, 0.0)
+    _keys(ob, "location", [(40, (0.0, 0.0, 2.0)), (48, (1.0, 0.0, 2.0))])
+    assert ob.physanim.spring_mesh.sleep  # the default
+    baked = {}
+    for sleeps in (True, False):
+        ob.physanim.spring_mesh.sleep = sleeps
+        _save(tmp_path)
+        assert bpy.ops.physanim.bake() == {'FINISHED'}
+        baked[sleeps] = _samples(physanim_ext, ob).copy()
+    x, awake = baked[True], baked[False]
+    same = [np.array_equal(x[f], x[f - 1]) for f in range(1, len(x))]  # frame f + 1 as f
+    first = same.index(True) + 1  # the first frame it slept through
+    assert first < 30, "it never slept"
+    assert all(same[first - 1:39]), "it woke with nothing changing"
+    assert not any(same[40:]), "it slept on while its pins moved"
+    assert not all(np.array_equal(awake[f], awake[f - 1]) for f in range(first, 39))
+    np.testing.assert_allclose(x[38], awake[38], atol=1e-4)  # frame 39, before the move
+    rest = _local(ob.data)
+    bottom = np.isclose(rest[:, 1], rest[:, 1].min())
+    assert (x[40][bottom, 0] - rest[bottom, 0]).max() < -0.03  # frame 41: dragged, behind
+    np.testing.assert_allclose(x[-1], awake[-1], atol=1e-3)  # and swings as the other one
+
+
 # ------------------------------------------------------------------------ mesh colliders
 
 def test_cloth_drapes_over_a_mesh_collider_and_never_enters_it(physanim_ext, tmp_path):

@@ -1,0 +1,126 @@
+"""A spring mesh at rest sleeps: its sub-steps are skipped while nothing around it changes.
+
+A cloth that has settled on a collider or hangs still from its pins is, step after step, a
+solve of forces that cancel: every step costs its full passes (contacts, features, the
+implicit solve) to move the vertices by micrometres. When, frame after frame, no free vertex
+has moved faster than the sleep speed — SLEEP_SHARE of the mesh's size per second, at most
+SLEEP_SPEED — for SLEEP_TIME seconds of frames in a row, under the same conditions, the mesh
+falls asleep: its velocities become zero and its vertices stay where they are, and each
+sub-step returns at once.
+
+The conditions are what a sub-step is a function of, apart from the mesh's own state
+(:func:`conditions`): the integrator and the sub-step length, gravity, the colliders (each still
+over the interval: not moving, not deforming, and the same as when the mesh fell asleep), the
+pins' targets and the attachments' targets (still, and where they were), no force object, and
+no attachment to a rigid body (which the mesh's sub-steps move). Anything else — a collider
+keyed to move, a body landing on the mesh (it moves as a collider), gravity keyed, a wind or
+any other force object, pins or targets moving — wakes the mesh for that frame; it sleeps again
+only after SLEEP_TIME more of slow frames. As Bullet's sleeping bodies, a mesh creeping slower
+than the sleep speed for that long stops: the drape of the cloth benchmark moves 0.02 mm in
+the 150 frames after it would fall asleep (measured by baking it on).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+SLEEP_SPEED = 2e-3  # [m/s] the largest sleep speed (a cloth of 2 m or more)
+SLEEP_SHARE = 1e-3  # [1/s] the sleep speed as a share of the mesh's size (its rest box's diagonal)
+SLEEP_TIME = 0.5  # [s] of consecutive slow frames before the mesh sleeps
+
+
+@dataclass(frozen=True)
+class Conditions:
+    """What a spring mesh's sub-steps are a function of, besides its own state: the
+    integrator, the sub-step h [s], gravity, the colliders' frames (each still), and the pins'
+    and targets' places: ``pins`` (k, 3) the pinned vertices' targets, ``targets`` the
+    attachments' and virtual springs' target matrices by name."""
+
+    integrator: str
+    h: float
+    gravity: tuple
+    colliders: tuple
+    pins: np.ndarray
+    targets: tuple
+
+    def same_as(self, other: Conditions | None) -> bool:
+        return (other is not None and (self.integrator, self.h, self.gravity) ==
+                (other.integrator, other.h, other.gravity) and
+                len(self.colliders) == len(other.colliders) and
+                all(a.same_as(b) for a, b in zip(self.colliders, other.colliders)) and
+                np.array_equal(self.pins, other.pins) and
+                [name for name, _ in self.targets] == [name for name, _ in other.targets] and
+                all(np.array_equal(a, b) for (_, a), (_, b) in zip(self.targets, other.targets)))
+
+
+def conditions(integrator: str, h: float, inputs, paths: list, pinned: np.ndarray,
+               rest0: np.ndarray, rest1: np.ndarray, coupled: bool) -> Conditions | None:
+    """The conditions of a frame interval's sub-steps, or None when they change within it or
+    the mesh must not sleep under them: a collider moving or deforming, a force object, pins
+    or targets moving, an attachment to a rigid body (``coupled``). ``pinned``: (n,) bool."""
+    if coupled or inputs.winds or inputs.fields or not all(p.still for p in paths):
+        return None
+    if not np.array_equal(rest0[pinned], rest1[pinned]):
+        return None
+    targets = []
+    for name in sorted(inputs.targets):
+        m0, m1 = inputs.targets[name]
+        if not np.array_equal(m0, m1):
+            return None
+        targets.append((name, np.asarray(m0)))
+    return Conditions(integrator, float(h), tuple(float(g) for g in inputs.gravity),
+                      tuple(p.frame for p in paths), rest1[pinned], tuple(targets))
+
+
+class Sleep:
+    """Whether a spring mesh sleeps, and how long it has been slow (see the module
+    docstring). ``speed``: its sleep speed [m/s]."""
+
+    def __init__(self, speed: float):
+        self.speed = float(speed)
+        self.asleep = False
+        self.slow = 0.0  # [s] of consecutive slow frames under self.conditions
+        self.conditions: Conditions | None = None
+
+    @classmethod
+    def for_mesh(cls, rest_x: np.ndarray) -> Sleep:
+        """The sleep of a mesh with rest positions ``rest_x`` (n, 3)."""
+        size = float(np.linalg.norm(np.ptp(rest_x, axis=0))) if len(rest_x) else 0.0
+        return cls(min(SLEEP_SPEED, SLEEP_SHARE * size))
+
+    def sleeps(self, now: Conditions | None) -> bool:
+        """Whether the frame interval under ``now`` is skipped; a sleeper under other
+        conditions wakes."""
+        if self.asleep and now is not None and now.same_as(self.conditions):
+            return True
+        if self.asleep:
+            self.asleep, self.slow = False, 0.0
+        return False
+
+    def settle(self, now: Conditions | None, free: np.ndarray, x0: np.ndarray, x1: np.ndarray,
+               v1: np.ndarray, frame_dt: float) -> bool:
+        """After a frame interval under ``now`` that took the free vertices from ``x0`` to
+        ``x1`` with velocities ``v1`` at its end: whether the mesh falls asleep now (the
+        caller then zeroes its velocities)."""
+        fast = now is None or self.speed <= 0.0 or _faster(free, x0, x1, v1, frame_dt,
+                                                           self.speed)
+        if fast or not now.same_as(self.conditions):
+            self.slow = 0.0
+        if not fast:
+            self.slow += frame_dt
+        self.conditions = now
+        # (a share of a frame short counts: 12 frames of 1/24 s sum to a hair under 0.5 s)
+        self.asleep = not fast and self.slow >= SLEEP_TIME - 1e-9
+        return self.asleep
+
+
+def _faster(free: np.ndarray, x0: np.ndarray, x1: np.ndarray, v1: np.ndarray,
+            frame_dt: float, speed: float) -> bool:
+    """Whether any free vertex moved faster than ``speed`` over the interval (on average) or
+    is faster at its end."""
+    d = (x1 - x0)[free]
+    v = v1[free]
+    limit = speed * speed
+    return bool(np.einsum("ij,ij->i", v, v).max(initial=0.0) > limit or
+                np.einsum("ij,ij->i", d, d).max(initial=0.0) > limit * frame_dt * frame_dt)

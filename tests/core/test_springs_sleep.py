@@ -1,0 +1,211 @@
+"""Spring meshes at rest sleep (:mod:`physanim.core.springs.sleep`): a cloth that has settled
+stops being stepped, lies where an unsleeping one lies, and wakes when anything around it
+changes; one that still moves, slowly, never sleeps."""
+from __future__ import annotations
+
+import pickle
+
+import numpy as np
+import pytest
+
+from physanim.core.contact import ColliderFrame
+from physanim.core.forces import Wind
+from physanim.core.springs import (SpringFrameInputs, SpringMeshBuilder, SpringMeshSettings,
+                                   SpringMeshSolver)
+from physanim.core.springs import sleep
+from physanim.tests.core.helpers import grid as _grid
+
+DT = 1.0 / 24.0
+GROUND = ColliderFrame("Ground", "HALF_SPACE", np.eye(4), np.eye(4))
+
+
+def _sheet(sleeps: bool = True, pins=None, size: float = 1.0, height: float = 0.3,
+           hanging: bool = False):
+    """A size x size cloth (9 x 9 vertices) ``height`` above the ground, at the defaults
+    (``hanging``: upright, its last row on top)."""
+    x, edges, tris, ls, lt, lv = _grid(9, 9, size)
+    x = x - [0.5 * size, 0.5 * size, -height]
+    if hanging:
+        x = x[:, [0, 2, 1]] + [0.0, -height, height + 0.5 * size]
+    settings = SpringMeshSettings("Sheet") if sleeps else SpringMeshSettings("Sheet", sleep=False)
+    return SpringMeshBuilder(settings, x, edges, tris, ls, lt, lv, pins).finalize(1)
+
+
+class _Counted:
+    """Counts the integrator's steps (the work a sleeping mesh skips)."""
+
+    def __init__(self, solver: SpringMeshSolver):
+        self.steps = 0
+        step = solver.integrator.step
+
+        def counted(*args, **kwargs):
+            self.steps += 1
+            return step(*args, **kwargs)
+        solver.integrator.step = counted
+
+
+def _inputs(frame: int, **kwargs) -> SpringFrameInputs:
+    kwargs.setdefault("colliders", [GROUND])
+    return SpringFrameInputs(frame, frame * DT, DT, **kwargs)
+
+
+def test_a_cloth_at_rest_at_the_defaults_falls_asleep_where_an_unsleeping_one_lies():
+    """Nothing set but the spring mesh and the ground: the dropped cloth lands, settles and
+    sleeps; its sleeping frames step nothing; at frame 60 it lies where the same cloth with
+    sleep off lies (within 0.1 mm)."""
+    model, awake_model = _sheet(), _sheet(sleeps=False)
+    solver = SpringMeshSolver(model, "IMPLICIT", 2, frame_dt=DT, frame=1)
+    other = SpringMeshSolver(awake_model, "IMPLICIT", 2, frame_dt=DT, frame=1)
+    counted = _Counted(solver)
+    state, reference = model.state(), awake_model.state()
+    fell = None
+    for frame in range(1, 61):
+        before = counted.steps
+        solver.advance(state, _inputs(frame))
+        other.advance(reference, _inputs(frame))
+        assert not other.asleep
+        if solver.asleep and fell is None:
+            fell = frame
+        elif fell is not None:  # asleep through the frame: no step, not a micrometre of motion
+            assert solver.asleep and counted.steps == before
+    assert fell is not None and fell <= 40  # landed by frame 7, then half a second of rest
+    assert np.all(state.v == 0.0)
+    assert np.abs(state.x - reference.x).max() < 1e-4
+    assert state.x[:, 2].min() >= -1e-6 and state.x[:, 2].max() < 0.01
+
+
+def _settled(model=None, frames: int = 48, **kwargs):
+    model = model or _sheet()
+    solver = SpringMeshSolver(model, "IMPLICIT", 2, frame_dt=DT, frame=1)
+    state = model.state()
+    for frame in range(1, frames + 1):
+        solver.advance(state, _inputs(frame, **kwargs))
+    assert solver.asleep
+    return solver, state
+
+
+def _lifted(frame):
+    m1 = np.eye(4)
+    m1[2, 3] = 0.05
+    return {"colliders": [ColliderFrame("Ground", "HALF_SPACE", np.eye(4), m1)]}
+
+
+@pytest.mark.parametrize("change, moved", [
+    # the ground keyed to rise 5 cm in a frame: the cloth goes up with it
+    (_lifted, lambda x0, x: x[:, 2].min() > 0.04),
+    # gravity turned sideways (the ground's friction holds it no more than mu g)
+    (lambda f: {"gravity": (9.81, 0.0, -1.0)}, lambda x0, x: (x - x0)[:, 0].mean() > 1e-3),
+    # a wind switched on lifts the cloth off the ground
+    (lambda f: {"winds": [Wind("Gust", (0.0, 0.0, 1.0), 200.0)]},
+     lambda x0, x: x[:, 2].mean() > x0[:, 2].mean() + 1e-3),
+], ids=["collider moves", "gravity changes", "wind"])
+def test_a_sleeping_cloth_wakes_when_anything_around_it_changes(change, moved):
+    solver, state = _settled()
+    x0 = state.x.copy()
+    counted = _Counted(solver)
+    for frame in range(49, 53):
+        solver.advance(state, _inputs(frame, **change(frame)))
+        assert not solver.asleep
+    assert counted.steps == 8
+    assert moved(x0, state.x)
+
+
+def test_a_sleeping_cloth_under_the_same_conditions_stays_asleep_across_a_save():
+    """A bake saved and resumed: the solver pickled asleep resumes asleep; one saved before
+    meshes slept (no sleep in its state) resumes awake and never sleeps."""
+    solver, state = _settled()
+    again = pickle.loads(pickle.dumps(solver))
+    assert again.asleep
+    counted = _Counted(again)
+    again.advance(state, _inputs(49))
+    assert again.asleep and counted.steps == 0
+    old = pickle.loads(pickle.dumps(solver))
+    del old.__dict__["_sleep"]
+    old = pickle.loads(pickle.dumps(old))
+    assert not old.asleep
+    counted = _Counted(old)
+    for frame in range(49, 73):
+        old.advance(state, _inputs(frame))
+    assert not old.asleep and counted.steps == 48
+
+
+def test_pins_that_move_wake_the_mesh_and_still_ones_let_it_sleep():
+    """A cloth hanging from two pinned corners comes to rest and sleeps; its pins' targets
+    moved by 1 cm (an animated rest shape) wake it and pull it along."""
+    weights = np.zeros(81)
+    weights[[72, 80]] = 1.0  # the corners of the last row, on top
+    model = _sheet(pins=weights, height=1.0, hanging=True)
+    solver = SpringMeshSolver(model, "IMPLICIT", 2, frame_dt=DT, frame=1)
+    state = model.state()
+    rest = model.rest_x
+    for frame in range(1, 24 * 12):
+        solver.advance(state, _inputs(frame, colliders=[], rest0=rest, rest1=rest))
+        if solver.asleep:
+            break
+    assert solver.asleep, "the hanging cloth never came to rest in 12 s"
+    x0 = state.x.copy()
+    moved = rest + [0.01, 0.0, 0.0]
+    solver.advance(state, _inputs(frame + 1, colliders=[], rest0=rest, rest1=moved))
+    assert not solver.asleep
+    assert np.allclose(state.x[[72, 80]], moved[[72, 80]])
+    assert (state.x - x0)[:, 0].mean() > 1e-4
+
+
+@pytest.mark.parametrize("mu", [0.2, 0.5])
+def test_a_cloth_sliding_down_a_slope_never_sleeps(mu):
+    """Slopes of 30 degrees, friction below tan 30 = 0.577: the cloth accelerates at
+    g (sin - mu cos), 0.24 m/s^2 at mu 0.5 — from rest, slower than the sleep speed only in
+    its first frame."""
+    c, s = np.cos(np.radians(30.0)), np.sin(np.radians(30.0))
+    m = np.eye(4)
+    m[1:3, 1:3] = [[c, -s], [s, c]]
+    slope = ColliderFrame("Slope", "HALF_SPACE", m, m, restitution=0.0, friction=mu)
+    x, edges, tris, ls, lt, lv = _grid(7, 7, 0.4)
+    x = (x - [0.2, 0.2, 0.0]) @ m[:3, :3].T
+    model = SpringMeshBuilder(SpringMeshSettings("Patch"), x, edges, tris, ls, lt,
+                              lv).finalize(1)
+    solver = SpringMeshSolver(model, "IMPLICIT", 2, frame_dt=DT, frame=1)
+    state = model.state()
+    for frame in range(1, 49):
+        solver.advance(state, _inputs(frame, colliders=[slope]))
+        assert not solver.asleep, frame
+
+
+def test_the_sleep_speed_is_a_share_of_the_mesh_size_up_to_a_limit():
+    """A 2 cm napkin sleeps below 0.03 mm/s (a thousandth of its size per second), a 10 m sail
+    below 2 mm/s: a slow creep of a small mesh is not taken for rest."""
+    x, *_ = _grid(3, 3, 1.0)
+    diagonal = np.sqrt(2.0)
+    assert sleep.Sleep.for_mesh(0.02 * x).speed == pytest.approx(0.02 * diagonal * 1e-3)
+    assert sleep.Sleep.for_mesh(10.0 * x).speed == sleep.SLEEP_SPEED
+
+
+def _frame(keeper, now, speed):
+    """One frame interval in which every vertex moved at ``speed``; whether it fell asleep."""
+    x0 = np.zeros((4, 3))
+    v = np.tile([speed, 0.0, 0.0], (4, 1))
+    return keeper.settle(now, np.ones(4, bool), x0, x0 + DT * v, v, DT)
+
+
+def test_sleep_takes_half_a_second_of_slow_frames_under_the_same_conditions():
+    """Slow frames (below the sleep speed, at their end and on average) count up to
+    SLEEP_TIME; a faster frame, or a frame under other conditions, starts the count again;
+    the sleeper wakes under other conditions."""
+    model = _sheet()
+    solver = SpringMeshSolver(model, "IMPLICIT", 2, frame_dt=DT, frame=1)
+    state = model.state()
+    solver.advance(state, _inputs(1))
+    keeper = sleep.Sleep(1e-3)
+    now = solver._sleep.conditions
+    other = sleep.conditions("IMPLICIT", 0.5 * DT, _inputs(2, gravity=(0.0, 0.0, -9.0)),
+                             [], np.zeros(81, bool), model.rest_x, model.rest_x, False)
+    assert now is not None and other is not None and not now.same_as(other)
+    assert not any(_frame(keeper, now, 0.9e-3) for _ in range(11))
+    assert not _frame(keeper, now, 1.1e-3)  # one fast frame: the count starts again
+    assert not any(_frame(keeper, now, 0.5e-3) for _ in range(11))
+    assert not _frame(keeper, other, 0.5e-3)  # other conditions: again
+    assert not any(_frame(keeper, now, 0.5e-3) for _ in range(11))
+    assert _frame(keeper, now, 0.5e-3)  # twelve slow frames of 1/24 s in a row
+    assert keeper.sleeps(now) and keeper.asleep
+    assert not keeper.sleeps(other) and not keeper.asleep
+    assert not keeper.sleeps(now)  # woken: it must be slow for half a second again
