@@ -13,8 +13,10 @@ Three scenes, 250 frames at 24 fps each:
 * **suzanne** (defaults too): the same grid from 2.5 m onto Suzanne (Blender's monkey, 2 m,
   face up, on the ground). Blender: Collision modifiers on Suzanne and the ground. physanim:
   both colliders, Suzanne's shape Mesh. Checked: no vertex below the ground, the cloth draped
-  over her. Both dropped scenes also run physanim with the Implicit BDF2 integrator at one
-  step per frame (a labelled row beside the defaults' headline).
+  over her. Both dropped scenes also run physanim with Sleep When Still off and with the
+  Implicit BDF2 integrator at one step per frame (labelled rows beside the defaults'
+  headline), and say from which frame the defaults' cloth slept (its cache unchanged after)
+  and how far from it the cloth with sleep off ends.
 * **pinned**: the same grid at z = 2 m, pinned at the two corners of one edge, hanging under
   gravity (no collision): physanim at its defaults (the spring mesh's pin group named, nothing
   else set: the headline row), with the tuned settings below, and at the defaults with the
@@ -146,11 +148,12 @@ def run_blender_dropped(grid: int, frames: int, suzanne: bool = False):
 
 
 def run_physanim_dropped(grid: int, frames: int, folder: str, suzanne: bool = False,
-                         bdf2: bool = False):
+                         bdf2: bool = False, sleep: bool = True):
     """The dropped cloth as a spring mesh at the defaults, or (``bdf2``) with the Implicit
-    BDF2 integrator at one step per frame."""
+    BDF2 integrator at one step per frame, or with Sleep When Still off (``sleep``)."""
     scene, ob, colliders = build_dropped(grid, frames, suzanne)
     ob.physanim.spring_mesh.enabled = True
+    ob.physanim.spring_mesh.sleep = sleep
     if bdf2:
         ob.physanim.spring_mesh.integrator, ob.physanim.spring_mesh.substeps = 'BDF2', 1
     for collider in colliders:
@@ -168,15 +171,28 @@ def run_physanim_dropped(grid: int, frames: int, folder: str, suzanne: bool = Fa
     scene.frame_set(frames)
     x = world_vertices(ob)
     problems = [] if result == {'FINISHED'} else ["physanim: bake failed"]
-    return took, x, problems + check_dropped("physanim", x, suzanne), settings
+    return took, x, problems + check_dropped("physanim", x, suzanne), settings, slept(ob)
+
+
+def slept(ob) -> int | None:
+    """The first frame of the baked cache from which it never changes again (the mesh slept
+    through the frames after it), or None."""
+    path = bpy.path.abspath(ob.modifiers["physanim"].filepath)
+    samples = common.core_module("pc2").read_pc2(path)[0]
+    changed = [f for f in range(1, len(samples)) if not np.array_equal(samples[f],
+                                                                        samples[f - 1])]
+    last = changed[-1] + 1 if changed else 1
+    return last if last < len(samples) - 1 else None
 
 
 def dropped_table(grid: int, frames: int, blender: tuple, physanim: tuple,
-                  suzanne: bool = False, bdf2: tuple | None = None) -> str:
+                  suzanne: bool = False, bdf2: tuple | None = None,
+                  awake: tuple | None = None) -> str:
     """The dropped scene's heading, table and target line; each run is ``(seconds, final
-    world vertices (n, 3) [m])``, physanim's with its settings last (``bdf2``: the labelled
-    row with Implicit BDF2 chosen). The target is judged on the defaults."""
-    (b_time, b_x), (p_time, p_x, settings) = blender, physanim
+    world vertices (n, 3) [m])``, physanim's with its settings and the frame it slept from
+    last (``bdf2``: the labelled row with Implicit BDF2 chosen, ``awake``: with Sleep When
+    Still off). The target is judged on the defaults."""
+    (b_time, b_x), (p_time, p_x, settings, asleep) = blender, physanim
     target, onto = ((SUZANNE_TARGET, f"Suzanne (a Mesh collider) on a ground plane from "
                      f"{SUZANNE_DROP} m") if suzanne else
                     (DROPPED_TARGET, f"a ground plane from {DROP_HEIGHT} m"))
@@ -186,6 +202,15 @@ def dropped_table(grid: int, frames: int, blender: tuple, physanim: tuple,
             (f"physanim spring mesh + collider (defaults: {settings}, incl. PC2)",
              f"{p_time:.2f}", f"{1000 * p_time / frames:.1f}", f"{p_x[:, 2].min():.3f}",
              f"{p_x[:, 2].max():.3f}", f"{p_time / b_time:.2f}")]
+    notes = []
+    if awake is not None:
+        t, x = awake
+        rows.append(("physanim spring mesh + collider (defaults, Sleep When Still off, incl. "
+                     "PC2)", f"{t:.2f}", f"{1000 * t / frames:.1f}", f"{x[:, 2].min():.3f}",
+                     f"{x[:, 2].max():.3f}", f"{t / b_time:.2f}"))
+        notes.append(f"- physanim at the defaults slept from frame "
+                     f"{asleep if asleep is not None else '(never)'} on; with Sleep When Still "
+                     f"off the cloth ends {1000 * np.abs(x - p_x).max():.3f} mm from it at most")
     if bdf2 is not None:
         t, x, label = bdf2
         rows.append((f"physanim spring mesh + collider (defaults, Implicit BDF2 chosen: "
@@ -199,7 +224,7 @@ def dropped_table(grid: int, frames: int, blender: tuple, physanim: tuple,
                                    rows), "",
         f"- target (issue 12): physanim <= {target} x Blender's cloth: "
         f"{'met' if p_time <= target * b_time else 'NOT met'} "
-        f"({p_time / b_time:.2f} x)"])
+        f"({p_time / b_time:.2f} x)", *notes])
 
 
 def run_blender(grid: int, frames: int):
@@ -304,13 +329,16 @@ def main(argv: list[str]) -> int:
           blender_side.extension_enabled()):
         for suzanne in [s == "suzanne" for s in ("dropped", "suzanne") if s in scenes]:
             b_time, b_x, b_problems = run_blender_dropped(args.grid, args.frames, suzanne)
-            p_time, p_x, p_problems, settings = run_physanim_dropped(args.grid, args.frames,
-                                                                     folder, suzanne)
-            d_time, d_x, d_problems, d_settings = run_physanim_dropped(
+            p_time, p_x, p_problems, settings, asleep = run_physanim_dropped(
+                args.grid, args.frames, folder, suzanne)
+            a_time, a_x, a_problems, _, _ = run_physanim_dropped(
+                args.grid, args.frames, folder, suzanne, sleep=False)
+            d_time, d_x, d_problems, d_settings, _ = run_physanim_dropped(
                 args.grid, args.frames, folder, suzanne, bdf2=True)
-            problems += b_problems + p_problems + d_problems
-            print(dropped_table(args.grid, args.frames, (b_time, b_x), (p_time, p_x, settings),
-                                suzanne, (d_time, d_x, d_settings)), flush=True)
+            problems += b_problems + p_problems + a_problems + d_problems
+            print(dropped_table(args.grid, args.frames, (b_time, b_x),
+                                (p_time, p_x, settings, asleep), suzanne,
+                                (d_time, d_x, d_settings), (a_time, a_x)), flush=True)
         if "pinned" in scenes:
             b_time, b_x, b_problems, quality, b_motion = run_blender(args.grid, args.frames)
             runs = {}
