@@ -15,9 +15,8 @@ SIDE = 1.0  # [m] the cloth's side
 CUTS = 30  # vertices along a side: 32
 DROP = 0.8  # [m] from the lowest corner to the floor
 
-# Frames that show the point (landing on its corner and buckling; folding over; lying in a
-# pile of folds, the fold rolled over onto the rest by frame 80); README_FRAME is the README's
-# picture.
+# Frames that show the point (landing on its corner and buckling; folding over; lying at rest
+# with both ends folded over onto the rest); README_FRAME is the README's picture.
 END = 96
 SHOWCASE = (14, 22, END)
 README_FRAME = END
