@@ -11,8 +11,11 @@ sub-step returns at once.
 The conditions are what a sub-step is a function of, apart from the mesh's own state
 (:func:`conditions`): the integrator and the sub-step length, gravity, the colliders (each still
 over the interval: not moving, not deforming, and the same as when the mesh fell asleep), the
-pins' targets and the attachments' targets (still, and where they were), no force object, and
-no attachment to a rigid body (which the mesh's sub-steps move). Anything else — a collider
+pins' targets — the animated rest shape under hard and soft pins — and the attachments' and
+virtual springs' targets (still, and where they were), no force object, and no attachment to
+a rigid body (which the mesh's sub-steps move). A rigid body the mesh lies on is a collider:
+it must be still too (a sleeping body is), so a mesh asleep on it hands it no weight while
+nothing moves, and wakes with the body. Anything else — a collider
 keyed to move, a body landing on the mesh (it moves as a collider), gravity keyed, a wind or
 any other force object, pins or targets moving — wakes the mesh for that frame; it sleeps again
 only after SLEEP_TIME more of slow frames. As Bullet's sleeping bodies, a mesh creeping slower
@@ -54,14 +57,17 @@ class Conditions:
                 all(np.array_equal(a, b) for (_, a), (_, b) in zip(self.targets, other.targets)))
 
 
-def conditions(integrator: str, h: float, inputs, paths: list, pinned: np.ndarray,
+def conditions(integrator: str, h: float, inputs, paths: list, anchored: np.ndarray,
                rest0: np.ndarray, rest1: np.ndarray, coupled: bool) -> Conditions | None:
     """The conditions of a frame interval's sub-steps, or None when they change within it or
-    the mesh must not sleep under them: a collider moving or deforming, a force object, pins
-    or targets moving, an attachment to a rigid body (``coupled``). ``pinned``: (n,) bool."""
+    the mesh must not sleep under them: a collider moving or deforming (``paths``: every
+    collider's, those the mesh is attached to without colliding too), a force object, pins or
+    targets moving, an attachment to a rigid body (``coupled``). ``anchored``: (n,) bool, the
+    vertices held on the animated rest shape ``rest0`` -> ``rest1`` (hard pins, soft pins'
+    springs)."""
     if coupled or inputs.winds or inputs.fields or not all(p.still for p in paths):
         return None
-    if not np.array_equal(rest0[pinned], rest1[pinned]):
+    if not np.array_equal(rest0[anchored], rest1[anchored]):
         return None
     targets = []
     for name in sorted(inputs.targets):
@@ -70,7 +76,7 @@ def conditions(integrator: str, h: float, inputs, paths: list, pinned: np.ndarra
             return None
         targets.append((name, np.asarray(m0)))
     return Conditions(integrator, float(h), tuple(float(g) for g in inputs.gravity),
-                      tuple(p.frame for p in paths), rest1[pinned], tuple(targets))
+                      tuple(p.frame for p in paths), rest1[anchored], tuple(targets))
 
 
 class Sleep:

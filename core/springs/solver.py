@@ -123,11 +123,16 @@ class SpringMeshSolver:
                                     s.self_distance, s.self_friction) \
             if s.self_collision else None
         self._sleep = sleep_.Sleep.for_mesh(model.rest_x) if s.sleep else None
+        # the vertices the animated rest shape moves: hard pins and soft (PIN) springs' anchors
+        self._anchored = ~self.free
+        for vs in model.virtual:
+            if vs.mode == "PIN":
+                self._anchored[vs.index] = True
         self._check_stability(frame_dt / self.substeps, frame)
 
     def __setstate__(self, saved: dict) -> None:
         """A solver saved before spring meshes slept resumes awake, never sleeping."""
-        self.__dict__.update({"_sleep": None, **saved})
+        self.__dict__.update({"_sleep": None, "_anchored": None, **saved})
 
     @property
     def asleep(self) -> bool:
@@ -166,7 +171,7 @@ class SpringMeshSolver:
         # (that is its undeformed shape, which the mesh starts on)
         apart = {a.target for a in self.model.attachments if not a.collide}
         apart.add(self.model.settings.name)
-        paths = [p for p in paths if p.frame.name not in apart]
+        every, paths = paths, [p for p in paths if p.frame.name not in apart]
         h = inputs.frame_dt / self.substeps
         g = np.asarray(inputs.gravity, dtype=np.float64)
         rest0 = inputs.rest0 if inputs.rest0 is not None else self.model.rest_x
@@ -183,8 +188,8 @@ class SpringMeshSolver:
                           2.0 * float(np.linalg.norm(g)) * h + 1e-4, held=held)
         if self._sleep is not None:
             coupled = held is not None and any(b is not None for b in held.coupled)
-            step.conditions = sleep_.conditions(self.integrator_name, h, inputs, paths, ~self.free,
-                                          rest0, rest1, coupled)
+            step.conditions = sleep_.conditions(self.integrator_name, h, inputs, every,
+                                                self._anchored, rest0, rest1, coupled)
             step.asleep = self._sleep.sleeps(step.conditions)
             step.start = None if step.asleep else state.x.copy()
         return step

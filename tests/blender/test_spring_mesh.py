@@ -293,8 +293,8 @@ def test_a_hanging_cloth_sleeps_at_rest_and_wakes_when_its_object_moves(physanim
         baked[sleeps] = _samples(physanim_ext, ob).copy()
     x, awake = baked[True], baked[False]
     same = [np.array_equal(x[f], x[f - 1]) for f in range(1, len(x))]  # frame f + 1 as f
+    assert any(same[:29]), "it never slept"
     first = same.index(True) + 1  # the first frame it slept through
-    assert first < 30, "it never slept"
     assert all(same[first - 1:39]), "it woke with nothing changing"
     assert not any(same[40:]), "it slept on while its pins moved"
     assert not all(np.array_equal(awake[f], awake[f - 1]) for f in range(first, 39))

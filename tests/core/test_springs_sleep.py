@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 
 from physanim.core.contact import ColliderFrame
-from physanim.core.forces import Wind
+from physanim.core.forces import Drag, Wind
 from physanim.core.springs import (SpringFrameInputs, SpringMeshBuilder, SpringMeshSettings,
-                                   SpringMeshSolver)
+                                   SpringMeshSolver, VirtualSprings)
+from physanim.core.springs.model import Attachment
 from physanim.core.springs import sleep
 from physanim.tests.core.helpers import grid as _grid
 
@@ -20,15 +21,20 @@ GROUND = ColliderFrame("Ground", "HALF_SPACE", np.eye(4), np.eye(4))
 
 
 def _sheet(sleeps: bool = True, pins=None, size: float = 1.0, height: float = 0.3,
-           hanging: bool = False):
+           hanging: bool = False, virtual=(), attachments=()):
     """A size x size cloth (9 x 9 vertices) ``height`` above the ground, at the defaults
-    (``hanging``: upright, its last row on top)."""
+    (``hanging``: upright, its last row on top; ``virtual``: virtual spring groups)."""
     x, edges, tris, ls, lt, lv = _grid(9, 9, size)
     x = x - [0.5 * size, 0.5 * size, -height]
     if hanging:
         x = x[:, [0, 2, 1]] + [0.0, -height, height + 0.5 * size]
     settings = SpringMeshSettings("Sheet") if sleeps else SpringMeshSettings("Sheet", sleep=False)
-    return SpringMeshBuilder(settings, x, edges, tris, ls, lt, lv, pins).finalize(1)
+    builder = SpringMeshBuilder(settings, x, edges, tris, ls, lt, lv, pins)
+    for group in virtual:
+        builder.add_virtual(group)
+    for attachment in attachments:
+        builder.add_attachment(attachment)
+    return builder.finalize(1)
 
 
 class _Counted:
@@ -149,6 +155,115 @@ def test_pins_that_move_wake_the_mesh_and_still_ones_let_it_sleep():
     assert not solver.asleep
     assert np.allclose(state.x[[72, 80]], moved[[72, 80]])
     assert (state.x - x0)[:, 0].mean() > 1e-4
+
+
+TOP = np.arange(72, 81)  # the last row: on top of a hanging sheet
+
+
+def _hung(model, targets=None, frames: int = 24 * 12):
+    """Hang ``model`` (no collider) until it sleeps; the solver and state."""
+    solver = SpringMeshSolver(model, "IMPLICIT", 2, frame_dt=DT, frame=1)
+    state = model.state()
+    for frame in range(1, frames):
+        solver.advance(state, _inputs(frame, colliders=[], targets=targets or {}))
+        if solver.asleep:
+            return solver, state, frame
+    raise AssertionError("the hanging cloth never came to rest")
+
+
+def test_soft_pins_whose_rest_shape_moves_wake_the_mesh():
+    """Held by soft pins only (PIN virtual springs, no hard pin): the animated rest shape
+    moving 1 cm under them wakes the sleeping mesh, and the springs pull it along."""
+    soft = VirtualSprings("PIN", TOP, np.full(len(TOP), 0.5), 0.0, 2000.0, 20.0)
+    model = _sheet(height=1.0, hanging=True, virtual=[soft])
+    solver, state, frame = _hung(model)
+    x0 = state.x.copy()
+    rest = model.rest_x
+    step = np.array([1e-3, 0.0, 0.0])
+    for k in range(1, 13):
+        solver.advance(state, _inputs(frame + k, colliders=[], rest0=rest + (k - 1) * step,
+                                      rest1=rest + k * step))
+        assert not solver.asleep
+    assert (state.x - x0)[TOP, 0].mean() > 5e-3
+
+
+def test_attached_vertices_wake_the_mesh_when_their_target_moves():
+    """An ATTACH group on a still hook sleeps with the cloth; the hook keyed to move wakes it
+    and carries the attached row along."""
+    hook = np.eye(4)
+    attach = VirtualSprings("ATTACH", TOP, np.ones(len(TOP)), 0.0, 5000.0, 20.0, target="Hook")
+    model = _sheet(height=1.0, hanging=True, virtual=[attach])
+    solver, state, frame = _hung(model, {"Hook": (hook, hook)})
+    moved = hook.copy()
+    moved[0, 3] = 0.02
+    x0 = state.x.copy()
+    solver.advance(state, _inputs(frame + 1, colliders=[], targets={"Hook": (hook, moved)}))
+    assert not solver.asleep
+    for k in range(2, 13):
+        solver.advance(state, _inputs(frame + k, colliders=[], targets={"Hook": (moved, moved)}))
+    assert (state.x - x0)[TOP, 0].mean() > 0.01
+
+
+def test_a_mesh_sewn_onto_a_collider_wakes_when_the_collider_moves():
+    """An attachment to a collider it does not collide with (a cloth sewn onto a box, passing
+    through it): the mesh meets no path of that collider, yet the box keyed to move wakes it
+    and carries the sewn row."""
+    box = np.diag([0.1, 0.1, 0.1, 1.0])
+    box[:3, 3] = [0.0, 0.0, 2.0]
+    model = _sheet(height=1.0, hanging=True, attachments=[Attachment(TOP, "Box", collide=False)])
+    still = ColliderFrame("Box", "BOX", box, box)
+    solver = SpringMeshSolver(model, "IMPLICIT", 2, frame_dt=DT, frame=1)
+    state = model.state()
+    for frame in range(1, 24 * 12):
+        solver.advance(state, _inputs(frame, colliders=[still]))
+        if solver.asleep:
+            break
+    assert solver.asleep
+    x0 = state.x.copy()
+    moved = box.copy()
+    moved[0, 3] = 0.02
+    solver.advance(state, _inputs(frame + 1, colliders=[ColliderFrame("Box", "BOX", box, moved)]))
+    assert not solver.asleep
+    assert np.allclose((state.x - x0)[TOP, 0], 0.02)
+
+
+def test_a_moving_collider_or_a_force_object_keeps_a_still_mesh_awake():
+    """Anything that moves among the colliders (a ball circling far from the cloth, the same
+    frame over and over), or any force object (a drag field, which a still cloth does not
+    feel), keeps the mesh awake: the sub-step is not known to be the same function."""
+    far = np.eye(4)
+    far[:3, 3] = [10.0, 0.0, 1.0]
+    near = far.copy()
+    near[1, 3] = 0.5
+    ball = ColliderFrame("Ball", "SPHERE", far, near)
+    for extra in ({"colliders": [GROUND, ball]}, {"fields": [Drag("Air", 0.1)]}):
+        model = _sheet()
+        solver = SpringMeshSolver(model, "IMPLICIT", 2, frame_dt=DT, frame=1)
+        state = model.state()
+        for frame in range(1, 61):
+            solver.advance(state, _inputs(frame, **extra))
+            assert not solver.asleep, (extra, frame)
+        assert np.abs(state.v).max() < 1e-3  # at rest all the same
+
+
+@pytest.mark.parametrize("integrator", ["BDF2", "SYMPLECTIC_EULER"])
+def test_other_integrators_sleep_and_wake(integrator):
+    """Implicit BDF2 and an explicit integrator (at substeps it can take) sleep as implicit
+    Euler does, and a sideways gravity wakes them."""
+    model = _sheet()
+    substeps = 2 if integrator == "BDF2" else 200
+    solver = SpringMeshSolver(model, integrator, substeps, frame_dt=DT, frame=1)
+    state = model.state()
+    for frame in range(1, 73):
+        solver.advance(state, _inputs(frame))
+        if solver.asleep:
+            break
+    assert solver.asleep, integrator
+    x0 = state.x.copy()
+    for k in range(1, 7):
+        solver.advance(state, _inputs(frame + k, gravity=(9.81, 0.0, -1.0)))
+        assert not solver.asleep
+    assert (state.x - x0)[:, 0].mean() > 1e-3
 
 
 @pytest.mark.parametrize("mu", [0.2, 0.5])
