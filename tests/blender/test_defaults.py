@@ -209,6 +209,10 @@ def test_spring_mesh_at_its_defaults_falls_lands_and_rests(physanim_ext, tmp_pat
     assert z[-1].min() < 0.02, "it never landed"
     speed = np.linalg.norm(x[-1] - x[-2], axis=1) * 24.0
     assert speed.max() < 0.05, f"not at rest after {x.shape[0]} frames ({speed.max():.3f} m/s)"
+    # at rest it sleeps (Sleep When Still, on by default): its last 100 frames are the same
+    # to the bit (the monkey, a closed mesh, held its springs' micrometre jitter without it)
+    moved = [f for f in range(1, len(x)) if not np.array_equal(x[f], x[f - 1])]
+    assert moved[-1] < len(x) - 100, f"still moving at frame {moved[-1] + 1}"
     size0 = np.ptp(x[0], axis=0).max()
     assert 0.5 * size0 < np.ptp(x[-1], axis=0).max() < 1.5 * size0  # it kept its shape
 
