@@ -415,10 +415,9 @@ class BakeJob(Resumable, Failures):
                   else "")
         info = (f"baked {', '.join(parts)}, frames {self.frame_start}-{self.frame_end}"
                 f"{births}, {took:.2f} s")
-        if self.breaks:
-            info += "; " + "; ".join(self.breaks)
-        if self.aim_notes:
-            info += "; " + "; ".join(self.aim_notes)
+        notes = [*self.breaks, *springs.rest_notes(self.meshes), *(self.aim_notes or [])]
+        if notes:
+            info += "; " + "; ".join(notes)
         self.settings.bake_info = info
         return info
 

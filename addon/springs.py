@@ -108,6 +108,7 @@ class SpringMeshBake:
         self.target_kinds = {**held_on, **pulled_to}  # what messages call each target
         self.targets = sorted(self.target_kinds)
         self.pc2: Pc2Writer | None = None
+        self.asleep_from: int | None = None  # the frame from which the mesh sleeps (at rest)
 
     @property
     def label(self) -> str:
@@ -203,6 +204,10 @@ class SpringMeshBake:
     def end_frame(self, nxt: dict) -> None:
         """The interval to ``nxt`` was simulated (its frames are written by :meth:`write`)."""
         self.sample = nxt
+        if not self.solver.asleep:
+            self.asleep_from = None
+        elif getattr(self, "asleep_from", None) is None:
+            self.asleep_from = nxt["frame"]
 
     def write(self, frame: int | None = None, pose=None) -> None:
         """Append a frame's object-space positions to the PC2 file: the state now, or ``pose``
@@ -300,3 +305,9 @@ def cache_folder_of(ob) -> str | None:
     if mod is None or not mod.filepath:
         return None
     return os.path.dirname(bpy.path.abspath(mod.filepath, library=ob.library))
+
+
+def rest_notes(meshes) -> list[str]:
+    """For the bake's summary: the meshes asleep at its end, and since which frame."""
+    return [f'"{m.ob.name}" at rest (asleep) from frame {m.asleep_from}' for m in meshes
+            if getattr(m, "asleep_from", None) is not None]

@@ -5,6 +5,7 @@ up as a user would place objects; the role's own properties keep their defaults)
 from __future__ import annotations
 
 import math
+import re
 import sys
 from pathlib import Path
 
@@ -213,6 +214,13 @@ def test_spring_mesh_at_its_defaults_falls_lands_and_rests(physanim_ext, tmp_pat
     # to the bit (the monkey, a closed mesh, held its springs' micrometre jitter without it)
     moved = [f for f in range(1, len(x)) if not np.array_equal(x[f], x[f - 1])]
     assert moved[-1] < len(x) - 100, f"still moving at frame {moved[-1] + 1}"
+    # and the bake's summary says from which frame: at most half a second after the cache
+    # stopped changing (static friction can hold a flat cloth exactly before it sleeps)
+    still = scene.physanim.frame_start + moved[-1]
+    asleep = re.search(f'"{ob.name}" at rest \\(asleep\\) from frame (\\d+)',
+                       scene.physanim.bake_info)
+    assert asleep is not None, scene.physanim.bake_info
+    assert still <= int(asleep.group(1)) <= still + 13
     size0 = np.ptp(x[0], axis=0).max()
     assert 0.5 * size0 < np.ptp(x[-1], axis=0).max() < 1.5 * size0  # it kept its shape
 
