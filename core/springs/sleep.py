@@ -12,12 +12,13 @@ The conditions are what a sub-step is a function of, apart from the mesh's own s
 (:func:`conditions`): the integrator and the sub-step length, gravity, the colliders (each still
 over the interval: not moving, not deforming, and the same as when the mesh fell asleep), the
 pins' targets — the animated rest shape under hard and soft pins — and the attachments' and
-virtual springs' targets (still, and where they were), no force object, and no attachment to
-a rigid body (which the mesh's sub-steps move). A rigid body the mesh lies on is a collider:
+virtual springs' targets (still, and where they were), the force objects (the same, each
+steady: drag, attractors, vortices and winds without gusts push a still mesh the same way at
+any time), and no attachment to a rigid body (which the mesh's sub-steps move). A rigid body the mesh lies on is a collider:
 it must be still too (a sleeping body is), so a mesh asleep on it hands it no weight while
 nothing moves, and wakes with the body. Anything else — a collider
-keyed to move, a body landing on the mesh (it moves as a collider), gravity keyed, a wind or
-any other force object, pins or targets moving — wakes the mesh for that frame; it sleeps again
+keyed to move, a body landing on the mesh (it moves as a collider), gravity keyed, a force
+keyed or gusting, pins or targets moving — wakes the mesh for that frame; it sleeps again
 only after SLEEP_TIME more of slow frames. As Bullet's sleeping bodies, a mesh creeping slower
 than the sleep speed for that long stops: the drape of the cloth benchmark moves 0.02 mm in
 the 150 frames after it would fall asleep (measured by baking it on).
@@ -28,17 +29,23 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..forces import Attractor, Drag, Vortex, Wind
+
 SLEEP_SPEED = 2e-3  # [m/s] the largest sleep speed (a cloth of 2 m or more)
 SLEEP_SHARE = 1e-3  # [1/s] the sleep speed as a share of the mesh's size (its rest box's diagonal)
 SLEEP_TIME = 0.5  # [s] of consecutive slow frames before the mesh sleeps
+# force objects whose push is a function of the mesh's positions and velocities alone (a wind
+# only without gusts, which change with time)
+STEADY = (Attractor, Drag, Vortex, Wind)
 
 
 @dataclass(frozen=True)
 class Conditions:
     """What a spring mesh's sub-steps are a function of, besides its own state: the
-    integrator, the sub-step h [s], gravity, the colliders' frames (each still), and the pins'
+    integrator, the sub-step h [s], gravity, the colliders' frames (each still), the pins'
     and targets' places: ``pins`` (k, 3) the pinned vertices' targets, ``targets`` the
-    attachments' and virtual springs' target matrices by name."""
+    attachments' and virtual springs' target matrices by name; and the force objects (each
+    steady)."""
 
     integrator: str
     h: float
@@ -46,10 +53,13 @@ class Conditions:
     colliders: tuple
     pins: np.ndarray
     targets: tuple
+    forces: tuple = ()
 
     def same_as(self, other: Conditions | None) -> bool:
         return (other is not None and (self.integrator, self.h, self.gravity) ==
                 (other.integrator, other.h, other.gravity) and
+                len(self.forces) == len(other.forces) and
+                all(_same_force(a, b) for a, b in zip(self.forces, other.forces)) and
                 len(self.colliders) == len(other.colliders) and
                 all(a.same_as(b) for a, b in zip(self.colliders, other.colliders)) and
                 np.array_equal(self.pins, other.pins) and
@@ -61,11 +71,13 @@ def conditions(integrator: str, h: float, inputs, paths: list, anchored: np.ndar
                rest0: np.ndarray, rest1: np.ndarray, coupled: bool) -> Conditions | None:
     """The conditions of a frame interval's sub-steps, or None when they change within it or
     the mesh must not sleep under them: a collider moving or deforming (``paths``: every
-    collider's, those the mesh is attached to without colliding too), a force object, pins or
-    targets moving, an attachment to a rigid body (``coupled``). ``anchored``: (n,) bool, the
+    collider's, those the mesh is attached to without colliding too), a force object that is
+    not steady (:data:`STEADY`), pins or targets moving, an attachment to a rigid body
+    (``coupled``). ``anchored``: (n,) bool, the
     vertices held on the animated rest shape ``rest0`` -> ``rest1`` (hard pins, soft pins'
     springs)."""
-    if coupled or inputs.winds or inputs.fields or not all(p.still for p in paths):
+    forces = (*inputs.winds, *inputs.fields)
+    if coupled or not all(_steady(f) for f in forces) or not all(p.still for p in paths):
         return None
     if not np.array_equal(rest0[anchored], rest1[anchored]):
         return None
@@ -76,7 +88,7 @@ def conditions(integrator: str, h: float, inputs, paths: list, anchored: np.ndar
             return None
         targets.append((name, np.asarray(m0)))
     return Conditions(integrator, float(h), tuple(float(g) for g in inputs.gravity),
-                      tuple(p.frame for p in paths), rest1[anchored], tuple(targets))
+                      tuple(p.frame for p in paths), rest1[anchored], tuple(targets), forces)
 
 
 class Sleep:
@@ -119,6 +131,19 @@ class Sleep:
         # (a share of a frame short counts: 12 frames of 1/24 s sum to a hair under 0.5 s)
         self.asleep = not fast and self.slow >= SLEEP_TIME - 1e-9
         return self.asleep
+
+
+def _steady(force) -> bool:
+    """Whether a force object pushes a still mesh the same way at every time."""
+    return type(force) in STEADY and not (isinstance(force, Wind) and force.noise > 0.0)
+
+
+def _same_force(a, b) -> bool:
+    """Whether two force objects' frames are the same force (the same kind and values)."""
+    try:
+        return type(a) is type(b) and bool(a == b)
+    except ValueError:  # values that compare element-wise: taken as changed
+        return False
 
 
 def _faster(free: np.ndarray, x0: np.ndarray, x1: np.ndarray, v1: np.ndarray,

@@ -227,16 +227,17 @@ def test_a_mesh_sewn_onto_a_collider_wakes_when_the_collider_moves():
     assert np.allclose((state.x - x0)[TOP, 0], 0.02)
 
 
-def test_a_moving_collider_or_a_force_object_keeps_a_still_mesh_awake():
-    """Anything that moves among the colliders (a ball circling far from the cloth, the same
-    frame over and over), or any force object (a drag field, which a still cloth does not
-    feel), keeps the mesh awake: the sub-step is not known to be the same function."""
+def test_a_moving_collider_or_a_gusting_wind_keeps_a_still_mesh_awake():
+    """Anything that moves among the colliders (a ball swinging far from the cloth, the same
+    frame over and over), or a wind with gusts (they change with time, however weak), keeps
+    the mesh awake: the sub-step is not known to be the same function."""
     far = np.eye(4)
     far[:3, 3] = [10.0, 0.0, 1.0]
     near = far.copy()
     near[1, 3] = 0.5
     ball = ColliderFrame("Ball", "SPHERE", far, near)
-    for extra in ({"colliders": [GROUND, ball]}, {"fields": [Drag("Air", 0.1)]}):
+    gusts = Wind("Gusts", (0.0, 0.0, -1.0), 0.01, noise=0.5)
+    for extra in ({"colliders": [GROUND, ball]}, {"winds": [gusts]}):
         model = _sheet()
         solver = SpringMeshSolver(model, "IMPLICIT", 2, frame_dt=DT, frame=1)
         state = model.state()
@@ -244,6 +245,18 @@ def test_a_moving_collider_or_a_force_object_keeps_a_still_mesh_awake():
             solver.advance(state, _inputs(frame, **extra))
             assert not solver.asleep, (extra, frame)
         assert np.abs(state.v).max() < 1e-3  # at rest all the same
+
+
+def test_steady_forces_let_a_mesh_sleep_and_a_change_of_them_wakes_it():
+    """Air drag, and a steady wind pressing the cloth onto the ground, push a still cloth the
+    same way every frame: it sleeps under them; the wind keyed stronger wakes it."""
+    drag, wind = Drag("Air", 0.1, 0.01), Wind("Down", (0.0, 0.0, -1.0), 5.0)
+    solver, state = _settled(fields=[drag], winds=[wind])
+    counted = _Counted(solver)
+    solver.advance(state, _inputs(49, fields=[Drag("Air", 0.1, 0.01)], winds=[wind]))
+    assert solver.asleep and counted.steps == 0  # equal values: the same force
+    solver.advance(state, _inputs(50, fields=[drag], winds=[Wind("Down", (0.0, 0.0, -1.0), 6.0)]))
+    assert not solver.asleep and counted.steps == 2
 
 
 @pytest.mark.parametrize("integrator", ["BDF2", "SYMPLECTIC_EULER"])
