@@ -206,7 +206,7 @@ class SpringMeshBake:
         self.sample = nxt
         if not self.solver.asleep:
             self.asleep_from = None
-        elif getattr(self, "asleep_from", None) is None:
+        elif self.asleep_from is None:
             self.asleep_from = nxt["frame"]
 
     def write(self, frame: int | None = None, pose=None) -> None:
@@ -310,4 +310,4 @@ def cache_folder_of(ob) -> str | None:
 def rest_notes(meshes) -> list[str]:
     """For the bake's summary: the meshes asleep at its end, and since which frame."""
     return [f'"{m.ob.name}" at rest (asleep) from frame {m.asleep_from}' for m in meshes
-            if getattr(m, "asleep_from", None) is not None]
+            if m.asleep_from is not None]

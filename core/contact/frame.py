@@ -120,6 +120,12 @@ class ColliderFrame:
 _ARRAYS = ("matrix0", "matrix1", "matrices", "vertices0", "vertices1", "triangles")
 
 
+def same_frames(a, b) -> bool:
+    """Whether two sequences of colliders' frames describe the same colliders in the same
+    places, one by one (:meth:`ColliderFrame.same_as`)."""
+    return len(a) == len(b) and all(x.same_as(y) for x, y in zip(a, b))
+
+
 def _same_array(a: np.ndarray | None, b: np.ndarray | None) -> bool:
     if a is None or b is None:
         return a is b

@@ -26,6 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..contact import same_frames
+
 # integrators whose step is a function of each particle alone, to the bit: RK4's weighted sum
 # of its stages is one BLAS product over the whole state, whose last values round by the
 # state's length
@@ -47,8 +49,7 @@ class Conditions:
             return True
         return (other is not None and (self.integrator, self.gravity, self.h) ==
                 (other.integrator, other.gravity, other.h) and
-                len(self.colliders) == len(other.colliders) and
-                all(a.same_as(b) for a, b in zip(self.colliders, other.colliders)))
+                same_frames(self.colliders, other.colliders))
 
 
 def conditions(integrator: str, gravity: np.ndarray, h: float, inputs, paths: list,

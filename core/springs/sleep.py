@@ -14,12 +14,12 @@ over the interval: not moving, not deforming, and the same as when the mesh fell
 pins' targets — the animated rest shape under hard and soft pins — and the attachments' and
 virtual springs' targets (still, and where they were), the force objects (the same, each
 steady: drag, attractors, vortices and winds without gusts push a still mesh the same way at
-any time), and no attachment to a rigid body (which the mesh's sub-steps move). A rigid body the mesh lies on is a collider:
-it must be still too (a sleeping body is), so a mesh asleep on it hands it no weight while
-nothing moves, and wakes with the body. Anything else — a collider
-keyed to move, a body landing on the mesh (it moves as a collider), gravity keyed, a force
-keyed or gusting, pins or targets moving — wakes the mesh for that frame; it sleeps again
-only after SLEEP_TIME more of slow frames. As Bullet's sleeping bodies, a mesh creeping slower
+any time), and no attachment to a rigid body (which the mesh's sub-steps move). A rigid body
+the mesh lies on is a collider: it must be still too (a sleeping body is), so a mesh asleep
+on it hands it no weight while nothing moves, and wakes with the body. Anything else — a
+collider keyed to move, a body landing on the mesh (it moves as a collider), gravity keyed, a
+force keyed or gusting, pins or targets moving — wakes the mesh for that frame; it sleeps
+again only after SLEEP_TIME more of slow frames. As Bullet's sleeping bodies, a mesh creeping slower
 than the sleep speed for that long stops: the drape of the cloth benchmark moves 0.02 mm in
 the 150 frames after it would fall asleep (measured by baking it on).
 """
@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..contact import same_frames
 from ..forces import Attractor, Drag, Vortex, Wind
 
 SLEEP_SPEED = 2e-3  # [m/s] the largest sleep speed (a cloth of 2 m or more)
@@ -60,11 +61,10 @@ class Conditions:
                 (other.integrator, other.h, other.gravity) and
                 len(self.forces) == len(other.forces) and
                 all(_same_force(a, b) for a, b in zip(self.forces, other.forces)) and
-                len(self.colliders) == len(other.colliders) and
-                all(a.same_as(b) for a, b in zip(self.colliders, other.colliders)) and
-                np.array_equal(self.pins, other.pins) and
-                [name for name, _ in self.targets] == [name for name, _ in other.targets] and
-                all(np.array_equal(a, b) for (_, a), (_, b) in zip(self.targets, other.targets)))
+                same_frames(self.colliders, other.colliders) and
+                np.array_equal(self.pins, other.pins) and len(self.targets) == len(other.targets)
+                and all(na == nb and np.array_equal(a, b)
+                        for (na, a), (nb, b) in zip(self.targets, other.targets)))
 
 
 def conditions(integrator: str, h: float, inputs, paths: list, anchored: np.ndarray,
@@ -73,9 +73,8 @@ def conditions(integrator: str, h: float, inputs, paths: list, anchored: np.ndar
     the mesh must not sleep under them: a collider moving or deforming (``paths``: every
     collider's, those the mesh is attached to without colliding too), a force object that is
     not steady (:data:`STEADY`), pins or targets moving, an attachment to a rigid body
-    (``coupled``). ``anchored``: (n,) bool, the
-    vertices held on the animated rest shape ``rest0`` -> ``rest1`` (hard pins, soft pins'
-    springs)."""
+    (``coupled``). ``anchored``: (n,) bool, the vertices held on the animated rest shape
+    ``rest0`` -> ``rest1`` (hard pins, soft pins' springs)."""
     forces = (*inputs.winds, *inputs.fields)
     if coupled or not all(_steady(f) for f in forces) or not all(p.still for p in paths):
         return None

@@ -58,7 +58,7 @@ class _FrameStep:
     hits: int = 0  # collisions handled
     held: attach.Held | None = None  # the attachments' paths this frame
     reactions: list = field(default_factory=list)  # impulses on bodies held by attachments
-    conditions: sleep_.Conditions | None = None  # what its sub-steps are a function of (:mod:`.sleep`)
+    conditions: sleep_.Conditions | None = None  # what its sub-steps depend on (:mod:`.sleep`)
     asleep: bool = False  # the mesh sleeps through the interval: its sub-steps do nothing
     start: np.ndarray | None = None  # (n, 3) positions at the interval's start (for sleeping)
 

@@ -160,15 +160,17 @@ def test_pins_that_move_wake_the_mesh_and_still_ones_let_it_sleep():
 TOP = np.arange(72, 81)  # the last row: on top of a hanging sheet
 
 
-def _hung(model, targets=None, frames: int = 24 * 12):
-    """Hang ``model`` (no collider) until it sleeps; the solver and state."""
-    solver = SpringMeshSolver(model, "IMPLICIT", 2, frame_dt=DT, frame=1)
+def _until_asleep(model, integrator: str = "IMPLICIT", substeps: int = 2,
+                  frames: int = 24 * 12, **kwargs):
+    """Step ``model`` under the same inputs (``kwargs``, see :func:`_inputs`) until it sleeps;
+    the solver, state and the frame it fell asleep in."""
+    solver = SpringMeshSolver(model, integrator, substeps, frame_dt=DT, frame=1)
     state = model.state()
     for frame in range(1, frames):
-        solver.advance(state, _inputs(frame, colliders=[], targets=targets or {}))
+        solver.advance(state, _inputs(frame, **kwargs))
         if solver.asleep:
             return solver, state, frame
-    raise AssertionError("the hanging cloth never came to rest")
+    raise AssertionError(f"{integrator}: the cloth never came to rest")
 
 
 def test_soft_pins_whose_rest_shape_moves_wake_the_mesh():
@@ -176,7 +178,7 @@ def test_soft_pins_whose_rest_shape_moves_wake_the_mesh():
     moving 1 cm under them wakes the sleeping mesh, and the springs pull it along."""
     soft = VirtualSprings("PIN", TOP, np.full(len(TOP), 0.5), 0.0, 2000.0, 20.0)
     model = _sheet(height=1.0, hanging=True, virtual=[soft])
-    solver, state, frame = _hung(model)
+    solver, state, frame = _until_asleep(model, colliders=[])
     x0 = state.x.copy()
     rest = model.rest_x
     step = np.array([1e-3, 0.0, 0.0])
@@ -193,7 +195,7 @@ def test_attached_vertices_wake_the_mesh_when_their_target_moves():
     hook = np.eye(4)
     attach = VirtualSprings("ATTACH", TOP, np.ones(len(TOP)), 0.0, 5000.0, 20.0, target="Hook")
     model = _sheet(height=1.0, hanging=True, virtual=[attach])
-    solver, state, frame = _hung(model, {"Hook": (hook, hook)})
+    solver, state, frame = _until_asleep(model, colliders=[], targets={"Hook": (hook, hook)})
     moved = hook.copy()
     moved[0, 3] = 0.02
     x0 = state.x.copy()
@@ -211,14 +213,8 @@ def test_a_mesh_sewn_onto_a_collider_wakes_when_the_collider_moves():
     box = np.diag([0.1, 0.1, 0.1, 1.0])
     box[:3, 3] = [0.0, 0.0, 2.0]
     model = _sheet(height=1.0, hanging=True, attachments=[Attachment(TOP, "Box", collide=False)])
-    still = ColliderFrame("Box", "BOX", box, box)
-    solver = SpringMeshSolver(model, "IMPLICIT", 2, frame_dt=DT, frame=1)
-    state = model.state()
-    for frame in range(1, 24 * 12):
-        solver.advance(state, _inputs(frame, colliders=[still]))
-        if solver.asleep:
-            break
-    assert solver.asleep
+    solver, state, frame = _until_asleep(model, colliders=[ColliderFrame("Box", "BOX", box,
+                                                                         box)])
     x0 = state.x.copy()
     moved = box.copy()
     moved[0, 3] = 0.02
@@ -263,15 +259,8 @@ def test_steady_forces_let_a_mesh_sleep_and_a_change_of_them_wakes_it():
 def test_other_integrators_sleep_and_wake(integrator):
     """Implicit BDF2 and an explicit integrator (at substeps it can take) sleep as implicit
     Euler does, and a sideways gravity wakes them."""
-    model = _sheet()
     substeps = 2 if integrator == "BDF2" else 200
-    solver = SpringMeshSolver(model, integrator, substeps, frame_dt=DT, frame=1)
-    state = model.state()
-    for frame in range(1, 73):
-        solver.advance(state, _inputs(frame))
-        if solver.asleep:
-            break
-    assert solver.asleep, integrator
+    solver, state, frame = _until_asleep(_sheet(), integrator, substeps, frames=73)
     x0 = state.x.copy()
     for k in range(1, 7):
         solver.advance(state, _inputs(frame + k, gravity=(9.81, 0.0, -1.0)))
