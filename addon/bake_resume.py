@@ -15,7 +15,7 @@ from .roles import gather
 #: What each system's bake wrapper carries from frame to frame, saved in a checkpoint (the core
 #: objects among them are shared with the world and pickled together with it).
 _RESUMED = {"particles": ("model", "solver", "system", "births", "first_frame", "trackers"),
-            "mesh": ("model", "solver", "state", "system", "sample"),
+            "mesh": ("model", "solver", "state", "system", "sample", "asleep_from"),
             "rigid": ("model", "solver", "system", "kinematic", "simulated", "_last",
                       "joint_values")}
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -157,6 +158,31 @@ def test_a_killed_bake_resumes_bit_identical(physanim_ext, tmp_path):
     assert failed is None
     assert _tree(cache) == reference
     assert _partials(cache) == []
+
+
+def test_a_resumed_bake_names_the_frame_its_cloth_fell_asleep(physanim_ext, tmp_path):
+    """A spring mesh asleep at the checkpoint (Sleep When Still) stays asleep from the frame it
+    fell asleep at: the resumed bake's summary names that frame, not the first one it baked."""
+    path = _shot(tmp_path / "shot", frame_end=48)
+    for name in ("Spray", "Cube", "Cube.001", "Cube.002"):  # the sheet alone on the ground
+        bpy.data.objects.remove(bpy.data.objects[name])
+    bpy.ops.wm.save_mainfile()
+    bake = _module(physanim_ext, "bake")
+    cache = path.parent / "physanim_cache"
+    reference = _reference(bake, cache)
+    scene = bpy.context.scene
+    summary = re.search(r'"Sheet" at rest \(asleep\) from frame (\d+)', scene.physanim.bake_info)
+    assert summary is not None, scene.physanim.bake_info
+    asleep = int(summary.group(1))
+    assert asleep < 40
+    job = bake.BakeJob(bpy.context, checkpoint_every=0)
+    while job.frame < asleep + 4:
+        job.step(bpy.context)
+    job.suspend()
+    info, failed = bake.run(bpy.context, resume=True)
+    assert failed is None
+    assert _tree(cache) == reference
+    assert f'"Sheet" at rest (asleep) from frame {asleep}' in scene.physanim.bake_info
 
 
 def test_a_checkpoint_names_only_frames_already_on_disk(physanim_ext, tmp_path, monkeypatch):
