@@ -24,7 +24,7 @@ def matrix(owner: str, key: str, m) -> np.ndarray:
     m = np.asarray(m, dtype=np.float64)
     if m.shape != (4, 4):
         raise ValueError(f"{owner}: {key} must be a 4x4 matrix (got shape {m.shape})")
-    if not np.all(np.isfinite(m)):
+    if not np.isfinite(m).all():
         raise ValueError(f"{owner}: {key} has non-finite entries")
     return m
 

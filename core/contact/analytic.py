@@ -33,6 +33,7 @@ class AnalyticPath(ColliderPath):
                                margin[2] if frame.shape == "PLANE" else 1.0 + margin[2]])
         self.extent = extent
         self._features = _features(frame.shape, extent)
+        self._z_row = None  # see _plane_z
 
     def first_hits(self, start, end, s_start, s_end) -> Hits:
         shape = self.frame.shape
@@ -129,6 +130,39 @@ class AnalyticPath(ColliderPath):
                     self.surface_velocity(self.to_local(p_w, s), s))
         return SurfacePoints(cand, p_w, n_w, velocity, d, axis)
 
+    def apart(self, points: tuple, s: float, distance: float) -> bool:
+        """:meth:`ColliderPath.apart` of a ground or bounded plane standing still: the local
+        z range of the points (z is affine, so the points' hull lies within it), as far from
+        the surface as the nearest point. The same comparisons as :meth:`_near_plane` and
+        :meth:`first_hits` make of each point (their roundings are monotone in z), so where
+        this says apart they find nothing."""
+        shape = self.frame.shape
+        if not self.path.static or shape not in ("HALF_SPACE", "PLANE"):
+            return False
+        row, k, scale = self._plane_z()
+        plane = shape == "PLANE"
+        lo, hi = np.inf, -np.inf
+        for x in points:
+            if len(x):
+                a, b = _affine_range(x, row, k, plane)
+                if a != a or b != b:  # NaN: the questions answer for it
+                    return False
+                lo, hi = min(lo, a), max(hi, b)
+        level = self.extent[2]
+        return bool((lo - level) / scale >= distance or
+                    plane and (-hi - level) / scale >= distance)
+
+    def _plane_z(self) -> tuple:
+        """The local z of the collider at rest: its row of the inverse, the one axis it reads
+        (or -1) and its gradient's length (world distance = (z - level) / length); worked out
+        once (a path saved before it was kept works it out when first asked)."""
+        if getattr(self, "_z_row", None) is None:
+            row = self._inverse0[2]
+            axes = np.nonzero(row[:3])[0]
+            self._z_row = (row, int(axes[0]) if len(axes) == 1 else -1,
+                           float(np.linalg.norm(row[:3])))
+        return self._z_row
+
     def features(self, s0: float, s1: float) -> Features:
         return self._features
 
@@ -163,6 +197,19 @@ def _affine_row(x: np.ndarray, row: np.ndarray) -> np.ndarray:
         k = int(axes[0])
         return x[:, k] * row[k] + row[3]
     return np.einsum("ij,j->i", x, row[:3]) + row[3]
+
+
+def _affine_range(x: np.ndarray, row: np.ndarray, k: int, both: bool) -> tuple[float, float]:
+    """The least and (with ``both``) the largest of ``_affine_row(x, row)`` (else -inf); for a
+    row along the one axis ``k`` (else -1), from that column's extremes (a monotone map: the
+    same values). NaN where x has one."""
+    if k < 0:
+        z = _affine_row(x, row)
+        return float(np.minimum.reduce(z)), (float(np.maximum.reduce(z)) if both else -np.inf)
+    r, c = row[k], x[:, k]
+    least, most = (np.minimum, np.maximum) if r > 0.0 else (np.maximum, np.minimum)
+    return (float(least.reduce(c) * r + row[3]),
+            float(most.reduce(c) * r + row[3]) if both else -np.inf)
 
 
 def _features(shape: str, e: np.ndarray) -> Features:

@@ -223,6 +223,14 @@ class ColliderPath:
         """Points x (n, 3) whose ``gap`` to the surface at s is below CONTACT_DISTANCE."""
         raise NotImplementedError
 
+    def apart(self, points: tuple, s: float, distance: float) -> bool:
+        """Whether every point of the (n, 3) arrays ``points``, and every segment between
+        two of them, lies farther than ``distance`` [m] outside the collider at ``s``: then
+        none is near its surface, enters it or is inside it, and the questions above answer
+        nothing for them. One bound over all the points instead of a test of each; False
+        where no such bound is known (the questions then answer as always)."""
+        return False
+
     def features(self, s0: float, s1: float) -> Features:
         """The collider's corners, creased edges and round parts at s0 and s1 (none: a
         surface without any, like the infinite ground, which no face can meet before one of

@@ -19,7 +19,7 @@ import numpy as np
 
 from ..transforms import rows_at
 from .contacts import Contacts
-from .path import SKIN, ColliderPath, SurfacePoints
+from .path import CONTACT_DISTANCE, SKIN, ColliderPath, SurfacePoints
 
 PASSES = 3  # a bounce's remaining motion may hit another collider: re-test up to this often
 
@@ -60,9 +60,11 @@ def respond(colliders: list[ColliderPath], x0: np.ndarray, x1: np.ndarray, v0: n
         the surface, carried to the sub-step's end with the surface; ``impulse``: the normal
         velocity change the bounce gave it).
     """
-    # pass 1 tests everyone (no gather) on the paths as given: most sub-steps hit nothing
-    nearest = None if not colliders or len(x1) == 0 else _nearest_hits(
-        colliders, (x0, x1, np.full(len(x1), float(s0)), np.full(len(x1), float(s1))))
+    # pass 1 tests everyone (no gather) on the paths as given: most sub-steps hit nothing,
+    # and where every collider is apart from every path, that is known without a test
+    nearest = None if len(x1) == 0 or all(col.apart((x0, x1), s0, SKIN) for col in colliders) \
+        else _nearest_hits(colliders, (x0, x1, np.full(len(x1), float(s0)),
+                                       np.full(len(x1), float(s1))))
     if nearest is None:
         return (Response(x1, v1, 0, Contacts.none()) if own else
                 Response(x1.copy(), v1.copy(), 0, Contacts.none()))
@@ -286,6 +288,8 @@ def resting_contacts(colliders: list[ColliderPath], x: np.ndarray, v: np.ndarray
     not moving away faster than ``rest_speed`` (the nearest surface where several are)."""
     found = []  # per collider: (its index, its SurfacePoints of the resting points)
     for ci, col in enumerate(colliders if len(x) else ()):
+        if col.apart((x,), s, CONTACT_DISTANCE):
+            continue
         surf = col.near_surface(x, s)
         if surf.axis is not None:  # a still ground: the normal speed is one column
             un = rows_at(v, surf.index)[:, surf.axis[0]] * surf.axis[1]

@@ -106,6 +106,14 @@ def all_finite(*arrays: np.ndarray) -> bool:
     return all(bool(np.isfinite(a).all()) for a in arrays)
 
 
+def finite_sum(a: np.ndarray) -> bool:
+    """Whether the sum of ``a``'s values is finite: True means every value is (a NaN or an
+    infinity makes the sum NaN or infinite); False, that one is not or that the sum of finite
+    values overflowed (call under ``np.errstate(over="ignore")``). One pass, no temporary:
+    a faster first test than :func:`all_finite`."""
+    return math.isfinite(np.add.reduce(a, axis=None))
+
+
 class Integrator:
     """Base class: advances a :class:`System` from ``t`` to ``t + dt``.
 

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import SimulationError
-from .base import (Derivative, Integrator, PointSystem, StepReport, all_finite, check_step, is_a,
+from .base import (Derivative, Integrator, PointSystem, StepReport, all_finite, check_step, finite_sum, is_a,
                    non_finite)
 
 
@@ -280,13 +280,18 @@ class SymplecticEuler(Integrator):
             return super().step(system, t, dt)
         check_step(t, dt)
         x, v = system.points()
-        if not all_finite(x, v):
-            raise non_finite(np.concatenate([x.ravel(), v.ravel()]), "the state before the step")
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
             a = system.acceleration(float(t), x, v)
             v_new, x_new = _kick_drift(a, x, v, float(dt), a, np.empty_like(x))
-        if not all_finite(x_new, v_new):
-            raise non_finite(np.concatenate([x_new.ravel(), v_new.ravel()]), "the new state")
+            # a non-finite value before the step leaves one after it (the step adds to each
+            # value), so the state before is read only to say which it was
+            if not (finite_sum(x_new) and finite_sum(v_new)):
+                if not all_finite(x, v):
+                    raise non_finite(np.concatenate([x.ravel(), v.ravel()]),
+                                     "the state before the step")
+                if not all_finite(x_new, v_new):
+                    raise non_finite(np.concatenate([x_new.ravel(), v_new.ravel()]),
+                                     "the new state")
         system.set_points(x_new, v_new)
         return StepReport(steps=1, evaluations=1, h_last=dt)
 

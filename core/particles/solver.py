@@ -185,6 +185,7 @@ class ParticleSolver:
         h = inputs.frame_dt / self.substeps
         self._check_stiffness(state, inputs, h)
         g = np.asarray(inputs.gravity, dtype=np.float64)
+        g_norm = math.sqrt(float(g @ g))
         tied = any(c.kind == TIE for ef in inputs.emitters for c in ef.constraints)
         ties = TieFrame(inputs, h) if tied else None
         if ties is not None and ties.coupled and self.settings.integrator != "SYMPLECTIC_EULER":
@@ -196,7 +197,7 @@ class ParticleSolver:
         alone = ties is None and not len(state.link_a) and \
             not any(ef.constraints for ef in inputs.emitters) and \
             all(e.link is None for e in model.emitters)  # (springs may be born mid-frame)
-        return _FrameStep(state, inputs, paths, h, g, 2.0 * float(np.linalg.norm(g)) * h + 1e-4,
+        return _FrameStep(state, inputs, paths, h, g, 2.0 * g_norm * h + 1e-4,
                           [self._sample(state, inputs, i) for i in range(model.emitter_count)],
                           FrameReport(per_emitter_births=[0] * model.emitter_count), ties,
                           conditions(self.settings.integrator, g, h, inputs, paths, alone),
@@ -291,8 +292,7 @@ class ParticleSolver:
                 self._collide_pairs(step, x0, v0, s1, contact.contacts)
         if held is not None:
             self._constrain(state, held, x0, t + h, h)
-        self._check(state, inputs, t + h)
-        return x0, v0, tied
+        return x0, v0, tied  # (non-finite values are named by _check_bounds)
 
     # -- passes ---------------------------------------------------------------------------------
     def _collide_pairs(self, step: _FrameStep, x0, v0, s1: float, resting) -> None:
@@ -394,16 +394,14 @@ class ParticleSolver:
             x, v = trial[:3 * n].reshape(n, 3), trial[3 * n:].reshape(n, 3)
             raise self._blame(state, inputs, str(exc), x, v) from exc
 
-    def _check(self, state, inputs, t) -> None:
-        x, v = state.particle_x, state.particle_v
-        if not (np.isfinite(x).all() and np.isfinite(v).all()):
-            raise self._blame(state, inputs, "", x, v)
-
     def _check_bounds(self, state, inputs, rows: np.ndarray | None = None) -> None:
-        """Every particle (or those at ``rows``) within the bounds, or an error naming one."""
+        """Every particle (or those at ``rows``) finite and within the bounds, or an error
+        naming one (a non-finite value as a blow-up: :meth:`_blame`)."""
         x, v = state.particle_x, state.particle_v
         bad = self.bounds.violation(x if rows is None else x[rows], v if rows is None else v[rows])
         if bad is not None:
+            if not (np.isfinite(x).all() and np.isfinite(v).all()):
+                raise self._blame(state, inputs, "", x, v)
             i, what = bad
             i = i if rows is None else int(rows[i])
             raise SimulationError(
@@ -451,6 +449,8 @@ class ParticleSolver:
                 b.u = np.full(len(b), s1)
             else:
                 b = births[i]
+                if len(b) == 0:
+                    continue
                 b = b.take((b.u >= s0) & ((b.u < s1) | last))
             if len(b) == 0:
                 continue

@@ -1,0 +1,110 @@
+"""``ColliderPath.apart``: one bound over a set of points that tells the colliders' questions
+(near the surface, first hits of segments, inside) will find nothing — exactly where they find
+nothing, for a ground or bounded plane standing still, and never for what it cannot bound."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from physanim.core.contact import ColliderFrame, ColliderPaths
+from physanim.core.contact.path import CONTACT_DISTANCE, SKIN
+
+DT = 1.0 / 24.0
+
+
+def _turn(axis: int, angle: float) -> np.ndarray:
+    c, s = np.cos(angle), np.sin(angle)
+    i, j = [k for k in range(3) if k != axis]
+    m = np.eye(4)
+    m[i, i], m[i, j], m[j, i], m[j, j] = c, -s, s, c
+    return m
+
+
+MATRICES = {
+    "identity": np.eye(4),
+    "moved and scaled": np.diag([3.0, 2.0, 0.5, 1.0]) + np.array(
+        [[0, 0, 0, 1.5], [0, 0, 0, -2.0], [0, 0, 0, 0.25], [0, 0, 0, 0]]),
+    "upside down": np.diag([1.0, -1.0, -2.0, 1.0]),  # turned over exactly (one axis)
+    "turned": _turn(0, 0.3) @ _turn(1, -0.2),
+}
+
+
+def _path(shape: str, m: np.ndarray, m1: np.ndarray | None = None, thickness: float = 0.0):
+    frame = ColliderFrame("Ground", shape, m, m if m1 is None else m1, 0.5, 0.3,
+                          thickness=thickness)
+    return ColliderPaths().of([frame], DT)[0]
+
+
+def _clouds(rng, path) -> list[np.ndarray]:
+    """Point clouds about the collider's surface, from touching it to a metre off it, on both
+    sides, some with one point placed within a rounding of the contact distance."""
+    m = path.path.m0
+    normal = np.linalg.inv(m)[2, :3]
+    normal = normal / np.linalg.norm(normal)
+    origin = m[:3, 3]
+    out = []
+    for offset in (-1.0, -0.01, -CONTACT_DISTANCE, 0.0, 2e-4, CONTACT_DISTANCE, 0.0011, 0.01,
+                   0.5, 1.0):
+        spread = rng.uniform(0.0, 0.2, (50, 1)) if offset else np.zeros((50, 1))
+        spread[0] = 0.0  # the nearest point right at the offset, the others up to 0.2 m off
+        side = np.sign(offset) or 1.0
+        x = origin + rng.uniform(-1.0, 1.0, (50, 3)) @ np.diag([0.8, 0.8, 0.0]) @ m[:3, :3].T
+        x = x - (x - origin) @ np.outer(normal, normal) + (offset + side * spread) * normal
+        out.append(x)
+    return out
+
+
+@pytest.mark.parametrize("shape", ["HALF_SPACE", "PLANE"])
+@pytest.mark.parametrize("name", list(MATRICES))
+@pytest.mark.parametrize("thickness", [0.0, 0.02])
+def test_apart_means_the_questions_find_nothing(shape, name, thickness):
+    rng = np.random.default_rng(7)
+    path = _path(shape, MATRICES[name], thickness=thickness)
+    said_apart = {"near": 0, "segments": 0}
+    for x0 in _clouds(rng, path):
+        near = path.near_surface(x0, 0.0)
+        if path.apart((x0,), 0.0, CONTACT_DISTANCE):
+            said_apart["near"] += 1
+            assert len(near.index) == 0
+        for step in (np.zeros(3), np.array([0.0, 0.0, -0.05]), np.array([0.1, 0.0, 0.3])):
+            x1 = x0 + step
+            n = len(x0)
+            hits = path.first_hits(x0, x1, np.zeros(n), np.ones(n))
+            inside = path.push_out(x1, np.ones(n), x0, np.zeros(n))
+            if path.apart((x0, x1), 0.0, SKIN):
+                said_apart["segments"] += 1
+                assert len(hits.index) == 0 and len(inside.index) == 0
+    # and it does say so for the clouds well away (else nothing would be skipped)
+    assert said_apart["near"] >= 2 and said_apart["segments"] >= 4, said_apart
+
+
+def test_apart_is_exact_at_the_contact_distance():
+    """A point exactly at the contact distance is not near (the test is strict), and apart;
+    one a rounding closer is near, and not apart."""
+    path = _path("HALF_SPACE", np.eye(4))
+    far = np.array([[0.0, 0.0, 5.0]])
+    for z, near in ((CONTACT_DISTANCE, False), (np.nextafter(CONTACT_DISTANCE, 0.0), True)):
+        x = np.vstack([far, [[0.3, -0.2, z]]])
+        assert (len(path.near_surface(x, 0.0).index) == 1) == near
+        assert path.apart((x,), 0.0, CONTACT_DISTANCE) == (not near)
+
+
+def test_apart_answers_false_where_it_cannot_bound():
+    x = np.array([[0.0, 0.0, 5.0], [1.0, 1.0, 6.0]])
+    assert not _path("SPHERE", np.eye(4)).apart((x,), 0.0, CONTACT_DISTANCE)
+    assert not _path("BOX", np.eye(4)).apart((x,), 0.0, CONTACT_DISTANCE)
+    moving = np.eye(4)
+    moving[2, 3] = 0.1
+    assert not _path("HALF_SPACE", np.eye(4), moving).apart((x,), 0.0, CONTACT_DISTANCE)
+    ground = _path("HALF_SPACE", np.eye(4))
+    assert ground.apart((x,), 0.0, CONTACT_DISTANCE)
+    assert ground.apart((np.zeros((0, 3)),), 0.0, CONTACT_DISTANCE)
+    for bad in (np.nan, np.inf, -np.inf):
+        y = x.copy()
+        y[1, 2] = bad
+        assert not ground.apart((y,), 0.0, CONTACT_DISTANCE) or bad == np.inf
+    # a plane is apart only when every point is on one side
+    plane = _path("PLANE", np.eye(4))
+    assert plane.apart((x,), 0.0, CONTACT_DISTANCE)
+    assert plane.apart((-x,), 0.0, CONTACT_DISTANCE)
+    assert not plane.apart((x, -x), 0.0, CONTACT_DISTANCE)
