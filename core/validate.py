@@ -14,9 +14,9 @@ def finite(owner: str, **values: float) -> None:
 
 
 def non_negative(owner: str, **values: float) -> None:
-    finite(owner, **values)
     for key, value in values.items():
-        if value < 0.0:
+        if not (0.0 <= value < math.inf):  # (False for NaN)
+            finite(owner, **{key: value})
             raise ValueError(f'{owner}: {key} must be >= 0 (got {value})')
 
 

@@ -60,7 +60,7 @@ def conditions(integrator: str, gravity: np.ndarray, h: float, inputs, paths: li
     if (not alone or integrator not in FIXED_STEP or inputs.forces or inputs.interactions
             or inputs.collisions or not all(path.still for path in paths)):
         return None
-    return Conditions(integrator, tuple(float(g) for g in gravity), float(h),
+    return Conditions(integrator, tuple(gravity.tolist()), float(h),
                       tuple(path.frame for path in paths))
 
 

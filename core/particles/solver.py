@@ -20,7 +20,6 @@ left exactly as they were, while the sub-step stays the function it was (:mod:`.
 """
 from __future__ import annotations
 
-import contextlib
 import math
 
 from dataclasses import dataclass
@@ -29,7 +28,7 @@ import numpy as np
 
 from ..bounds import DEFAULT_BOUNDS, StateBounds
 from ..contact import ColliderPaths, ContactForce, respond, resting_contacts
-from ..errors import PhysanimError, SimulationError
+from ..errors import PhysanimError, SimulationError, at_frame
 from ..forces import (DampedSprings, Gravity, HardConstraints, OnCurves, OnPlanes,
                       Rods, Tethers, on_circles)
 from ..integrators import make_integrator
@@ -45,6 +44,8 @@ from .ties import TIE, TieFrame
 
 FIRST_ORDER = ("EULER", "SYMPLECTIC_EULER", "IMPLICIT")  # integrators whose rods take RATTLE
 MAX_PARTICLES = 50_000_000  # hard limit that keeps a bake inside memory (~5 GB of state)
+_NONE = np.zeros(0, np.int64)  # no particle (read only)
+_NONE.flags.writeable = False
 
 
 @dataclass
@@ -62,6 +63,7 @@ class _FrameStep:
     ties: TieFrame | None = None  # particles tied to objects (None: no tie this frame)
     rest: Conditions | None = None  # what its sub-steps are a function of (:mod:`.rest`)
     blocks: bool = False  # whether its particles move on their own, in blocks (:mod:`.blocks`)
+    gravity: Gravity | None = None  # the force of g (None without gravity)
 
     @property
     def reactions(self) -> list:
@@ -116,17 +118,6 @@ def _up(g: np.ndarray) -> np.ndarray | None:
     """The unit vector against gravity ``g`` (None when there is none)."""
     length = float(np.linalg.norm(g))
     return -g / length if length > 0.0 else None
-
-
-@contextlib.contextmanager
-def _at_frame(frame):
-    """A PhysanimError raised inside without a frame gains ``frame``."""
-    try:
-        yield
-    except PhysanimError as exc:
-        if exc.frame is not None:
-            raise
-        raise PhysanimError(exc.detail, obj=exc.obj, frame=frame, kind=exc.kind) from exc
 
 
 class ParticleSolver:
@@ -201,7 +192,8 @@ class ParticleSolver:
                           [self._sample(state, inputs, i) for i in range(model.emitter_count)],
                           FrameReport(per_emitter_births=[0] * model.emitter_count), ties,
                           conditions(self.settings.integrator, g, h, inputs, paths, alone),
-                          separable(self.settings.integrator, alone, inputs))
+                          separable(self.settings.integrator, alone, inputs),
+                          Gravity(tuple(g.tolist())) if g.any() else None)
 
     @staticmethod
     def _check_stiffness(state: ParticleState, inputs: FrameInputs, h: float) -> None:
@@ -268,17 +260,18 @@ class ParticleSolver:
         inputs, h = step.inputs, step.h
         tied = ([], None) if step.ties is None else step.ties.substep(
             state, inputs.emitters, s0, s1, t, h)
-        still = np.concatenate([p.i for p in tied[0]] + [np.zeros(0, np.int64)] + (
-            [] if tied[1] is None else [tied[1].i]))  # tied: no collider moves them
+        still = _NONE if not tied[0] and tied[1] is None else np.concatenate(
+            [p.i for p in tied[0]] + [_NONE] + ([] if tied[1] is None else [tied[1].i]))
+        # (tied: no collider moves them)
         resting = resting_contacts(step.paths, state.particle_x, state.particle_v, s0,
                                    step.rest_speed)
         contact = ContactForce(resting.take(~np.isin(resting.index, still)) if len(still)
                                else resting, h)
         x0, v0 = state.particle_x, state.particle_v
         held = self._constraints(state, inputs, s0, t, h, tied)
-        with _at_frame(inputs.frame):  # an interaction's failure knows no frame
+        with at_frame(inputs.frame):  # an interaction's failure knows no frame
             step.report.integrator_steps += self._integrate(
-                state, self._forces(state, inputs, step.g), contact, held, t, h, inputs)
+                state, self._forces(state, inputs, step.gravity), contact, held, t, h, inputs)
         if tied[1] is not None:  # the bodies take what the step's tie forces gave them
             tied[1].commit(h)
         done = respond(step.paths, x0, state.particle_x, v0, state.particle_v, s0, s1, h,
@@ -288,7 +281,7 @@ class ParticleSolver:
         state.particle_x, state.particle_v = done.x, done.v
         step.report.collisions += done.count
         if inputs.collisions:
-            with _at_frame(inputs.frame):
+            with at_frame(inputs.frame):
                 self._collide_pairs(step, x0, v0, s1, contact.contacts)
         if held is not None:
             self._constrain(state, held, x0, t + h, h)
@@ -327,8 +320,8 @@ class ParticleSolver:
         except ValueError as exc:  # e.g. a volume that encloses nothing: name emitter and frame
             raise PhysanimError(str(exc), obj=e.name, frame=inputs.frame, kind="emitter") from exc
 
-    def _forces(self, state, inputs, g) -> list:
-        forces: list = [Gravity(tuple(g))] if np.any(g) else []
+    def _forces(self, state, inputs, gravity: Gravity | None) -> list:
+        forces: list = [] if gravity is None else [gravity]
         forces.extend(inputs.forces)
         forces.extend(spec.bind(state.particle_emitter) for spec in inputs.interactions)
         if len(state.link_a):

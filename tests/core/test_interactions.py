@@ -196,8 +196,8 @@ def test_an_opening_angle_too_small_for_the_point_count_is_refused_naming_the_fo
     model = particle_model(EmitterSettings("Stars"))
     state = model.state()
     place(state, x, np.zeros_like(x))
-    with pytest.raises(PhysanimError, match=r'force "Pull".*Opening Angle 0.001 over 3,000 '
-                                            r"particles .* raise the Opening Angle"):
+    with pytest.raises(PhysanimError, match=r'force "Pull" at frame \d+: .*Opening Angle 0.001 '
+                                            r"over 3,000 particles .* raise the Opening Angle"):
         _run(model, state, [MutualGravity("Pull", 1.0, 0.01, 1e-3)], 1, 0.05)
 
 
