@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..transforms import rows_at
+from ..transforms import rows_at, take
 from .frame import ColliderFrame
 from .path import CONTACT_DISTANCE, ColliderPath, Features, Hits, SurfacePoints
 
@@ -34,6 +34,7 @@ class AnalyticPath(ColliderPath):
         self.extent = extent
         self._features = _features(frame.shape, extent)
         self._z_row = None  # see _plane_z
+        self._box = None  # see _bounds
 
     def first_hits(self, start, end, s_start, s_end) -> Hits:
         shape = self.frame.shape
@@ -57,6 +58,9 @@ class AnalyticPath(ColliderPath):
         return Hits(cand[hit], t[hit], n_local[hit], l_hit[hit])
 
     def push_out(self, x, s, start, s_start) -> SurfacePoints:
+        sub = self._within(0.0, x)  # only points within a still shape's world box can be in
+        if sub is not None:
+            x, s = take(x, sub), take(s, sub)
         l = self.to_local(x, s)
         inside = _inside(self.frame.shape, l, self.extent)
         if not inside.any():
@@ -65,7 +69,8 @@ class AnalyticPath(ColliderPath):
         p, n_local, _ = _closest(self.frame.shape, l[idx], self.extent)
         p_w, n_w = self.to_world(p, n_local, s[idx])
         gap = np.einsum("ij,ij->i", x[idx] - p_w, n_w)
-        return SurfacePoints(idx, p_w, n_w, self.surface_velocity(p, s[idx]), gap)
+        return SurfacePoints(idx if sub is None else sub[idx], p_w, n_w,
+                             self.surface_velocity(p, s[idx]), gap)
 
     def near_surface(self, x, s) -> SurfacePoints:
         shape = self.frame.shape
@@ -75,7 +80,19 @@ class AnalyticPath(ColliderPath):
 
     def _near_closest(self, x, s) -> SurfacePoints:
         """:meth:`near_surface` through each point's closest surface point in local space (any
-        shape; ``s`` a scalar or one parameter per point)."""
+        shape; ``s`` a scalar or one parameter per point); of a still sphere or box, only for
+        the points within its world box grown by the contact distance (see :meth:`_bounds`)."""
+        sub = self._within(CONTACT_DISTANCE, x)
+        if sub is not None:
+            if not len(sub):
+                return SurfacePoints.none()
+            found = self._near_closest_all(take(x, sub), s if np.ndim(s) == 0 else
+                                           take(np.asarray(s), sub))
+            return SurfacePoints(sub[found.index], found.point, found.normal, found.velocity,
+                                 found.gap)
+        return self._near_closest_all(x, s)
+
+    def _near_closest_all(self, x, s) -> SurfacePoints:
         l = self.to_local(x, s)
         p, n_local, valid = _closest(self.frame.shape, l, self.extent)
         p_w, n_w = self.to_world(p, n_local, s)
@@ -163,6 +180,37 @@ class AnalyticPath(ColliderPath):
                            float(np.linalg.norm(row[:3])))
         return self._z_row
 
+    def _bounds(self) -> tuple | None:
+        """A still sphere's or box's world box (lo, hi), and how far (as a multiple of a
+        distance) a point :meth:`near_surface` finds may lie outside it; None for grounds,
+        planes and moving colliders. Near is judged along the normal of a supporting plane,
+        which a non-uniform scale tilts: a point found within d of it lies within d times the
+        matrix's condition number of the shape. Padded against rounding; worked out once."""
+        if self.frame.shape not in ("SPHERE", "BOX") or not self.path.static:
+            return None
+        if getattr(self, "_box", None) is None:
+            m, e = self.path.m0[:3, :3], self.extent
+            # the world extent of a ball (an ellipsoid's: e0 times each row's length) or of a
+            # box (each row's absolute values against the half extents)
+            half = e[0] * np.linalg.norm(m, axis=1) if self.frame.shape == "SPHERE" \
+                else np.abs(m) @ e
+            centre = self.path.m0[:3, 3]
+            pad = 1e-9 * (np.abs(centre) + half) + 1e-12
+            stretch = np.linalg.svd(m, compute_uv=False)
+            self._box = (centre - half - pad, centre + half + pad,
+                         float(stretch[0] / stretch[-1]) * (1.0 + 1e-9))
+        return self._box
+
+    def _within(self, distance: float, *points: np.ndarray) -> np.ndarray | None:
+        """The rows whose points (their box, over several arrays: segments) come within
+        ``distance`` (scaled as :meth:`_bounds` says) of a still sphere's or box's world box;
+        None where every row may (or there is no such box)."""
+        bounds = self._bounds()
+        if bounds is None:
+            return None
+        rows = _meeting(bounds, distance, *points)
+        return None if len(rows) == len(points[0]) else rows
+
     def features(self, s0: float, s1: float) -> Features:
         return self._features
 
@@ -174,11 +222,12 @@ class AnalyticPath(ColliderPath):
         return np.einsum("nj,nj->n", inv[:, 2, :3], x) + inv[:, 2, 3]
 
     def _segment_candidates(self, start, end, s_start, s_end) -> np.ndarray | None:
-        """Indices of segments that may hit a plane-like collider (cheap z test), or None when
-        every segment must be tested (spheres, boxes)."""
+        """Indices of segments that may hit the collider: a plane-like one's by a cheap z test,
+        a still sphere's or box's those whose box meets its world box; None when every segment
+        must be tested (a moving sphere or box)."""
         shape = self.frame.shape
         if shape not in ("HALF_SPACE", "PLANE"):
-            return None
+            return self._within(0.0, start, end)
         z1 = self._local_z(end, s_end)
         level = self.extent[2]
         if shape == "HALF_SPACE":
@@ -210,6 +259,24 @@ def _affine_range(x: np.ndarray, row: np.ndarray, k: int, both: bool) -> tuple[f
     least, most = (np.minimum, np.maximum) if r > 0.0 else (np.maximum, np.minimum)
     return (float(least.reduce(c) * r + row[3]),
             float(most.reduce(c) * r + row[3]) if both else -np.inf)
+
+
+def _meeting(bounds: tuple, distance: float, *points: np.ndarray) -> np.ndarray:
+    """Indices of the rows whose box over ``points`` (one or more (n, 3) arrays: a row's
+    points, e.g. a segment's ends) meets the box of :meth:`AnalyticPath._bounds` grown by
+    ``distance`` times its factor; column by column."""
+    lo, hi, factor = bounds
+    grow = distance * factor
+    meets = None
+    for k in range(3):
+        columns = [a[:, k] for a in points]
+        least = columns[0] if len(columns) == 1 else np.minimum(columns[0], columns[1])
+        most = columns[0] if len(columns) == 1 else np.maximum(columns[0], columns[1])
+        for c in columns[2:]:
+            least, most = np.minimum(least, c), np.maximum(most, c)
+        here = (most >= lo[k] - grow) & (least <= hi[k] + grow)
+        meets = here if meets is None else np.logical_and(meets, here, out=meets)
+    return np.nonzero(meets)[0]
 
 
 def _features(shape: str, e: np.ndarray) -> Features:

@@ -108,3 +108,72 @@ def test_apart_answers_false_where_it_cannot_bound():
     assert plane.apart((x,), 0.0, CONTACT_DISTANCE)
     assert plane.apart((-x,), 0.0, CONTACT_DISTANCE)
     assert not plane.apart((x, -x), 0.0, CONTACT_DISTANCE)
+
+
+# -- spheres and boxes standing still: only the points near their world box are tested ------
+
+SOLIDS = {
+    "unit": np.eye(4),
+    "moved and scaled": MATRICES["moved and scaled"],
+    "turned and stretched": _turn(2, 0.785) @ _turn(0, 0.4) @ np.diag([8.0, 0.1, 1.0, 1.0]),
+    "turned": _turn(2, 0.785) @ _turn(1, 0.3) @ np.diag([1.5, 1.0, 0.7, 1.0]),
+}
+
+
+def _around(rng, path, count: int = 3000) -> np.ndarray:
+    """Points about the shape: on its world surface pushed out or in by up to a few contact
+    distances (those are the ones judged near), and a third as many several sizes away."""
+    m = path.path.m0
+    u = rng.normal(size=(count, 3))
+    if path.frame.shape == "SPHERE":
+        u = u / np.linalg.norm(u, axis=1, keepdims=True) * path.extent[0]
+    else:  # on the box's faces, edges and corners
+        u = np.clip(u, -1.0, 1.0) * path.extent
+        face = rng.integers(0, 3, count)
+        u[np.arange(count), face] = np.sign(u[np.arange(count), face] + 1e-12) * path.extent[face]
+    world = u @ m[:3, :3].T + m[:3, 3]
+    push = rng.normal(size=(count, 3))
+    push *= rng.uniform(0.0, 4.0 * CONTACT_DISTANCE, (count, 1)) / np.linalg.norm(push, axis=1,
+                                                                                 keepdims=True)
+    far = world[:count // 2] - m[:3, 3]
+    far = far * rng.uniform(3.0, 6.0, (len(far), 1)) + m[:3, 3]  # well outside its world box
+    return np.vstack([world + push, far])
+
+
+def _unbounded(path, monkeypatch):
+    """The same path answering without its world box (every point tested)."""
+    monkeypatch.setattr(type(path), "_bounds", lambda self: None)
+
+
+@pytest.mark.parametrize("shape", ["SPHERE", "BOX"])
+@pytest.mark.parametrize("name", list(SOLIDS))
+@pytest.mark.parametrize("thickness", [0.0, 0.03])
+def test_a_still_solid_answers_as_if_every_point_were_tested(shape, name, thickness,
+                                                             monkeypatch):
+    rng = np.random.default_rng(11)
+    path = _path(shape, SOLIDS[name], thickness=thickness)
+    x0 = _around(rng, path)
+    x1 = x0 + rng.normal(scale=0.05, size=x0.shape)
+    n = len(x0)
+    ones, zeros = np.ones(n), np.zeros(n)
+    near = path.near_surface(x0, 0.0)
+    hits = path.first_hits(x0, x1, zeros, ones)
+    inside = path.push_out(x1, ones, x0, zeros)
+    assert len(path._within(CONTACT_DISTANCE, x0)) <= n - n // 4  # the far ones skipped ...
+    assert len(near.index) > 100 and len(hits.index) > 10 and len(inside.index) > 100  # ... not all
+    _unbounded(path, monkeypatch)
+    for got, want in ((near, path.near_surface(x0, 0.0)),
+                      (hits, path.first_hits(x0, x1, zeros, ones)),
+                      (inside, path.push_out(x1, ones, x0, zeros))):
+        for key, value in vars(want).items():
+            if isinstance(value, np.ndarray):
+                assert np.array_equal(getattr(got, key), value), key
+
+
+def test_a_moving_solid_tests_every_point():
+    moving = np.eye(4)
+    moving[0, 3] = 0.2
+    x = np.array([[5.0, 5.0, 5.0]])
+    assert _path("SPHERE", np.eye(4), moving)._within(0.0, x) is None
+    assert _path("HALF_SPACE", np.eye(4))._within(0.0, x) is None
+    assert len(_path("BOX", np.eye(4))._within(0.0, x)) == 0
