@@ -23,6 +23,10 @@ Part 2, "steady" — core solver only: N particles pre-filled high above a groun
 one warm-up frame, then ``--steady-frames`` frames of one sub-step each, per integrator, one
 after another as a bake runs them (garbage collected once before them, not before each).
 
+Part "colliders" (``--parts colliders``) — the steady particles (symplectic Euler) beside one
+collider of each kind out of their reach (none, the ground below, a sphere, a box, a mesh), at
+the first two ``--sizes``: what a collider costs the particles it is far from.
+
 Part 3, "memory" (``--parts memory``; not run by default: it writes gigabytes) — the peak memory
 of a ``--memory-count`` particle bake at the defaults for each of ``--memory-frames`` frame
 counts, each in its own process (``bench/particles_memory.py``).
@@ -50,7 +54,9 @@ from bench.particles_compare import FPS, FRICTION, RESTITUTION
 
 # --- part 2: steady state per particle-step -------------------------------------------------------
 
-def steady(n: int, integrator: str, frames: int) -> dict:
+def steady(n: int, integrator: str, frames: int, colliders: list | None = None) -> dict:
+    """``n`` particles in flight for ``frames`` frames of one sub-step; ``colliders``: the
+    scene's ColliderFrames (default: the ground half-space below them)."""
     P, contact = common.core_module("particles"), common.core_module("contact")
     builder = P.ParticleModelBuilder(seed=0)
     builder.add_emitter(P.EmitterSettings(name="Filled"))
@@ -62,13 +68,14 @@ def steady(n: int, integrator: str, frames: int) -> dict:
     state.append(0, x, np.zeros((n, 3)), np.full(n, 0.1), np.zeros(n), np.full(n, 1e6),
                  np.full(n, 0.05))
     dt = 1.0 / FPS
-    ground = contact.ColliderFrame("Ground", "HALF_SPACE", np.eye(4), np.eye(4), RESTITUTION,
-                                   FRICTION)
+    if colliders is None:
+        colliders = [contact.ColliderFrame("Ground", "HALF_SPACE", np.eye(4), np.eye(4),
+                                           RESTITUTION, FRICTION)]
     idle = P.EmitterFrame(active=False)
 
     def inputs(frame):
         return P.FrameInputs(frame=frame, t0=frame * dt, frame_dt=dt, emitters=[idle],
-                             colliders=[ground])
+                             colliders=colliders)
 
     times = []
     collisions = 0
@@ -85,6 +92,51 @@ def steady(n: int, integrator: str, frames: int) -> dict:
     return {"n": n, "integrator": integrator, "frame_ms": 1e3 * times.mean(),
             "ns_mean": 1e9 * times.mean() / n, "ns_min": 1e9 * times.min() / n,
             "collisions": collisions, "alive": state.particle_count}
+
+
+def beside_colliders() -> dict:
+    """One collider of each kind, 30 m beside the steady particles (out of their reach): what
+    a collider costs the particles it is far from."""
+    contact = common.core_module("contact")
+    at = np.eye(4)
+    at[:3, 3] = (30.0, 0.0, 2.0)
+    u = np.linspace(-1.0, 1.0, 100)
+    gx, gy = np.meshgrid(u, u)
+    verts = np.column_stack([gx.ravel(), gy.ravel(), 0.1 * np.sin(3.0 * gx.ravel())])
+    i = np.arange(100 * 100).reshape(100, 100)
+    a, b, c, d = (i[:-1, :-1].ravel(), i[1:, :-1].ravel(), i[1:, 1:].ravel(),
+                  i[:-1, 1:].ravel())
+    tris = np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
+
+    def frame(name, shape, **mesh):
+        return contact.ColliderFrame(name, shape, at, at, RESTITUTION, FRICTION, **mesh)
+    return {"none": [], "ground below (half-space)": None,
+            "sphere beside": [frame("Sphere", "SPHERE")], "box beside": [frame("Box", "BOX")],
+            f"mesh beside ({len(tris):,} triangles)": [
+                frame("Mesh", "MESH", vertices0=verts, vertices1=verts, triangles=tris)]}
+
+
+def collider_costs(opts: Options) -> list[str]:
+    """Part "colliders": the steady particles (symplectic Euler) beside one collider of each
+    kind; prints ms per frame and the cost over no collider."""
+    rows, problems = [], []
+    for n in opts.sizes[:2]:
+        base = None
+        for name, colliders in beside_colliders().items():
+            row = steady(n, "SYMPLECTIC_EULER", opts.steady_frames, colliders)
+            base = base or row["frame_ms"]
+            rows.append((f"{n:,}", name, f"{row['frame_ms']:.2f}", f"{row['ns_mean']:.0f}",
+                         f"{row['frame_ms'] / base:.2f}"))
+            if row["alive"] != n or row["collisions"]:
+                problems.append(f"colliders {n:,} {name}: a particle met the collider")
+            gc.collect()
+    print("\n".join([
+        f"### Core solver beside colliders ({opts.steady_frames} frames of 1 substep, particles "
+        "in flight as in the steady table; each collider out of their reach)", "",
+        *common.markdown_table(("particles", "collider", "ms / frame",
+                                "ns / particle-step", "x no collider"), "rlrrr", rows)]) + "\n",
+          flush=True)
+    return problems
 
 
 # --- output ---------------------------------------------------------------------------------------
@@ -110,7 +162,7 @@ class Options:
     sizes: tuple[int, ...]
     steady_frames: int
     integrators: tuple[str, ...]
-    parts: frozenset[str]  # of compare, steady, memory, profile
+    parts: frozenset[str]  # of compare, steady, colliders, memory, profile
     blender_method: str
     no_blender: bool
     top: int
@@ -132,7 +184,8 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--blender-method", choices=("frames", "bake"), default="frames",
                     help="frame_set(1..F) from an empty cache (default) or ptcache.bake")
     ap.add_argument("--parts", default="compare,steady",
-                    help="comma list of: compare, steady, memory (add profile with --profile)")
+                    help="comma list of: compare, steady, colliders, memory (add profile "
+                         "with --profile)")
     ap.add_argument("--memory-count", type=int, default=1_000_000,
                     help="memory: particles of the bakes (default 1000000)")
     ap.add_argument("--memory-frames", default="50,125,250",
@@ -210,6 +263,8 @@ def run_parts(opts: Options, folder: str) -> list[str]:
         problems += compare(opts, folder)
     if "steady" in opts.parts:
         problems += steady_states(opts)
+    if "colliders" in opts.parts:
+        problems += collider_costs(opts)
     if "memory" in opts.parts:
         rows = particles_memory.measure(opts.memory_count, list(opts.memory_frames))
         print(particles_memory.table(opts.memory_count, rows) + "\n", flush=True)
