@@ -7,7 +7,7 @@ import numpy as np
 
 from ..transforms import rows_at, take
 from .frame import ColliderFrame
-from .path import CONTACT_DISTANCE, ColliderPath, Features, Hits, SurfacePoints
+from .path import CONTACT_DISTANCE, ColliderPath, Features, Hits, SurfacePoints, rows_meeting
 
 SHAPES = ("HALF_SPACE", "PLANE", "SPHERE", "BOX")
 
@@ -208,7 +208,9 @@ class AnalyticPath(ColliderPath):
         bounds = self._bounds()
         if bounds is None:
             return None
-        rows = _meeting(bounds, distance, *points)
+        lo, hi, factor = bounds
+        grow = distance * factor
+        rows = rows_meeting(lo - grow, hi + grow, *points)
         return None if len(rows) == len(points[0]) else rows
 
     def features(self, s0: float, s1: float) -> Features:
@@ -259,24 +261,6 @@ def _affine_range(x: np.ndarray, row: np.ndarray, k: int, both: bool) -> tuple[f
     least, most = (np.minimum, np.maximum) if r > 0.0 else (np.maximum, np.minimum)
     return (float(least.reduce(c) * r + row[3]),
             float(most.reduce(c) * r + row[3]) if both else -np.inf)
-
-
-def _meeting(bounds: tuple, distance: float, *points: np.ndarray) -> np.ndarray:
-    """Indices of the rows whose box over ``points`` (one or more (n, 3) arrays: a row's
-    points, e.g. a segment's ends) meets the box of :meth:`AnalyticPath._bounds` grown by
-    ``distance`` times its factor; column by column."""
-    lo, hi, factor = bounds
-    grow = distance * factor
-    meets = None
-    for k in range(3):
-        columns = [a[:, k] for a in points]
-        least = columns[0] if len(columns) == 1 else np.minimum(columns[0], columns[1])
-        most = columns[0] if len(columns) == 1 else np.maximum(columns[0], columns[1])
-        for c in columns[2:]:
-            least, most = np.minimum(least, c), np.maximum(most, c)
-        here = (most >= lo[k] - grow) & (least <= hi[k] + grow)
-        meets = here if meets is None else np.logical_and(meets, here, out=meets)
-    return np.nonzero(meets)[0]
 
 
 def _features(shape: str, e: np.ndarray) -> Features:

@@ -27,6 +27,14 @@ class ColliderPaths:
         # paths hold nothing but their frame (a still ground gets one path for the whole run)
         self._kept: dict[str, tuple[ColliderFrame, float, ColliderPath]] = {}
 
+    def __getstate__(self) -> dict:
+        """Saved (a checkpoint) without the kept mesh paths, which the next interval makes
+        again from the hierarchies saved with it (the same answers)."""
+        state = dict(self.__dict__)
+        state["_kept"] = {name: kept for name, kept in self._kept.items()
+                          if not isinstance(kept[2], MeshPath)}
+        return state
+
     def release(self) -> None:
         """Drop what is kept between frame intervals (a run calls this when it ends)."""
         self.hierarchies.clear()
@@ -40,11 +48,12 @@ class ColliderPaths:
         if kind is None:
             raise ValueError(f'collider "{frame.name}": no collider kind handles shape '
                              f"{frame.shape!r}")
-        if not kind.reusable:
-            return kind.build(frame, frame_dt, self)
         kept = self._kept.get(frame.name)
         if kept is not None and kept[1] == frame_dt and kept[0].same_as(frame):
             return kept[2]
         path = kind.build(frame, frame_dt, self)
-        self._kept[frame.name] = (frame, frame_dt, path)
+        if path.reusable:
+            self._kept[frame.name] = (frame, frame_dt, path)
+        else:
+            self._kept.pop(frame.name, None)
         return path

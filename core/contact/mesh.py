@@ -41,7 +41,7 @@ from ..collision.raycast import segment_hits
 from ..transforms import (cross, divide_rows, inverse_affine, norm_rows, scale_rows, take,
                           transform_vectors, where_rows)
 from .frame import ColliderFrame
-from .path import CONTACT_DISTANCE, ColliderPath, Features, Hits, SurfacePoints
+from .path import CONTACT_DISTANCE, ColliderPath, Features, Hits, SurfacePoints, rows_meeting
 
 BVH_KIND = "aabb"  # refits cheaply and exactly for deforming meshes
 BVH_CACHE = 8  # hierarchies kept per interval (refits for the sub-step times in use)
@@ -81,6 +81,10 @@ class MeshPath(ColliderPath):
         self._local_metre = max(float(np.linalg.norm(inverse_affine(m)[:3, :3], axis=1).max())
                                 for m in self.path.samples)
         self._still = self.still
+        self._box = None  # see _world_box
+        # a mesh standing still is a function of its frame: the next interval of the same
+        # frame can use this path (and its hierarchy and grid) again
+        self.reusable = self._still
 
     # -- geometry at a time s ---------------------------------------------------------------------
     def bvh_at(self, s: float) -> BVH:
@@ -171,9 +175,45 @@ class MeshPath(ColliderPath):
         return np.nonzero(near)[0]
 
     # -- the three questions --------------------------------------------------------------------
+    def _world_box(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """A still mesh's world box holding every point its questions can answer for: its
+        local bounds grown by the thickness and the contact distance (in the most local units
+        a metre spans), mapped to the world and padded against rounding; None for a moving or
+        deforming mesh. Worked out once."""
+        if not self._still:
+            return None
+        if getattr(self, "_box", None) is None:
+            m = self.path.m0
+            reach = (self.frame.thickness + CONTACT_DISTANCE) * self._local_metre * (1.0 + 1e-9)
+            half = np.abs(m[:3, :3]) @ ((self._hi - self._lo) / 2.0 + reach)
+            centre = m[:3, :3] @ ((self._hi + self._lo) / 2.0) + m[:3, 3]
+            pad = 1e-9 * (np.abs(centre) + half) + 1e-12
+            self._box = (centre - half - pad, centre + half + pad)
+        return self._box
+
+    def _near_rows(self, *points: np.ndarray) -> np.ndarray | None:
+        """The rows of ``points`` (their box over the arrays) within a still mesh's world box
+        (:meth:`_world_box`); None where every row is (or there is no such box)."""
+        box = self._world_box()
+        if box is None:
+            return None
+        rows = rows_meeting(*box, *points)
+        return None if len(rows) == len(points[0]) else rows
+
     def first_hits(self, start, end, s_start, s_end) -> Hits:
         """Segment hits on the mesh at the end times, kept where the segment came from the side
-        it hits; then the hits at t = 1 that the segment test cannot see (see the module)."""
+        it hits; then the hits at t = 1 that the segment test cannot see (see the module). Of a
+        still mesh, only the segments whose box meets its world box are tested."""
+        sub = self._near_rows(start, end)
+        if sub is not None:
+            if not len(sub):
+                return Hits.none()
+            found = self._first_hits(take(start, sub), take(end, sub), take(s_start, sub),
+                                     take(s_end, sub))
+            return Hits(sub[found.index], found.t, found.normal, found.point, found.element)
+        return self._first_hits(start, end, s_start, s_end)
+
+    def _first_hits(self, start, end, s_start, s_end) -> Hits:
         if len(end) == 0:
             return Hits.none()
         l0 = self.to_local(start, s_start)
@@ -266,6 +306,16 @@ class MeshPath(ColliderPath):
         return SurfacePoints(idx, p_w, n_w, velocity, gap)
 
     def near_surface(self, x, s) -> SurfacePoints:
+        sub = self._near_rows(x)  # of a still mesh, only the points within its world box
+        if sub is not None:
+            if not len(sub):
+                return SurfacePoints.none()
+            found = self._near_surface(take(x, sub), s)
+            return SurfacePoints(sub[found.index], found.point, found.normal, found.velocity,
+                                 found.gap)
+        return self._near_surface(x, s)
+
+    def _near_surface(self, x, s) -> SurfacePoints:
         if len(x) == 0:
             return SurfacePoints.none()
         s = np.full(len(x), float(s))

@@ -30,6 +30,21 @@ SKIN = 1e-4  # [m] particles are placed this far outside a surface after a hit
 CONTACT_DISTANCE = 1e-3  # [m] closer than this (and not separating) counts as resting contact
 
 
+def rows_meeting(lo: np.ndarray, hi: np.ndarray, *points: np.ndarray) -> np.ndarray:
+    """Indices of the rows whose box over ``points`` (one or more (n, 3) arrays: each row's
+    points, e.g. a segment's two ends) meets the world box [lo, hi]; column by column. A
+    collider's cheap first cut: points outside its box need no test of its shape."""
+    meets = None
+    for k in range(3):
+        columns = [a[:, k] for a in points]
+        least = most = columns[0]
+        for c in columns[1:]:
+            least, most = np.minimum(least, c), np.maximum(most, c)
+        here = (most >= lo[k]) & (least <= hi[k])
+        meets = here if meets is None else np.logical_and(meets, here, out=meets)
+    return np.nonzero(meets)[0]
+
+
 @dataclass(frozen=True)
 class Hits:
     """First hits of the segments that hit (k of them), in the collider's local frame.

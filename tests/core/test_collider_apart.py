@@ -177,3 +177,53 @@ def test_a_moving_solid_tests_every_point():
     assert _path("SPHERE", np.eye(4), moving)._within(0.0, x) is None
     assert _path("HALF_SPACE", np.eye(4))._within(0.0, x) is None
     assert len(_path("BOX", np.eye(4))._within(0.0, x)) == 0
+
+
+def _wavy(n: int = 30):
+    u = np.linspace(-1.0, 1.0, n)
+    gx, gy = np.meshgrid(u, u)
+    verts = np.column_stack([gx.ravel(), gy.ravel(), 0.3 * np.sin(3.0 * gx.ravel())])
+    i = np.arange(n * n).reshape(n, n)
+    a, b, c, d = i[:-1, :-1].ravel(), i[1:, :-1].ravel(), i[1:, 1:].ravel(), i[:-1, 1:].ravel()
+    return verts, np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
+
+
+@pytest.mark.parametrize("name", ["unit", "turned and stretched", "turned"])
+@pytest.mark.parametrize("thickness", [0.0, 0.03])
+def test_a_still_mesh_answers_as_if_every_point_were_tested(name, thickness, monkeypatch):
+    verts, tris = _wavy()
+    m = SOLIDS[name]
+    frame = ColliderFrame("Wavy", "MESH", m, m, 0.5, 0.3, thickness=thickness, vertices0=verts,
+                          vertices1=verts, triangles=tris)
+    path = ColliderPaths().of([frame], DT)[0]
+    rng = np.random.default_rng(5)
+    on = verts[rng.integers(0, len(verts), 3000)] + rng.normal(scale=0.004, size=(3000, 3))
+    far = rng.normal(size=(1000, 3))
+    far *= rng.uniform(3.0, 6.0, (1000, 1)) / np.linalg.norm(far, axis=1, keepdims=True)
+    lifted = on[:1000] + [0.0, 0.0, thickness]  # about the thickness's grown surface
+    x0 = np.vstack([on, lifted, far]) @ m[:3, :3].T + m[:3, 3]
+    x1 = x0 + rng.normal(scale=0.05, size=x0.shape)
+    n = len(x0)
+    ones, zeros = np.ones(n), np.zeros(n)
+    near = path.near_surface(x0, 0.0)
+    hits = path.first_hits(x0, x1, zeros, ones)
+    back = path.push_out(x1, ones, x0, zeros)
+    assert len(path._near_rows(x0)) <= n - n // 6  # the far ones skipped ...
+    assert len(near.index) > 3 and len(hits.index) > 100 and len(back.index) > 100  # ... not all
+    monkeypatch.setattr(type(path), "_world_box", lambda self: None)
+    for got, want in ((near, path.near_surface(x0, 0.0)),
+                      (hits, path.first_hits(x0, x1, zeros, ones)),
+                      (back, path.push_out(x1, ones, x0, zeros))):
+        for key, value in vars(want).items():
+            if isinstance(value, np.ndarray):
+                assert np.array_equal(getattr(got, key), value), key
+
+
+def test_a_moving_mesh_tests_every_point():
+    verts, tris = _wavy(5)
+    moved = np.eye(4)
+    moved[2, 3] = 0.1
+    frame = ColliderFrame("Wavy", "MESH", np.eye(4), moved, vertices0=verts, vertices1=verts,
+                          triangles=tris)
+    path = ColliderPaths().of([frame], DT)[0]
+    assert path._near_rows(np.array([[9.0, 9.0, 9.0]])) is None

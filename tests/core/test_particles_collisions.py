@@ -183,6 +183,39 @@ def test_a_still_collider_keeps_one_path_until_it_changes():
         first = paths.path(still, DT)
 
 
+def test_a_still_mesh_keeps_one_path_and_a_checkpoint_leaves_it_out():
+    """A mesh standing still keeps its path (its hierarchy and grid) while its frame stays the
+    same, vertex for vertex; moving, deforming or another mesh makes a new one, and a mesh
+    moving over its interval is never kept. Pickled (a checkpoint), the paths leave the kept
+    mesh out: the next interval makes it again, answering the same."""
+    import pickle
+
+    verts = np.array([[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]])
+    tris = np.array([[0, 1, 2], [0, 2, 3]])
+
+    def mesh(v0, v1=None, m1=None):
+        return ColliderFrame("Floor", "MESH", np.eye(4), np.eye(4) if m1 is None else m1, 0.3,
+                             vertices0=v0, vertices1=v0 if v1 is None else v1, triangles=tris)
+    paths = coll.ColliderPaths()
+    first = paths.path(mesh(verts), DT)
+    assert paths.path(mesh(verts.copy()), DT) is first
+    lifted = verts + [0.0, 0.0, 0.01]
+    for changed in (mesh(lifted), mesh(verts, lifted), mesh(verts, m1=_translate(z=0.01))):
+        made = paths.path(changed, DT)
+        assert made is not first and made.frame is changed
+        assert paths.path(changed, DT) is not made or made.still
+        first = paths.path(mesh(verts), DT)
+    saved = pickle.loads(pickle.dumps(paths))
+    assert "Floor" in paths._kept and "Floor" not in saved._kept  # (its hierarchy is saved)
+    again = saved.path(mesh(verts), DT)
+    assert again.reusable and saved.path(mesh(verts), DT) is again
+    x0 = np.array([[0.2, 0.1, 0.5], [3.0, 3.0, 0.5]])
+    x1 = np.array([[0.2, 0.1, -0.5], [3.0, 3.0, -0.5]])
+    hits = [p.first_hits(x0, x1, np.zeros(2), np.ones(2)) for p in (first, again)]
+    assert hits[0].index.tolist() == hits[1].index.tolist() == [0]
+    assert np.array_equal(hits[0].point, hits[1].point)
+
+
 def test_particle_rides_a_platform_that_waits_rises_and_stops():
     # Still for 6 frames (one path kept), rising at 1 m/s for 12, then still again: the
     # particle rides it up, flies on when it stops (about 5 cm up and back) and rests on it.
