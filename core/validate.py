@@ -14,9 +14,10 @@ def finite(owner: str, **values: float) -> None:
 
 
 def non_negative(owner: str, **values: float) -> None:
-    for key, value in values.items():
-        if not (0.0 <= value < math.inf):  # (False for NaN)
-            finite(owner, **{key: value})
+    for value in values.values():
+        if not (0.0 <= value < math.inf):  # (False for NaN): a value fails; name the first
+            finite(owner, **values)  # non-finite one, else the first negative one
+            key, value = next((k, v) for k, v in values.items() if v < 0.0)
             raise ValueError(f'{owner}: {key} must be >= 0 (got {value})')
 
 

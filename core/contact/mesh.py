@@ -77,8 +77,9 @@ class MeshPath(ColliderPath):
             self._lo, self._hi = both.min(axis=0), both.max(axis=0)
         else:  # the hierarchy's mesh has exactly these vertices
             self._lo, self._hi = self._bvh0.mesh.bounds
-        # the most local units a world metre can span over the interval (distance conversions)
-        self._local_metre = max(float(np.linalg.norm(inverse_affine(m)[:3, :3], axis=1).max())
+        # the most local units a world metre can span over the interval (distance conversions):
+        # the inverse's largest stretch (its rows' largest length falls short under a shear)
+        self._local_metre = max(float(np.linalg.norm(inverse_affine(m)[:3, :3], 2))
                                 for m in self.path.samples)
         self._still = self.still
         self._box = None  # see _world_box

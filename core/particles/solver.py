@@ -238,7 +238,7 @@ class ParticleSolver:
                               step.rest)
         else:  # every particle at rest: the step leaves them as they are
             step.report.integrator_steps += 1
-        deaths = self._age_kill(state, h)
+        deaths = self._age_kill(state, h, inputs)
         step.report.deaths += sum(len(d[0]) for d in deaths)
         alive = state.particle_count
         self._emit(state, inputs, step.births, deaths, s0, s1, step.g, step.report)
@@ -419,12 +419,17 @@ class ParticleSolver:
                "weaker forces/springs")
         return SimulationError(msg, obj=emitter, frame=inputs.frame, kind="emitter")
 
-    def _age_kill(self, state: ParticleState, h: float):
-        """Age every particle by h; remove the dead. Returns per emitter (x, v) of the dead."""
+    def _age_kill(self, state: ParticleState, h: float, inputs):
+        """Age every particle by h; remove the dead. Returns per emitter (x, v) of the dead.
+        A dying particle's values are checked here (the sub-step's check comes after the
+        deaths): one that went non-finite is a blow-up, not a death."""
         state.particle_age = state.particle_age + h
         dead = state.particle_age >= state.particle_life
         deaths = [(np.zeros((0, 3)), np.zeros((0, 3)))] * self.model.emitter_count
         if dead.any():
+            x, v = state.particle_x[dead], state.particle_v[dead]
+            if not (np.isfinite(x).all() and np.isfinite(v).all()):
+                raise self._blame(state, inputs, "", state.particle_x, state.particle_v)
             for e in np.unique(state.particle_emitter[dead]):
                 sel = dead & (state.particle_emitter == e)
                 deaths[int(e)] = (state.particle_x[sel], state.particle_v[sel])

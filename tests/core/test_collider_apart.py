@@ -227,3 +227,29 @@ def test_a_moving_mesh_tests_every_point():
                           triangles=tris)
     path = ColliderPaths().of([frame], DT)[0]
     assert path._near_rows(np.array([[9.0, 9.0, 9.0]])) is None
+
+
+def test_a_sheared_mesh_keeps_its_thickness_whatever_else_is_asked():
+    """Under a shear (a turned child of a parent scaled unevenly) a world metre spans more
+    local units than any row of the inverse says: a point 4.35 cm from a mesh of 5 cm
+    thickness is within it, asked alone or beside a far segment (the far segment used to widen
+    the search for every row, so the answer depended on what else was asked)."""
+    to_local = np.array([[1.0, 0.0, 0.0], [0.9, 0.436, 0.0], [0.0, 0.0, 1.0]])
+    m = np.eye(4)
+    m[:3, :3] = np.linalg.inv(to_local)
+    u, stretch, _ = np.linalg.svd(to_local)
+    n = u[:, 0]  # the local direction a world metre stretches most
+    t1 = np.cross(n, [0.0, 0.0, 1.0])
+    t1 /= np.linalg.norm(t1)
+    t2 = np.cross(n, t1)
+    verts = 2.0 * np.array([-t1 - t2, t1 - t2, t1 + t2, -t1 + t2])
+    frame = ColliderFrame("Sheared", "MESH", m, m, thickness=0.05, vertices0=verts,
+                          vertices1=verts, triangles=np.array([[0, 1, 2], [0, 2, 3]]))
+    path = ColliderPaths().of([frame], DT)[0]
+    resting = (m @ np.append(0.06 * n, 1.0))[:3]  # 0.06 local units off the surface ...
+    assert 0.06 / stretch[0] < 0.05  # ... which is within the thickness in the world
+    far = np.array([path._world_box()[1][0] + 0.5, 0.0, -10.0])
+    for start, end in ((resting[None], resting[None]),
+                       (np.array([resting, far]), np.array([resting, far + [0.0, 0.0, 20.0]]))):
+        hits = path.first_hits(start, end, np.zeros(len(start)), np.ones(len(start)))
+        assert hits.index.tolist() == [0] and hits.t.tolist() == [1.0]

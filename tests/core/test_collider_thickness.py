@@ -67,3 +67,15 @@ def test_negative_thickness_is_rejected():
     with pytest.raises(ValueError, match="thickness must be >= 0"):
         ColliderFrame("G", "HALF_SPACE", np.eye(4), np.eye(4), thickness=-0.1)
     assert math.isfinite(SKIN)
+
+
+@pytest.mark.parametrize("restitution, friction, message", [
+    (-0.5, math.inf, r"friction must be finite \(got inf\)"),  # the non-finite one first
+    (math.nan, -1.0, r"restitution must be finite \(got nan\)"),
+    (0.5, -1.0, r"friction must be >= 0 \(got -1.0\)"),
+    (-0.5, -1.0, r"restitution must be >= 0 \(got -0.5\)"),
+])
+def test_bad_values_are_named_non_finite_first(restitution, friction, message):
+    with pytest.raises(ValueError, match=message):
+        ColliderFrame("G", "HALF_SPACE", np.eye(4), np.eye(4), restitution=restitution,
+                      friction=friction)

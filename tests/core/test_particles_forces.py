@@ -229,6 +229,29 @@ def test_nan_blames_the_emitter_whose_particle_failed():
     assert NON_FINITE_VALUE.search(str(info.value)), str(info.value)
 
 
+def test_a_particle_going_nan_as_it_dies_is_a_blow_up_not_a_death(monkeypatch):
+    """A value that goes non-finite after the integrator (here: the colliders' response,
+    made to fail) in the sub-step its particle dies must stop the bake naming it, not leave
+    with the dead (nor burst NaN sub-particles)."""
+    import sys
+
+    model = _model(EmitterSettings("Sparks"))
+    state = model.state()
+    _place(state, [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]],
+           life=0.5 * DT)  # both die in the first sub-step
+    solver_module = sys.modules[ParticleSolver.__module__]
+    real = solver_module.respond
+
+    def failing(*args, **kwargs):
+        done = real(*args, **kwargs)
+        done.x[1] = np.nan
+        return done
+    monkeypatch.setattr(solver_module, "respond", failing)
+    with pytest.raises(SimulationError) as info:
+        ParticleSolver(model).advance(state, _inputs(0))
+    assert info.value.obj == "Sparks" and NON_FINITE_VALUE.search(str(info.value))
+
+
 def test_overflow_from_huge_drag_raises_simulation_error():
     # Explicit Euler with k h / m ~ 4e298 multiplies v by -4e298 per step: the second step
     # overflows to inf. That must surface as SimulationError naming emitter, frame and value
