@@ -140,6 +140,22 @@ def _around(rng, path, count: int = 3000) -> np.ndarray:
     return np.vstack([world + push, far])
 
 
+def _questions(path, x0: np.ndarray, x1: np.ndarray) -> tuple:
+    """The path's three answers for points x0 (near the surface) and paths x0 -> x1 over the
+    interval (first hits, then x1 pushed out)."""
+    n = len(x0)
+    ones, zeros = np.ones(n), np.zeros(n)
+    return (path.near_surface(x0, 0.0), path.first_hits(x0, x1, zeros, ones),
+            path.push_out(x1, ones, x0, zeros))
+
+
+def _assert_same(got: tuple, want: tuple) -> None:
+    for a, b in zip(got, want):
+        for key, value in vars(b).items():
+            if isinstance(value, np.ndarray):
+                assert np.array_equal(getattr(a, key), value), key
+
+
 def _unbounded(path, monkeypatch):
     """The same path answering without its world box (every point tested)."""
     monkeypatch.setattr(type(path), "_bounds", lambda self: None)
@@ -155,19 +171,11 @@ def test_a_still_solid_answers_as_if_every_point_were_tested(shape, name, thickn
     x0 = _around(rng, path)
     x1 = x0 + rng.normal(scale=0.05, size=x0.shape)
     n = len(x0)
-    ones, zeros = np.ones(n), np.zeros(n)
-    near = path.near_surface(x0, 0.0)
-    hits = path.first_hits(x0, x1, zeros, ones)
-    inside = path.push_out(x1, ones, x0, zeros)
+    near, hits, inside = answers = _questions(path, x0, x1)
     assert len(path._within(CONTACT_DISTANCE, x0)) <= n - n // 4  # the far ones skipped ...
     assert len(near.index) > 100 and len(hits.index) > 10 and len(inside.index) > 100  # ... not all
     _unbounded(path, monkeypatch)
-    for got, want in ((near, path.near_surface(x0, 0.0)),
-                      (hits, path.first_hits(x0, x1, zeros, ones)),
-                      (inside, path.push_out(x1, ones, x0, zeros))):
-        for key, value in vars(want).items():
-            if isinstance(value, np.ndarray):
-                assert np.array_equal(getattr(got, key), value), key
+    _assert_same(answers, _questions(path, x0, x1))
 
 
 def test_a_moving_solid_tests_every_point():
@@ -204,19 +212,11 @@ def test_a_still_mesh_answers_as_if_every_point_were_tested(name, thickness, mon
     x0 = np.vstack([on, lifted, far]) @ m[:3, :3].T + m[:3, 3]
     x1 = x0 + rng.normal(scale=0.05, size=x0.shape)
     n = len(x0)
-    ones, zeros = np.ones(n), np.zeros(n)
-    near = path.near_surface(x0, 0.0)
-    hits = path.first_hits(x0, x1, zeros, ones)
-    back = path.push_out(x1, ones, x0, zeros)
+    near, hits, back = answers = _questions(path, x0, x1)
     assert len(path._near_rows(x0)) <= n - n // 6  # the far ones skipped ...
     assert len(near.index) > 3 and len(hits.index) > 100 and len(back.index) > 100  # ... not all
     monkeypatch.setattr(type(path), "_world_box", lambda self: None)
-    for got, want in ((near, path.near_surface(x0, 0.0)),
-                      (hits, path.first_hits(x0, x1, zeros, ones)),
-                      (back, path.push_out(x1, ones, x0, zeros))):
-        for key, value in vars(want).items():
-            if isinstance(value, np.ndarray):
-                assert np.array_equal(getattr(got, key), value), key
+    _assert_same(answers, _questions(path, x0, x1))
 
 
 def test_a_moving_mesh_tests_every_point():
