@@ -7,7 +7,8 @@ import numpy as np
 
 from ..transforms import rows_at, take
 from .frame import ColliderFrame
-from .path import CONTACT_DISTANCE, ColliderPath, Features, Hits, SurfacePoints, rows_meeting
+from .path import (CONTACT_DISTANCE, ColliderPath, Features, Hits, SurfacePoints, padded_box,
+                   rows_meeting)
 
 SHAPES = ("HALF_SPACE", "PLANE", "SPHERE", "BOX")
 
@@ -86,10 +87,8 @@ class AnalyticPath(ColliderPath):
         if sub is not None:
             if not len(sub):
                 return SurfacePoints.none()
-            found = self._near_closest_all(take(x, sub), s if np.ndim(s) == 0 else
-                                           take(np.asarray(s), sub))
-            return SurfacePoints(sub[found.index], found.point, found.normal, found.velocity,
-                                 found.gap)
+            return self._near_closest_all(take(x, sub), s if np.ndim(s) == 0 else
+                                          take(np.asarray(s), sub)).of_rows(sub)
         return self._near_closest_all(x, s)
 
     def _near_closest_all(self, x, s) -> SurfacePoints:
@@ -194,10 +193,8 @@ class AnalyticPath(ColliderPath):
             # box (each row's absolute values against the half extents)
             half = e[0] * np.linalg.norm(m, axis=1) if self.frame.shape == "SPHERE" \
                 else np.abs(m) @ e
-            centre = self.path.m0[:3, 3]
-            pad = 1e-9 * (np.abs(centre) + half) + 1e-12
             stretch = np.linalg.svd(m, compute_uv=False)
-            self._box = (centre - half - pad, centre + half + pad,
+            self._box = (*padded_box(self.path.m0[:3, 3], half),
                          float(stretch[0] / stretch[-1]) * (1.0 + 1e-9))
         return self._box
 
@@ -210,8 +207,7 @@ class AnalyticPath(ColliderPath):
             return None
         lo, hi, factor = bounds
         grow = distance * factor
-        rows = rows_meeting(lo - grow, hi + grow, *points)
-        return None if len(rows) == len(points[0]) else rows
+        return rows_meeting(lo - grow, hi + grow, *points)
 
     def features(self, s0: float, s1: float) -> Features:
         return self._features

@@ -41,7 +41,8 @@ from ..collision.raycast import segment_hits
 from ..transforms import (cross, divide_rows, inverse_affine, norm_rows, scale_rows, take,
                           transform_vectors, where_rows)
 from .frame import ColliderFrame
-from .path import CONTACT_DISTANCE, ColliderPath, Features, Hits, SurfacePoints, rows_meeting
+from .path import (CONTACT_DISTANCE, ColliderPath, Features, Hits, SurfacePoints, padded_box,
+                   rows_meeting)
 
 BVH_KIND = "aabb"  # refits cheaply and exactly for deforming meshes
 BVH_CACHE = 8  # hierarchies kept per interval (refits for the sub-step times in use)
@@ -187,19 +188,14 @@ class MeshPath(ColliderPath):
             m = self.path.m0
             reach = (self.frame.thickness + CONTACT_DISTANCE) * self._local_metre * (1.0 + 1e-9)
             half = np.abs(m[:3, :3]) @ ((self._hi - self._lo) / 2.0 + reach)
-            centre = m[:3, :3] @ ((self._hi + self._lo) / 2.0) + m[:3, 3]
-            pad = 1e-9 * (np.abs(centre) + half) + 1e-12
-            self._box = (centre - half - pad, centre + half + pad)
+            self._box = padded_box(m[:3, :3] @ ((self._hi + self._lo) / 2.0) + m[:3, 3], half)
         return self._box
 
     def _near_rows(self, *points: np.ndarray) -> np.ndarray | None:
         """The rows of ``points`` (their box over the arrays) within a still mesh's world box
         (:meth:`_world_box`); None where every row is (or there is no such box)."""
         box = self._world_box()
-        if box is None:
-            return None
-        rows = rows_meeting(*box, *points)
-        return None if len(rows) == len(points[0]) else rows
+        return None if box is None else rows_meeting(*box, *points)
 
     def first_hits(self, start, end, s_start, s_end) -> Hits:
         """Segment hits on the mesh at the end times, kept where the segment came from the side
@@ -209,9 +205,8 @@ class MeshPath(ColliderPath):
         if sub is not None:
             if not len(sub):
                 return Hits.none()
-            found = self._first_hits(take(start, sub), take(end, sub), take(s_start, sub),
-                                     take(s_end, sub))
-            return Hits(sub[found.index], found.t, found.normal, found.point, found.element)
+            return self._first_hits(take(start, sub), take(end, sub), take(s_start, sub),
+                                    take(s_end, sub)).of_rows(sub)
         return self._first_hits(start, end, s_start, s_end)
 
     def _first_hits(self, start, end, s_start, s_end) -> Hits:
@@ -311,9 +306,7 @@ class MeshPath(ColliderPath):
         if sub is not None:
             if not len(sub):
                 return SurfacePoints.none()
-            found = self._near_surface(take(x, sub), s)
-            return SurfacePoints(sub[found.index], found.point, found.normal, found.velocity,
-                                 found.gap)
+            return self._near_surface(take(x, sub), s).of_rows(sub)
         return self._near_surface(x, s)
 
     def _near_surface(self, x, s) -> SurfacePoints:

@@ -18,7 +18,7 @@ the corners, creased edges and round parts that could reach between a mesh's ver
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -30,10 +30,17 @@ SKIN = 1e-4  # [m] particles are placed this far outside a surface after a hit
 CONTACT_DISTANCE = 1e-3  # [m] closer than this (and not separating) counts as resting contact
 
 
-def rows_meeting(lo: np.ndarray, hi: np.ndarray, *points: np.ndarray) -> np.ndarray:
+def padded_box(centre: np.ndarray, half: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The world box (lo, hi) of ``centre`` +- ``half`` (3,), padded against rounding."""
+    pad = 1e-9 * (np.abs(centre) + half) + 1e-12
+    return centre - half - pad, centre + half + pad
+
+
+def rows_meeting(lo: np.ndarray, hi: np.ndarray, *points: np.ndarray) -> np.ndarray | None:
     """Indices of the rows whose box over ``points`` (one or more (n, 3) arrays: each row's
-    points, e.g. a segment's two ends) meets the world box [lo, hi]; column by column. A
-    collider's cheap first cut: points outside its box need no test of its shape."""
+    points, e.g. a segment's two ends) meets the world box [lo, hi], or None when every row
+    does; column by column. A collider's cheap first cut: points outside its box need no test
+    of its shape."""
     meets = None
     for k in range(3):
         columns = [a[:, k] for a in points]
@@ -42,7 +49,8 @@ def rows_meeting(lo: np.ndarray, hi: np.ndarray, *points: np.ndarray) -> np.ndar
             least, most = np.minimum(least, c), np.maximum(most, c)
         here = (most >= lo[k]) & (least <= hi[k])
         meets = here if meets is None else np.logical_and(meets, here, out=meets)
-    return np.nonzero(meets)[0]
+    rows = np.nonzero(meets)[0]
+    return None if len(rows) == len(meets) else rows
 
 
 @dataclass(frozen=True)
@@ -67,6 +75,10 @@ class Hits:
     @classmethod
     def none(cls) -> Hits:
         return cls(np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)))
+
+    def of_rows(self, rows: np.ndarray) -> Hits:
+        """These hits of the segments ``rows`` picked out of a larger query, indexed as in it."""
+        return replace(self, index=rows[self.index])
 
 
 @dataclass(frozen=True)
@@ -126,6 +138,11 @@ class SurfacePoints:
     def none(cls) -> SurfacePoints:
         return cls(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)),
                    np.zeros(0))
+
+    def of_rows(self, rows: np.ndarray) -> SurfacePoints:
+        """These points of the query points ``rows`` picked out of a larger query, indexed as
+        in it."""
+        return replace(self, index=rows[self.index])
 
     def take(self, rows: np.ndarray) -> SurfacePoints:
         """These points' rows ``rows`` (indices or a mask)."""
