@@ -29,6 +29,15 @@ class StateBounds:
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"the {key} bound must be finite and > 0 (got {value})")
 
+    def within(self, x: np.ndarray, v: np.ndarray) -> bool:
+        """True when every point (x, v: (n, 3), n > 0) is finite and within the bounds, found
+        by four reductions without a temporary: every coordinate within the world bound,
+        every velocity component within the speed limit / sqrt(3) (so every speed is within
+        it); a NaN fails every comparison. False may still be within (a fast component):
+        :meth:`violation` tells."""
+        p, s = self.position, self.speed * _COMPONENT
+        return bool(x.max() <= p and -x.min() <= p and v.max() <= s and -v.min() <= s)
+
     def violation(self, x: np.ndarray, v: np.ndarray) -> tuple[int, str] | None:
         """The first point (index) outside the bounds or non-finite, and what is wrong with it
         (a phrase naming the value and the bound); None when every point is inside.
@@ -36,13 +45,7 @@ class StateBounds:
         Args:
             x: (n, 3) positions [m]. v: (n, 3) velocities [m/s].
         """
-        if len(x) == 0:
-            return None
-        # when all is well, four reductions without a temporary: every coordinate within the
-        # world bound, every velocity component within the speed limit / sqrt(3) (so its speed
-        # is within the limit); a NaN fails every comparison
-        p, s = self.position, self.speed * _COMPONENT
-        if x.max() <= p and -x.min() <= p and v.max() <= s and -v.min() <= s:
+        if len(x) == 0 or self.within(x, v):
             return None
         with np.errstate(invalid="ignore", over="ignore"):
             speed2 = np.einsum("ij,ij->i", v, v)

@@ -47,10 +47,13 @@ class PointSystem(System, Protocol):
     """A :class:`System` of points whose state is y = [x, v] with x' = v, also seen as it is
     stored: ``points() -> (x, v)`` (n, 3) each, read only; ``acceleration(t, x, v) -> (n, 3)``,
     the second half of ``derivative`` (to the bit), as a fresh array the caller may overwrite;
-    ``set_points(x, v)`` stores new arrays. Symplectic Euler steps it without packing the state
-    into y or copying the velocities into a derivative."""
+    ``set_points(x, v)`` stores new arrays; ``new_points() -> (x, v) | None``: where the step is
+    to write the new positions and velocities (None: arrays of its own). Symplectic Euler steps
+    it without packing the state into y or copying the velocities into a derivative."""
 
     def points(self) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def new_points(self) -> tuple[np.ndarray, np.ndarray] | None: ...
 
     def acceleration(self, t: float, x: np.ndarray, v: np.ndarray) -> np.ndarray: ...
 

@@ -282,7 +282,9 @@ class SymplecticEuler(Integrator):
         x, v = system.points()
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
             a = system.acceleration(float(t), x, v)
-            v_new, x_new = _kick_drift(a, x, v, float(dt), a, np.empty_like(x))
+            into = system.new_points()
+            v_new, x_new = _kick_drift(a, x, v, float(dt), *(
+                (a, np.empty_like(x)) if into is None else (into[1], into[0])))
             # a non-finite value before the step leaves one after it (the step adds to each
             # value), so the state before is read only to say which it was
             if not (finite_sum(x_new) and finite_sum(v_new)):

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .rest import unchanged
+
 BLOCK = 65_536  # particles per block
 # integrators whose step treats each particle alone (RK45 picks one step size for all of them)
 BLOCKED = ("EULER", "SYMPLECTIC_EULER", "MIDPOINT", "RK4")
@@ -25,14 +27,37 @@ def separable(integrator: str, alone: bool, inputs) -> bool:
     return alone and integrator in BLOCKED and not inputs.interactions and not inputs.collisions
 
 
-def in_blocks(move, step, state, s0: float, s1: float, t: float):
-    """``move(step, state, s0, s1, t)`` (:meth:`.solver.ParticleSolver._move`) over the whole
-    state, block by block when the interval is separable and the state spans two blocks or
-    more; returns what ``move`` returns for the whole state (positions and velocities before,
-    no ties)."""
+class Looked:
+    """What a sub-step learns of its moved particles while their values are in the cache
+    (passed to :func:`in_blocks`): which were left exactly as they were (``still``, when
+    ``rest`` is the sub-step's :class:`~.rest.Conditions`; else None) and whether every one is
+    finite and within ``bounds`` by its quick test (``inside``, :meth:`~..bounds.StateBounds
+    .within`)."""
+
+    def __init__(self, n: int, rest, bounds):
+        self.still = None if rest is None else np.empty(n, bool)
+        self.inside = True
+        self._bounds = bounds
+
+    def __call__(self, rows: slice, x0, v0, x1, v1) -> None:
+        if self.still is not None:
+            self.still[rows] = unchanged(x0, v0, x1, v1)
+        if self.inside and len(x1):
+            self.inside = self._bounds.within(x1, v1)
+
+
+def in_blocks(move, step, state, s0: float, s1: float, t: float, look: Looked | None = None):
+    """``move(step, state, s0, s1, t, into)`` (:meth:`.solver.ParticleSolver._move`) over the
+    whole state, block by block when the interval is separable and the state spans two blocks
+    or more, each block's integrator writing into the new state's rows (``into``); returns what
+    ``move`` returns for the whole state (positions and velocities before, no ties).
+    ``look(rows, x0, v0, x1, v1)``: called on each block (or the whole state) once moved."""
     n = state.particle_count
     if not step.blocks or n < 2 * BLOCK:
-        return move(step, state, s0, s1, t)
+        moved = move(step, state, s0, s1, t)
+        if look is not None:
+            look(slice(0, n), moved[0], moved[1], state.particle_x, state.particle_v)
+        return moved
     x0, v0 = state.particle_x, state.particle_v  # no pass writes into them: moves make new ones
     x1, v1 = np.empty_like(x0), np.empty_like(v0)
     report = step.report
@@ -40,8 +65,13 @@ def in_blocks(move, step, state, s0: float, s1: float, t: float):
     for lo in range(0, n, BLOCK):
         rows = slice(lo, min(lo + BLOCK, n))
         part = state.subset(rows)  # views of the block's rows
-        move(step, part, s0, s1, t)
-        x1[rows], v1[rows] = part.particle_x, part.particle_v
+        into = (x1[rows], v1[rows])
+        move(step, part, s0, s1, t, into)
+        for new, out in zip((part.particle_x, part.particle_v), into):
+            if new is not out:  # (not written in place: a collision, another integrator)
+                out[...] = new
+        if look is not None:
+            look(rows, x0[rows], v0[rows], *into)
         if lo == 0:
             steps = report.integrator_steps  # the sub-step's steps, counted once
     report.integrator_steps = steps

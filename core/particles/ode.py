@@ -14,8 +14,10 @@ class ParticleOde:
     to symplectic Euler as its points (:class:`~..integrators.PointSystem`)."""
 
     def __init__(self, state: ParticleState, forces: list, contact: ContactForce,
-                 constraints: HardConstraints | None = None):
+                 constraints: HardConstraints | None = None,
+                 into: tuple[np.ndarray, np.ndarray] | None = None):
         self.state = state
+        self.into = into  # (x, v) a step writes the new state into (None: new arrays)
         self.forces = forces
         self.contact = contact
         self.constraints = constraints
@@ -34,6 +36,9 @@ class ParticleOde:
 
     def points(self) -> tuple[np.ndarray, np.ndarray]:
         return self.state.particle_x, self.state.particle_v
+
+    def new_points(self) -> tuple[np.ndarray, np.ndarray] | None:
+        return self.into
 
     def set_points(self, x: np.ndarray, v: np.ndarray) -> None:
         self.state.particle_x, self.state.particle_v = x, v

@@ -64,7 +64,7 @@ def conditions(integrator: str, gravity: np.ndarray, h: float, inputs, paths: li
                       tuple(path.frame for path in paths))
 
 
-def _unchanged(x0, v0, x1, v1) -> np.ndarray:
+def unchanged(x0, v0, x1, v1) -> np.ndarray:
     """(n,) whether each row of x1, v1 equals x0, v0: ``row_all(x1 == x0) & row_all(v1 ==
     v0)``, column by column, velocities first (gravity changes them in flight), stopping when
     no row is left (one compare for particles in the air instead of six)."""
@@ -105,10 +105,15 @@ class Rest:
                now: Conditions | None) -> None:
         """After a sub-step under ``now``: of the particles it computed (``awake``; None: all),
         from x0, v0 to x1, v1, those left exactly as they were rest from now on."""
+        self.rested(state, awake, None if now is None else unchanged(x0, v0, x1, v1), now)
+
+    def rested(self, state, awake: np.ndarray | None, still: np.ndarray | None,
+               now: Conditions | None) -> None:
+        """As :meth:`settle`, where the caller compared them: ``still`` (of ``awake``; None
+        when ``now`` is None) which were left exactly as they were."""
         if now is None:
             self.mask = None
             return
-        still = _unchanged(x0, v0, x1, v1)
         if awake is None:
             self.mask = still
         else:

@@ -33,7 +33,7 @@ from ..forces import (DampedSprings, Gravity, HardConstraints, OnCurves, OnPlane
                       Rods, Tethers, on_circles)
 from ..integrators import make_integrator
 from ..world import SolverSettings, SolverSystem, World, WorldFrame
-from .blocks import in_blocks, separable
+from .blocks import Looked, in_blocks, separable
 from .emit import Births, sample_births, sample_bursts
 from .frame_inputs import FrameInputs, FrameReport, ParticleDrive
 from .model import ParticleModel, ParticleState
@@ -225,9 +225,13 @@ class ParticleSolver:
         t = inputs.t0 + k * h
         awake = self._rest.awake(state, step.rest)
         tied = ([], None)  # (a sub-step with particles at rest has no ties)
+        checked = 0  # the particles (from the first) the move found within the bounds
         if awake is None:
-            x0, v0, tied = in_blocks(self._move, step, state, s0, s1, t)
-            self._rest.settle(state, None, x0, v0, state.particle_x, state.particle_v, step.rest)
+            look = Looked(state.particle_count, step.rest, self.bounds)
+            x0, v0, tied = in_blocks(self._move, step, state, s0, s1, t, look)
+            self._rest.rested(state, None, look.still, step.rest)
+            # (separable: nothing but deaths and births changes them before the check)
+            checked = state.particle_count if look.inside and step.blocks else 0
         elif len(awake):
             moving = state.subset(awake)
             x0, v0, _ = self._move(step, moving, s0, s1, t)
@@ -240,6 +244,7 @@ class ParticleSolver:
             step.report.integrator_steps += 1
         deaths = self._age_kill(state, h, inputs)
         step.report.deaths += sum(len(d[0]) for d in deaths)
+        checked -= sum(len(d[0]) for d in deaths)
         alive = state.particle_count
         self._emit(state, inputs, step.births, deaths, s0, s1, step.g, step.report)
         self._rest.born(state.particle_count - alive)
@@ -248,15 +253,16 @@ class ParticleSolver:
             if born is not None:  # the newborn onto them
                 self._constrain(state, born, None, t + h, h)
         # the particles at rest are as they were when last checked
-        self._check_bounds(state, inputs, None if awake is None else
-                           np.flatnonzero(~self._rest.mask))
+        self._check_bounds(state, inputs, (None if not checked else slice(checked, None))
+                           if awake is None else np.flatnonzero(~self._rest.mask))
         state.t = t + h
 
     def _move(self, step: _FrameStep, state: ParticleState, s0: float, s1: float,
-              t: float) -> tuple[np.ndarray, np.ndarray, tuple]:
+              t: float, into: tuple | None = None) -> tuple[np.ndarray, np.ndarray, tuple]:
         """The passes that move the particles of ``state`` (the frame's, or those of it not at
         rest), from collide to check; returns their positions and velocities before, and the
-        sub-step's ties (:meth:`TieFrame.substep`)."""
+        sub-step's ties (:meth:`TieFrame.substep`). ``into``: (x, v) arrays the integrator
+        may write the new state into (:mod:`.blocks`)."""
         inputs, h = step.inputs, step.h
         tied = ([], None) if step.ties is None else step.ties.substep(
             state, inputs.emitters, s0, s1, t, h)
@@ -271,7 +277,8 @@ class ParticleSolver:
         held = self._constraints(state, inputs, s0, t, h, tied)
         with at_frame(inputs.frame):  # an interaction's failure knows no frame
             step.report.integrator_steps += self._integrate(
-                state, self._forces(state, inputs, step.gravity), contact, held, t, h, inputs)
+                state, self._forces(state, inputs, step.gravity), contact, held, t, h, inputs,
+                into)
         if tied[1] is not None:  # the bodies take what the step's tie forces gave them
             tied[1].commit(h)
         done = respond(step.paths, x0, state.particle_x, v0, state.particle_v, s0, s1, h,
@@ -371,10 +378,10 @@ class ParticleSolver:
         if held.bodies is not None:
             held.bodies.finish(x)
 
-    def _integrate(self, state, forces, contact, rods, t, h, inputs) -> int:
+    def _integrate(self, state, forces, contact, rods, t, h, inputs, into=None) -> int:
         if state.particle_count == 0:
             return 0
-        ode = ParticleOde(state, forces, contact, rods)
+        ode = ParticleOde(state, forces, contact, rods, into)
         try:
             return self.integrator.step(ode, t, h).steps
         except SimulationError as exc:
@@ -387,16 +394,16 @@ class ParticleSolver:
             x, v = trial[:3 * n].reshape(n, 3), trial[3 * n:].reshape(n, 3)
             raise self._blame(state, inputs, str(exc), x, v) from exc
 
-    def _check_bounds(self, state, inputs, rows: np.ndarray | None = None) -> None:
-        """Every particle (or those at ``rows``) finite and within the bounds, or an error
-        naming one (a non-finite value as a blow-up: :meth:`_blame`)."""
+    def _check_bounds(self, state, inputs, rows: np.ndarray | slice | None = None) -> None:
+        """Every particle (or those at ``rows``: indices or a slice) finite and within the
+        bounds, or an error naming one (a non-finite value as a blow-up: :meth:`_blame`)."""
         x, v = state.particle_x, state.particle_v
         bad = self.bounds.violation(x if rows is None else x[rows], v if rows is None else v[rows])
         if bad is not None:
             if not (np.isfinite(x).all() and np.isfinite(v).all()):
                 raise self._blame(state, inputs, "", x, v)
             i, what = bad
-            i = i if rows is None else int(rows[i])
+            i = i if rows is None else int(np.arange(len(x))[rows][i])
             raise SimulationError(
                 f"particle {int(state.particle_id[i])} {what} — check gravity, forces and "
                 "emitter speeds, or raise the limits in Scene > PhysAnim > Limits",

@@ -53,3 +53,6 @@ def test_points_are_judged_as_by_their_definition_near_the_bounds():
         v *= rng.uniform(2.0, 5.2, (n, 1)) / np.linalg.norm(v, axis=1, keepdims=True)
         inside = bool((np.abs(x) <= 10.0).all() and (np.einsum("ij,ij->i", v, v) <= 25.0).all())
         assert (b.violation(x, v) is None) == inside
+        assert inside or not b.within(x, v)  # the quick test never passes a point outside
+        if (np.abs(v) <= 5.0 / math.sqrt(3.0) * (1.0 - 1e-9)).all():
+            assert b.within(x, v) == inside  # nor fails one whose components are small

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from physanim.core.contact import ColliderFrame
+from physanim.core.errors import PhysanimError
 from physanim.core.forces import Wind
 from physanim.core.particles import EmitterFrame, EmitterSettings, FrameInputs, ParticleSolver
 from physanim.core.particles import blocks
@@ -78,3 +79,55 @@ def test_blocks_move_the_particles_as_the_whole_state_does(monkeypatch, integrat
 def test_particles_that_collide_with_each_other_are_not_split(monkeypatch):
     out, count = _run(monkeypatch, 200, "SYMPLECTIC_EULER", [ParticleCollisions("Grains")], 8)
     assert out[-1][3].alive > 2000 and count == 0
+
+
+def _flight(n: int, bad: dict, life: float = 1e9, emitter=None):
+    """``n`` particles in flight above a ground, moved in blocks of 200 (symplectic Euler, one
+    sub-step); ``bad``: {row: (x, v)} set on particles; one frame advanced. Returns the
+    error it raised (or None) and the state."""
+    model = particle_model(EmitterSettings(name="Grains"))
+    solver = ParticleSolver(model, "SYMPLECTIC_EULER", 1)
+    state = model.state(0.0)
+    rng = np.random.default_rng(5)
+    x = rng.uniform(-5.0, 5.0, (n, 3)) + [0.0, 0.0, 20.0]
+    v = rng.normal(0.0, 1.0, (n, 3))
+    lives = np.full(n, 1e9)
+    lives[: n // 4] = life  # the first quarter dies within the first sub-step when life is short
+    state.append(0, x, v, np.full(n, 0.1), np.zeros(n), lives, np.full(n, 0.05))
+    for row, (xi, vi) in bad.items():
+        state.particle_x[row], state.particle_v[row] = xi, vi
+    try:
+        solver.advance(state, FrameInputs(frame=7, t0=0.0, frame_dt=DT,
+                                          emitters=[emitter or EmitterFrame(active=False)],
+                                          colliders=[GROUND]))
+    except PhysanimError as exc:
+        return exc, state
+    return None, state
+
+
+@pytest.mark.parametrize("row, x, v, words", [
+    (1450, (0.0, 0.0, 20.0), (2e5, 0.0, 0.0), "speed"),  # block 8 of 10: beyond the speed limit
+    (610, (0.0, 0.0, 20.0), (np.nan, 0.0, 0.0), "velocity became"),  # block 4: a blow-up
+    (1999, (3e5, 0.0, 20.0), (0.0, 0.0, 0.0), "world bound"),  # the last block's last row
+])
+def test_a_particle_out_of_bounds_in_any_block_is_named(monkeypatch, row, x, v, words):
+    """The bounds are checked block by block as the blocks are moved (in the cache): a particle
+    beyond them in any block stops the frame naming it, as the whole state's check did."""
+    monkeypatch.setattr(blocks, "BLOCK", 200)
+    exc, state = _flight(2000, {row: (x, v)})
+    assert exc is not None and words in str(exc), exc
+    assert f"particle {row}" in str(exc) and "frame 7" in str(exc) and "Grains" in str(exc)
+
+
+def test_newborns_out_of_bounds_are_named_after_the_moved_were_checked(monkeypatch):
+    """Where every moved block was within the bounds, the check that follows the births covers
+    the newborn (after the deaths of the same sub-step): a birth faster than the speed limit
+    stops the frame naming it, with more particles dying than are born."""
+    monkeypatch.setattr(blocks, "BLOCK", 200)
+    fast = EmitterFrame(rate=20.0, speed=2e5, lifetime=10.0, mass=0.1, size=0.02)
+    exc, state = _flight(2000, {}, life=0.01, emitter=fast)
+    assert exc is not None and "speed" in str(exc) and "beyond the speed limit" in str(exc), exc
+    born = int(str(exc).split("particle ")[1].split()[0])
+    assert born >= 2000  # a newborn's id (the placed ones are 0..1999)
+    exc, state = _flight(2000, {}, life=0.01)  # the same deaths, nobody born: no error
+    assert exc is None and state.particle_count == 1500

@@ -226,9 +226,9 @@ def test_a_solver_saved_before_particles_rested_resumes():
 
 
 def test_the_still_test_is_rows_whose_every_position_and_velocity_stayed():
-    """:func:`~physanim.core.particles.rest._unchanged` (velocities first, stopping once no row
+    """:func:`~physanim.core.particles.rest.unchanged` (velocities first, stopping once no row
     is left) against the plain definition, on rows that differ in any one column or none."""
-    from physanim.core.particles.rest import _unchanged
+    from physanim.core.particles.rest import unchanged
 
     rng = np.random.default_rng(7)
     for moved in (0, 1, 5, 40):
@@ -239,7 +239,7 @@ def test_the_still_test_is_rows_whose_every_position_and_velocity_stayed():
         for r, c in zip(rows, cols):
             (x1 if c < 3 else v1)[r, c % 3] += 1e-12
         expected = (x1 == x0).all(axis=1) & (v1 == v0).all(axis=1)
-        assert np.array_equal(_unchanged(x0, v0, x1, v1), expected)
-        assert _unchanged(x0, v0, x1, v1).sum() == 40 - moved
+        assert np.array_equal(unchanged(x0, v0, x1, v1), expected)
+        assert unchanged(x0, v0, x1, v1).sum() == 40 - moved
     empty = np.zeros((0, 3))
-    assert _unchanged(empty, empty, empty, empty).shape == (0,)
+    assert unchanged(empty, empty, empty, empty).shape == (0,)
