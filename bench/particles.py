@@ -24,8 +24,9 @@ one warm-up frame, then ``--steady-frames`` frames of one sub-step each, per int
 after another as a bake runs them (garbage collected once before them, not before each).
 
 Part "colliders" (``--parts colliders``) — the steady particles (symplectic Euler) beside one
-collider of each kind out of their reach (none, the ground below, a sphere, a box, a mesh), at
-the first two ``--sizes``: what a collider costs the particles it is far from.
+collider of each kind out of their reach (none, the ground below, a sphere, a box, a mesh, and
+the sphere, box and mesh moving and turning as an animated object does), at the first two
+``--sizes``: what a collider costs the particles it is far from.
 
 Part 3, "memory" (``--parts memory``; not run by default: it writes gigabytes) — the peak memory
 of a ``--memory-count`` particle bake at the defaults for each of ``--memory-frames`` frame
@@ -108,12 +109,20 @@ def beside_colliders() -> dict:
                   i[:-1, 1:].ravel())
     tris = np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
 
-    def frame(name, shape, **mesh):
-        return contact.ColliderFrame(name, shape, at, at, RESTITUTION, FRICTION, **mesh)
+    # moving: 0.2 m along x and turned 0.1 rad about z over each frame (an animated object)
+    c, s = np.cos(0.1), np.sin(0.1)
+    moved = np.array([[c, -s, 0.0, 0.2], [s, c, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0],
+                      [0.0, 0.0, 0.0, 1.0]]) @ at
+
+    def frame(name, shape, end=at, **mesh):
+        return contact.ColliderFrame(name, shape, at, end, RESTITUTION, FRICTION, **mesh)
+    mesh = {"vertices0": verts, "vertices1": verts, "triangles": tris}
     return {"none": [], "ground below (half-space)": None,
             "sphere beside": [frame("Sphere", "SPHERE")], "box beside": [frame("Box", "BOX")],
-            f"mesh beside ({len(tris):,} triangles)": [
-                frame("Mesh", "MESH", vertices0=verts, vertices1=verts, triangles=tris)]}
+            f"mesh beside ({len(tris):,} triangles)": [frame("Mesh", "MESH", **mesh)],
+            "sphere moving beside": [frame("Sphere", "SPHERE", moved)],
+            "box moving beside": [frame("Box", "BOX", moved)],
+            "mesh moving beside": [frame("Mesh", "MESH", moved, **mesh)]}
 
 
 def collider_costs(opts: Options) -> list[str]:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..transforms import rows_at, take
+from ..transforms import rows_at, take, transform_points
 from .frame import ColliderFrame
 from .path import (CONTACT_DISTANCE, ColliderPath, Features, Hits, SurfacePoints, padded_box,
                    rows_meeting)
@@ -40,12 +40,22 @@ class AnalyticPath(ColliderPath):
     def first_hits(self, start, end, s_start, s_end) -> Hits:
         shape = self.frame.shape
         cand = self._segment_candidates(start, end, s_start, s_end)
-        if cand is None:
-            cand = np.arange(len(end))
-        if len(cand) == 0:
-            return Hits.none()
-        l0 = self.to_local(start[cand], s_start[cand])
-        l1 = self.to_local(end[cand], s_end[cand])
+        if cand is None:  # a moving sphere or box: every segment in its local space, then
+            # only those whose local box meets the shape's are tested (a segment that enters
+            # the shape, or ends in it, has a point in that box)
+            l0, l1 = self.to_local(start, s_start), self.to_local(end, s_end)
+            cand = self._local_rows(np.zeros(3), l0, l1)
+            if cand is None:
+                cand = np.arange(len(end))
+            else:
+                l0, l1 = take(l0, cand), take(l1, cand)
+            if len(cand) == 0:
+                return Hits.none()
+        else:
+            if len(cand) == 0:
+                return Hits.none()
+            l0 = self.to_local(start[cand], s_start[cand])
+            l1 = self.to_local(end[cand], s_end[cand])
         hit, t, n_local = _segment_hit(shape, l0, l1, self.extent)
         l_hit = l0 + t[:, None] * (l1 - l0)
         # a collider that moved onto a particle: push it out to the nearest surface point
@@ -83,16 +93,43 @@ class AnalyticPath(ColliderPath):
         """:meth:`near_surface` through each point's closest surface point in local space (any
         shape; ``s`` a scalar or one parameter per point); of a still sphere or box, only for
         the points within its world box grown by the contact distance (see :meth:`_bounds`)."""
-        sub = self._within(CONTACT_DISTANCE, x)
+        sub, l = self._within(CONTACT_DISTANCE, x), None
+        if sub is None and not self.path.static:
+            sub, l = self._near_moving(x, s)
         if sub is not None:
             if not len(sub):
                 return SurfacePoints.none()
             return self._near_closest_all(take(x, sub), s if np.ndim(s) == 0 else
-                                          take(np.asarray(s), sub)).of_rows(sub)
-        return self._near_closest_all(x, s)
+                                          take(np.asarray(s), sub),
+                                          None if l is None else take(l, sub)).of_rows(sub)
+        return self._near_closest_all(x, s, l)
 
-    def _near_closest_all(self, x, s) -> SurfacePoints:
-        l = self.to_local(x, s)
+    def _near_moving(self, x, s) -> tuple:
+        """(rows, local points) of a moving sphere or box at one ``s`` (scalar, or the same
+        for every point): the rows whose local point lies within the shape's local box grown
+        by the contact distance in local units — a point found near lies within that distance
+        times the matrix's condition number of the shape (as for :meth:`_bounds`), bounded
+        here by the product of the matrix's and its inverse's Frobenius norms, and a world
+        metre spans at most its inverse's row length along each local axis. (None, None) for
+        points at different ``s``."""
+        inv = self._inverse(s)
+        if inv.ndim != 2:
+            return None, None
+        lin, inv3 = self._at(s)[:3, :3], inv[:3, :3]
+        condition = float(np.linalg.norm(lin) * np.linalg.norm(inv3))
+        l = transform_points(inv, x)
+        grow = CONTACT_DISTANCE * condition * np.linalg.norm(inv3, axis=1) * (1.0 + 1e-9)
+        return self._local_rows(grow, l), l
+
+    def _local_rows(self, grow: np.ndarray, *local: np.ndarray) -> np.ndarray | None:
+        """The rows whose local points (their box over the arrays) meet the shape's local box
+        (its extent, which holds a sphere too) grown by ``grow`` (3,) and padded against
+        rounding; None where every row does."""
+        lo, hi = padded_box(np.zeros(3), self.extent + grow)
+        return rows_meeting(lo, hi, *local)
+
+    def _near_closest_all(self, x, s, l=None) -> SurfacePoints:
+        l = self.to_local(x, s) if l is None else l
         p, n_local, valid = _closest(self.frame.shape, l, self.extent)
         p_w, n_w = self.to_world(p, n_local, s)
         d = np.einsum("ij,ij->i", x - p_w, n_w)

@@ -42,7 +42,7 @@ from ..transforms import (cross, divide_rows, inverse_affine, norm_rows, scale_r
                           transform_vectors, where_rows)
 from .frame import ColliderFrame
 from .path import (CONTACT_DISTANCE, ColliderPath, Features, Hits, SurfacePoints, padded_box,
-                   rows_meeting)
+                   rows_meeting, same_times)
 
 BVH_KIND = "aabb"  # refits cheaply and exactly for deforming meshes
 BVH_CACHE = 8  # hierarchies kept per interval (refits for the sub-step times in use)
@@ -312,7 +312,7 @@ class MeshPath(ColliderPath):
     def _near_surface(self, x, s) -> SurfacePoints:
         if len(x) == 0:
             return SurfacePoints.none()
-        s = np.full(len(x), float(s))
+        s = same_times(s, len(x))
         l = self.to_local(x, s)
         within = self.frame.thickness + CONTACT_DISTANCE
         reach = within * self._local_metre * (1.0 + 1e-9)

@@ -30,6 +30,12 @@ SKIN = 1e-4  # [m] particles are placed this far outside a surface after a hit
 CONTACT_DISTANCE = 1e-3  # [m] closer than this (and not separating) counts as resting contact
 
 
+def same_times(s: float, n: int) -> np.ndarray:
+    """(n,) read-only: the time ``s`` of n points, one value broadcast (a collider's path sees
+    one matrix for them without comparing n values)."""
+    return np.broadcast_to(np.float64(s), (n,))
+
+
 def padded_box(centre: np.ndarray, half: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The world box (lo, hi) of ``centre`` +- ``half`` (3,), padded against rounding."""
     pad = 1e-9 * (np.abs(centre) + half) + 1e-12
@@ -206,11 +212,12 @@ class ColliderPath:
     # -- motion ---------------------------------------------------------------------------------
     def _at(self, s) -> np.ndarray:
         """The matrix at ``s``: one (4, 4) when s is a scalar or the same for every particle
-        (the common case, far cheaper), else (n, 4, 4)."""
+        (the common case, far cheaper; known without a look at its values where ``s`` is one
+        value broadcast, as :func:`same_times` makes), else (n, 4, 4)."""
         s = np.asarray(s, dtype=np.float64)
         if self.path.static:
             return self.path.m0
-        if s.ndim == 0 or (len(s) and s.min() == s.max()):
+        if s.ndim == 0 or (len(s) and (s.strides[0] == 0 or s.min() == s.max())):
             return self.path.matrices(float(s.flat[0]) if s.size else 0.0)
         return self.path.matrices(s)
 

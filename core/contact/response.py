@@ -19,7 +19,7 @@ import numpy as np
 
 from ..transforms import rows_at
 from .contacts import Contacts
-from .path import CONTACT_DISTANCE, SKIN, ColliderPath, SurfacePoints
+from .path import CONTACT_DISTANCE, SKIN, ColliderPath, SurfacePoints, same_times
 
 PASSES = 3  # a bounce's remaining motion may hit another collider: re-test up to this often
 
@@ -63,8 +63,8 @@ def respond(colliders: list[ColliderPath], x0: np.ndarray, x1: np.ndarray, v0: n
     # pass 1 tests everyone (no gather) on the paths as given: most sub-steps hit nothing,
     # and where every collider is apart from every path, that is known without a test
     nearest = None if len(x1) == 0 or all(col.apart((x0, x1), s0, SKIN) for col in colliders) \
-        else _nearest_hits(colliders, (x0, x1, np.full(len(x1), float(s0)),
-                                       np.full(len(x1), float(s1))))
+        else _nearest_hits(colliders, (x0, x1, same_times(s0, len(x1)),
+                                       same_times(s1, len(x1))))
     if nearest is None:
         return (Response(x1, v1, 0, Contacts.none()) if own else
                 Response(x1.copy(), v1.copy(), 0, Contacts.none()))

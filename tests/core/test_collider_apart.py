@@ -178,6 +178,54 @@ def test_a_still_solid_answers_as_if_every_point_were_tested(shape, name, thickn
     _assert_same(answers, _questions(path, x0, x1))
 
 
+def _moving(m: np.ndarray) -> tuple:
+    """A motion from ``m``: moved 5 cm, turned 0.2 rad and stretched by a tenth along one axis
+    over the interval, with a sub-frame sample off the straight line."""
+    m1 = np.eye(4)
+    m1[:3, 3] = (0.05, -0.02, 0.03)
+    m1 = m1 @ m @ _turn(1, 0.2) @ np.diag([1.0, 1.1, 1.0, 1.0])
+    mid = 0.5 * (m + m1)
+    mid[:3, 3] += (0.0, 0.03, 0.0)
+    return m1, np.stack([m, mid, m1])
+
+
+@pytest.mark.parametrize("shape", ["SPHERE", "BOX"])
+@pytest.mark.parametrize("name", list(SOLIDS))
+@pytest.mark.parametrize("thickness", [0.0, 0.03])
+def test_a_moving_solid_answers_as_if_every_point_were_tested(shape, name, thickness,
+                                                              monkeypatch):
+    """A moving sphere or box tests only the points whose local box meets its own (grown by
+    the contact distance where near is asked): the same answers as every point tested, at one
+    time for all points and at times of their own."""
+    rng = np.random.default_rng(12)
+    m1, samples = _moving(SOLIDS[name])
+    frame = ColliderFrame("Solid", shape, SOLIDS[name], m1, 0.5, 0.3, thickness=thickness,
+                          matrices=samples)
+    path = ColliderPaths().of([frame], DT)[0]
+    assert not path.path.static
+    x0 = _around(rng, path)
+    x1 = x0 + rng.normal(scale=0.05, size=x0.shape)
+    n = len(x0)
+    mid = rng.uniform(0.3, 0.7, n)
+    asked = []
+    real = type(path)._local_rows
+
+    def counted(self, grow, *local):
+        rows = real(self, grow, *local)
+        asked.append(n if rows is None else len(rows))
+        return rows
+    monkeypatch.setattr(type(path), "_local_rows", counted)
+    answers = _questions(path, x0, x1) + (
+        path.near_surface(x1, 0.6), path.first_hits(x0, x1, mid - 0.3, mid + 0.3))
+    near, hits, inside, near_later, hits_own = answers
+    assert max(asked) <= n - n // 4  # the far ones skipped ...
+    assert len(near.index) > 100 and len(hits.index) > 10 and len(inside.index) > 100
+    assert len(near_later.index) > 3 and len(hits_own.index) > 10  # ... not all
+    monkeypatch.setattr(type(path), "_local_rows", lambda self, grow, *local: None)
+    _assert_same(answers, _questions(path, x0, x1) + (
+        path.near_surface(x1, 0.6), path.first_hits(x0, x1, mid - 0.3, mid + 0.3)))
+
+
 def test_a_moving_solid_tests_every_point():
     moving = np.eye(4)
     moving[0, 3] = 0.2
