@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..transforms import rows_at, take, transform_points
+from ..transforms import rows_at, take
 from .frame import ColliderFrame
 from .path import (CONTACT_DISTANCE, ColliderPath, Features, Hits, SurfacePoints, padded_box,
                    rows_meeting)
@@ -69,7 +69,10 @@ class AnalyticPath(ColliderPath):
         return Hits(cand[hit], t[hit], n_local[hit], l_hit[hit])
 
     def push_out(self, x, s, start, s_start) -> SurfacePoints:
-        sub = self._within(0.0, x)  # only points within a still shape's world box can be in
+        # only points within a sphere's or box's world box (a still one's, or a moving one's
+        # at s) can be in it
+        sub = self._within(0.0, x) if self.path.static or self.frame.shape not in (
+            "SPHERE", "BOX") else self._moving_rows(x, s, np.zeros(3))
         if sub is not None:
             x, s = take(x, sub), take(s, sub)
         l = self.to_local(x, s)
@@ -93,33 +96,37 @@ class AnalyticPath(ColliderPath):
         """:meth:`near_surface` through each point's closest surface point in local space (any
         shape; ``s`` a scalar or one parameter per point); of a still sphere or box, only for
         the points within its world box grown by the contact distance (see :meth:`_bounds`)."""
-        sub, l = self._within(CONTACT_DISTANCE, x), None
-        if sub is None and not self.path.static:
-            sub, l = self._near_moving(x, s)
+        sub = self._within(CONTACT_DISTANCE, x) if self.path.static else self._near_moving(x, s)
         if sub is not None:
             if not len(sub):
                 return SurfacePoints.none()
             return self._near_closest_all(take(x, sub), s if np.ndim(s) == 0 else
-                                          take(np.asarray(s), sub),
-                                          None if l is None else take(l, sub)).of_rows(sub)
-        return self._near_closest_all(x, s, l)
+                                          take(np.asarray(s), sub)).of_rows(sub)
+        return self._near_closest_all(x, s)
 
-    def _near_moving(self, x, s) -> tuple:
-        """(rows, local points) of a moving sphere or box at one ``s`` (scalar, or the same
-        for every point): the rows whose local point lies within the shape's local box grown
-        by the contact distance in local units — a point found near lies within that distance
-        times the matrix's condition number of the shape (as for :meth:`_bounds`), bounded
-        here by the product of the matrix's and its inverse's Frobenius norms, and a world
-        metre spans at most its inverse's row length along each local axis. (None, None) for
-        points at different ``s``."""
-        inv = self._inverse(s)
-        if inv.ndim != 2:
-            return None, None
-        lin, inv3 = self._at(s)[:3, :3], inv[:3, :3]
-        condition = float(np.linalg.norm(lin) * np.linalg.norm(inv3))
-        l = transform_points(inv, x)
+    def _near_moving(self, x, s) -> np.ndarray | None:
+        """:meth:`_moving_rows` for :meth:`near_surface`: a point found near lies within the
+        contact distance times the matrix's condition number of the shape (as for
+        :meth:`_bounds`; bounded here by the product of the matrix's and its inverse's
+        Frobenius norms), and a world metre spans at most its inverse's row length along each
+        local axis."""
+        m = self._at(s)
+        if m.ndim != 2:
+            return None
+        inv3 = self._inverse(s)[:3, :3]
+        condition = float(np.linalg.norm(m[:3, :3]) * np.linalg.norm(inv3))
         grow = CONTACT_DISTANCE * condition * np.linalg.norm(inv3, axis=1) * (1.0 + 1e-9)
-        return self._local_rows(grow, l), l
+        return self._moving_rows(x, s, grow)
+
+    def _moving_rows(self, x, s, grow: np.ndarray) -> np.ndarray | None:
+        """The rows of a moving sphere's or box's points ``x`` at one ``s`` (scalar, or the same
+        for every point) within the world box of its local box (its extent, which holds a
+        sphere too) grown by ``grow`` (3,) at ``s``: every point whose local point lies in that
+        grown box. None where the points' times differ, or every row is within."""
+        m = self._at(s)
+        if m.ndim != 2:
+            return None
+        return rows_meeting(*padded_box(m[:3, 3], np.abs(m[:3, :3]) @ (self.extent + grow)), x)
 
     def _local_rows(self, grow: np.ndarray, *local: np.ndarray) -> np.ndarray | None:
         """The rows whose local points (their box over the arrays) meet the shape's local box
@@ -128,8 +135,8 @@ class AnalyticPath(ColliderPath):
         lo, hi = padded_box(np.zeros(3), self.extent + grow)
         return rows_meeting(lo, hi, *local)
 
-    def _near_closest_all(self, x, s, l=None) -> SurfacePoints:
-        l = self.to_local(x, s) if l is None else l
+    def _near_closest_all(self, x, s) -> SurfacePoints:
+        l = self.to_local(x, s)
         p, n_local, valid = _closest(self.frame.shape, l, self.extent)
         p_w, n_w = self.to_world(p, n_local, s)
         d = np.einsum("ij,ij->i", x - p_w, n_w)

@@ -185,16 +185,23 @@ class MeshPath(ColliderPath):
         if not self._still:
             return None
         if getattr(self, "_box", None) is None:
-            m = self.path.m0
-            reach = (self.frame.thickness + CONTACT_DISTANCE) * self._local_metre * (1.0 + 1e-9)
-            half = np.abs(m[:3, :3]) @ ((self._hi - self._lo) / 2.0 + reach)
-            self._box = padded_box(m[:3, :3] @ ((self._hi + self._lo) / 2.0) + m[:3, 3], half)
+            self._box = self._box_at(self.path.m0)
         return self._box
 
-    def _near_rows(self, *points: np.ndarray) -> np.ndarray | None:
+    def _box_at(self, m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The world box of the mesh's local bounds (over the interval: a deforming mesh's
+        vertices at both ends) grown by the thickness and the contact distance, under the
+        matrix ``m``."""
+        reach = (self.frame.thickness + CONTACT_DISTANCE) * self._local_metre * (1.0 + 1e-9)
+        half = np.abs(m[:3, :3]) @ ((self._hi - self._lo) / 2.0 + reach)
+        return padded_box(m[:3, :3] @ ((self._hi + self._lo) / 2.0) + m[:3, 3], half)
+
+    def _near_rows(self, *points: np.ndarray, s: float | None = None) -> np.ndarray | None:
         """The rows of ``points`` (their box over the arrays) within a still mesh's world box
-        (:meth:`_world_box`); None where every row is (or there is no such box)."""
-        box = self._world_box()
+        (:meth:`_world_box`), or with ``s`` (points at that one time) within the world box
+        of a moving or deforming mesh at s; None where every row is (or there is no such
+        box)."""
+        box = self._world_box() if s is None or self._still else self._box_at(self._at(s))
         return None if box is None else rows_meeting(*box, *points)
 
     def first_hits(self, start, end, s_start, s_end) -> Hits:
@@ -302,7 +309,7 @@ class MeshPath(ColliderPath):
         return SurfacePoints(idx, p_w, n_w, velocity, gap)
 
     def near_surface(self, x, s) -> SurfacePoints:
-        sub = self._near_rows(x)  # of a still mesh, only the points within its world box
+        sub = self._near_rows(x, s=s)  # only the points within its world box at s
         if sub is not None:
             if not len(sub):
                 return SurfacePoints.none()

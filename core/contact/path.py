@@ -218,12 +218,27 @@ class ColliderPath:
         if self.path.static:
             return self.path.m0
         if s.ndim == 0 or (len(s) and (s.strides[0] == 0 or s.min() == s.max())):
-            return self.path.matrices(float(s.flat[0]) if s.size else 0.0)
+            return self._once(float(s.flat[0]) if s.size else 0.0)[0]
         return self.path.matrices(s)
+
+    def _once(self, s: float) -> tuple:
+        """The matrix at one ``s`` and its inverse (read-only), worked out once per interval:
+        a sub-step asks for each of its times several times."""
+        known = self.__dict__.setdefault("_known_at", {})  # (paths saved before it: none)
+        at = known.get(s)
+        if at is None:
+            m = self.path.matrices(s)
+            at = known[s] = (m, inverse_affine(m))
+            for a in at:
+                a.flags.writeable = False
+        return at
 
     def _inverse(self, s) -> np.ndarray:
         """The inverse of :meth:`_at` (of a collider standing still: worked out once)."""
-        return self._inverse0 if self.path.static else inverse_affine(self._at(s))
+        if self.path.static:
+            return self._inverse0
+        m = self._at(s)
+        return self._once(float(np.asarray(s).flat[0]))[1] if m.ndim == 2 else inverse_affine(m)
 
     def to_local(self, x: np.ndarray, s) -> np.ndarray:
         return transform_points(self._inverse(s), x)

@@ -208,20 +208,24 @@ def test_a_moving_solid_answers_as_if_every_point_were_tested(shape, name, thick
     n = len(x0)
     mid = rng.uniform(0.3, 0.7, n)
     asked = []
-    real = type(path)._local_rows
+    cuts = {"_local_rows": type(path)._local_rows, "_moving_rows": type(path)._moving_rows}
 
-    def counted(self, grow, *local):
-        rows = real(self, grow, *local)
-        asked.append(n if rows is None else len(rows))
-        return rows
-    monkeypatch.setattr(type(path), "_local_rows", counted)
+    def counted(cut):
+        def count(self, *args):
+            rows = cuts[cut](self, *args)
+            asked.append(n if rows is None else len(rows))
+            return rows
+        return count
+    for cut in cuts:
+        monkeypatch.setattr(type(path), cut, counted(cut))
     answers = _questions(path, x0, x1) + (
         path.near_surface(x1, 0.6), path.first_hits(x0, x1, mid - 0.3, mid + 0.3))
     near, hits, inside, near_later, hits_own = answers
     assert max(asked) <= n - n // 4  # the far ones skipped ...
     assert len(near.index) > 100 and len(hits.index) > 10 and len(inside.index) > 100
     assert len(near_later.index) > 3 and len(hits_own.index) > 10  # ... not all
-    monkeypatch.setattr(type(path), "_local_rows", lambda self, grow, *local: None)
+    for cut in cuts:
+        monkeypatch.setattr(type(path), cut, lambda self, *args: None)
     _assert_same(answers, _questions(path, x0, x1) + (
         path.near_surface(x1, 0.6), path.first_hits(x0, x1, mid - 0.3, mid + 0.3)))
 
@@ -265,6 +269,36 @@ def test_a_still_mesh_answers_as_if_every_point_were_tested(name, thickness, mon
     assert len(near.index) > 3 and len(hits.index) > 100 and len(back.index) > 100  # ... not all
     monkeypatch.setattr(type(path), "_world_box", lambda self: None)
     _assert_same(answers, _questions(path, x0, x1))
+
+
+@pytest.mark.parametrize("name", ["unit", "turned and stretched", "turned"])
+@pytest.mark.parametrize("deforming", [False, True])
+def test_a_moving_mesh_finds_near_points_as_if_every_point_were_tested(name, deforming,
+                                                                        monkeypatch):
+    """A moving (or deforming) mesh asked which points are near it at one time tests only the
+    points within the world box of its local bounds at that time: the same answers."""
+    verts, tris = _wavy()
+    m = SOLIDS[name]
+    m1, samples = _moving(m)
+    verts1 = verts * [1.0, 1.0, 1.3] if deforming else verts
+    frame = ColliderFrame("Wavy", "MESH", m, m1, 0.5, 0.3, thickness=0.02, vertices0=verts,
+                          vertices1=verts1, triangles=tris, matrices=samples)
+    path = ColliderPaths().of([frame], DT)[0]
+    rng = np.random.default_rng(6)
+    on = verts[rng.integers(0, len(verts), 3000)] + rng.normal(scale=0.004, size=(3000, 3))
+    far = rng.normal(size=(1000, 3))
+    far *= rng.uniform(3.0, 6.0, (1000, 1)) / np.linalg.norm(far, axis=1, keepdims=True)
+    local = np.vstack([on, on[:1000] + [0.0, 0.0, 0.02], far])
+    answers = []
+    for s in (0.0, 0.4, 1.0):
+        at = path._at(s)
+        x = (local * [1.0, 1.0, 1.0 + 0.3 * s * deforming]) @ at[:3, :3].T + at[:3, 3]
+        assert len(path._near_rows(x, s=s)) <= len(x) - len(far) // 2  # far ones skipped ...
+        answers.append((x, s, path.near_surface(x, s)))
+        assert len(answers[-1][2].index) > 20  # ... not the near ones
+    monkeypatch.setattr(type(path), "_near_rows", lambda self, *points, s=None: None)
+    for x, s, near in answers:
+        _assert_same((near,), (path.near_surface(x, s),))
 
 
 def test_a_moving_mesh_tests_every_point():
