@@ -11,6 +11,7 @@ from .path import (CONTACT_DISTANCE, ColliderPath, Features, Hits, SurfacePoints
                    rows_meeting)
 
 SHAPES = ("HALF_SPACE", "PLANE", "SPHERE", "BOX")
+EPS = float(np.finfo(np.float64).eps)
 
 
 class AnalyticPath(ColliderPath):
@@ -131,9 +132,20 @@ class AnalyticPath(ColliderPath):
     def _local_rows(self, grow: np.ndarray, *local: np.ndarray) -> np.ndarray | None:
         """The rows whose local points (their box over the arrays) meet the shape's local box
         (its extent, which holds a sphere too) grown by ``grow`` (3,) and padded against
-        rounding; None where every row does."""
-        lo, hi = padded_box(np.zeros(3), self.extent + grow)
+        rounding: relatively, and by what the shape's own tests may round to over the farthest
+        point asked (a sphere's discriminant by about eps |l|^2: a long segment grazing it may
+        be found to touch it); None where every row meets it, or a point is not finite."""
+        far = _farthest(*local)
+        if not far < np.inf:  # (NaN too): the shape's tests answer for every row
+            return None
+        lo, hi = padded_box(np.zeros(3), self.extent + grow + self._rounding(far))
         return rows_meeting(lo, hi, *local)
+
+    def _rounding(self, far: float) -> float:
+        """How far off the shape (local units) its tests may find a point or segment touching
+        it by rounding, for points up to ``far`` along any local axis: a sphere's
+        discriminant rounds by about eps |l|^2 (|l|^2 <= 3 far^2), with a margin."""
+        return 32.0 * EPS * 3.0 * far * far / float(self.extent.min())
 
     def _near_closest_all(self, x, s) -> SurfacePoints:
         l = self.to_local(x, s)
@@ -250,8 +262,24 @@ class AnalyticPath(ColliderPath):
         if bounds is None:
             return None
         lo, hi, factor = bounds
-        grow = distance * factor
+        far = _farthest(*points)
+        if not far < np.inf:  # (NaN too): the shape's tests answer for every row
+            return None
+        # what the shape's tests may round to, over the farthest point: in local units the
+        # point lies within sqrt(3) (far + |origin|) / least stretch, and a local length maps
+        # to at most sqrt(3) times the largest stretch along a world axis
+        big, small = self._stretches()
+        origin = float(np.abs(self.path.m0[:3, 3]).max())
+        grow = distance * factor + 2.0 * big * self._rounding((far + origin) / small)
         return rows_meeting(lo - grow, hi + grow, *points)
+
+    def _stretches(self) -> tuple[float, float]:
+        """A still shape's matrix's largest and least stretch (singular values), worked out
+        once."""
+        if getattr(self, "_singular", None) is None:
+            stretch = np.linalg.svd(self.path.m0[:3, :3], compute_uv=False)
+            self._singular = (float(stretch[0]), float(stretch[-1]))
+        return self._singular
 
     def features(self, s0: float, s1: float) -> Features:
         return self._features
@@ -276,6 +304,18 @@ class AnalyticPath(ColliderPath):
             return np.nonzero(z1 < level)[0]
         z0 = self._local_z(start, s_start)
         return np.nonzero((z0 > level) & (z1 <= level) | (z0 < -level) & (z1 >= -level))[0]
+
+
+def _farthest(*arrays: np.ndarray) -> float:
+    """The largest absolute coordinate of the points of ``arrays`` (0 for none; inf where one
+    is not finite)."""
+    far = 0.0
+    for a in arrays:
+        if len(a):
+            top = max(float(a.max()), -float(a.min()))  # (NaN where a has one)
+            if not top <= far:
+                far = top if top > far else np.inf  # (NaN: inf, which every caller refuses)
+    return far
 
 
 def _affine_row(x: np.ndarray, row: np.ndarray) -> np.ndarray:

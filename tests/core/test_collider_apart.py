@@ -230,6 +230,35 @@ def test_a_moving_solid_answers_as_if_every_point_were_tested(shape, name, thick
         path.near_surface(x1, 0.6), path.first_hits(x0, x1, mid - 0.3, mid + 0.3)))
 
 
+@pytest.mark.parametrize("shape", ["SPHERE", "BOX"])
+@pytest.mark.parametrize("moving", [False, True])
+def test_long_segments_grazing_a_small_solid_are_answered_as_every_segment_tested(
+        shape, moving, monkeypatch):
+    """Segments many radii long passing a hair's breadth off a 1 mm sphere or box, where the
+    shape's own test rounds (a sphere's discriminant by about eps |l|^2): the cut lets every
+    one the test would find through (a pad of a billionth of the shape fell short)."""
+    r = 1e-3
+    m0 = np.diag([r, r, r, 1.0])
+    m1 = m0.copy()
+    m1[2, 3] = 1e-6 if moving else 0.0
+    path = ColliderPaths().of([ColliderFrame("Small", shape, m0, m1)], DT)[0]
+    offsets = np.geomspace(1e-12, 1e-6, 40) * r
+    starts, ends = [], []
+    for length in (0.05, 1.0, 10.0, 30.0):
+        for side in (1.0, -1.0):
+            x = side * (r + offsets)
+            starts.append(np.column_stack([x, np.full_like(x, -length), np.zeros_like(x)]))
+            ends.append(np.column_stack([x, np.full_like(x, length), np.zeros_like(x)]))
+    start, end = np.vstack(starts), np.vstack(ends)
+    far = np.array([[0.0, 5.0, 5.0]])  # and one segment far off: a cut is made
+    start, end = np.vstack([start, far]), np.vstack([end, far + 1.0])
+    s = np.zeros(len(start))
+    got = path.first_hits(start, end, s, s)
+    monkeypatch.setattr(type(path), "_local_rows", lambda self, *args: None)
+    monkeypatch.setattr(type(path), "_bounds", lambda self: None)
+    _assert_same((got,), (path.first_hits(start, end, s, s),))
+
+
 def test_a_moving_solid_tests_every_point():
     moving = np.eye(4)
     moving[0, 3] = 0.2
