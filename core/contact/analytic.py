@@ -50,13 +50,11 @@ class AnalyticPath(ColliderPath):
                 cand = np.arange(len(end))
             else:
                 l0, l1 = take(l0, cand), take(l1, cand)
-            if len(cand) == 0:
-                return Hits.none()
-        else:
-            if len(cand) == 0:
-                return Hits.none()
+        elif len(cand):
             l0 = self.to_local(start[cand], s_start[cand])
             l1 = self.to_local(end[cand], s_end[cand])
+        if len(cand) == 0:
+            return Hits.none()
         hit, t, n_local = _segment_hit(shape, l0, l1, self.extent)
         l_hit = l0 + t[:, None] * (l1 - l0)
         # a collider that moved onto a particle: push it out to the nearest surface point

@@ -29,8 +29,7 @@ import numpy as np
 from ..bounds import DEFAULT_BOUNDS, StateBounds
 from ..contact import ColliderPaths, ContactForce, respond, resting_contacts
 from ..errors import PhysanimError, SimulationError, at_frame
-from ..forces import (DampedSprings, Gravity, HardConstraints, OnCurves, OnPlanes,
-                      Rods, Tethers, on_circles)
+from ..forces import DampedSprings, Gravity, HardConstraints, Rods
 from ..integrators import make_integrator
 from ..world import SolverSettings, SolverSystem, World, WorldFrame
 from .blocks import Looked, in_blocks, separable
@@ -38,8 +37,8 @@ from .emit import Births, sample_births, sample_bursts
 from .frame_inputs import FrameInputs, FrameReport, ParticleDrive
 from .model import ParticleModel, ParticleState
 from .ode import ParticleOde
+from .point_rows import point_rows
 from .rest import Conditions, Rest, conditions
-from .settings import PointConstraint
 from .ties import TIE, TieFrame
 
 FIRST_ORDER = ("EULER", "SYMPLECTIC_EULER", "IMPLICIT")  # integrators whose rods take RATTLE
@@ -93,25 +92,6 @@ def _scatter(full: np.ndarray, rows: np.ndarray, values: np.ndarray) -> np.ndarr
         full = full.copy()
     full[rows] = values
     return full
-
-
-def point_rows(c: PointConstraint, held: np.ndarray, s0: float, t: float, h: float,
-               frame_dt: float) -> list:
-    """The rows of point constraint ``c`` on particles ``held`` for the sub-step starting at
-    ``s0`` of the frame (time ``t``): its frame's origin moves linearly over the frame, its axis
-    is taken at the sub-step's start."""
-    if c.kind == "ON_CURVE":  # its points move linearly over the frame
-        return [OnCurves(held, c.points0 + s0 * (c.points1 - c.points0),
-                         (c.points1 - c.points0) / frame_dt, c.cyclic, t)]
-    o0, o1 = c.matrix0[:3, 3], c.matrix1[:3, 3]
-    origin, velocity = o0 + s0 * (o1 - o0), (o1 - o0) / frame_dt
-    axis = c.matrix0[:3, 2] + s0 * (c.matrix1[:3, 2] - c.matrix0[:3, 2])
-    axis = axis / np.linalg.norm(axis)
-    if c.kind == "ON_PLANE":
-        return [OnPlanes(held, origin, axis, velocity, t)]
-    if c.kind == "ON_SPHERE":
-        return [Tethers(held, origin, c.radius, velocity, t)]
-    return on_circles(held, origin, axis, c.radius, velocity, t)
 
 
 def _up(g: np.ndarray) -> np.ndarray | None:
