@@ -94,9 +94,7 @@ class ChainSolver:
         self.levels, self.inv = factors
         self.groups = op.groups
         if self.groups:  # the groups' rows: their coupling to the joints (B) and each other
-            unit = np.eye(3 * self.groups)
-            cols = [op(op.pack(np.zeros((len(r), rows)), unit[k])) for k in range(len(unit))]
-            cols = np.array(cols).T  # (size, 3 G)
+            cols = op.group_columns()  # (size, 3 G)
             n = len(r) * rows
             self.b_ = cols[:n]
             self.c_ = cols[n:]

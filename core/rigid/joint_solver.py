@@ -25,7 +25,7 @@ import numpy as np
 from ..forces.springs import scatter_add
 from ..transforms import cross
 from .joint_chains import ChainSolver, chains
-from .joints import CONE_TWIST, FRAME, HINGE, ROWS, SLIDER, SPRING_JOINT, JointModel
+from .joints import CONE_TWIST, FIXED, FRAME, HINGE, ROWS, SLIDER, SPRING_JOINT, JointModel
 
 JOINT_BIAS = 0.2  # fraction of a joint's drift taken back per sub-step (with position feedback)
 MAX_CORRECTION = 4.0  # [m/s], [rad/s] fastest drift correction
@@ -117,16 +117,17 @@ def rows(model: JointModel, joints: np.ndarray, ab: np.ndarray, x: np.ndarray,
     axes = wa.transpose(0, 2, 1)  # (J, 3, 3): the joint's x, y, z axes (on A) as rows
     pivot = _linear(axes, ra[:, None], rb[:, None])  # (J, 3, 12) the pivot along them
     j[:, :3] = pivot
-    for i in range(3):
-        c[:, i] = np.einsum("ji,ji->j", wa[:, :, i], gap)
-    turn = _rotation_vector(wb @ axes)
+    c[:, :3] = np.einsum("jik,ji->jk", wa, gap)  # the gap along the joint's axes
     swing = cross(axis_a, axis_b)
     hinge = kind == HINGE
     j[:, 3:6] = _angular(axes)  # turning about the joint's axes
-    for i in range(3):
-        u = wa[:, :, i]
-        c[:, 3 + i] = np.where(hinge, np.einsum("ji,ji->j", u, swing),
-                               np.einsum("ji,ji->j", u, turn))
+    # a hinge's turning errors are its axes' swing; those of joints that hold every turn
+    # (fixed, slider) B's turn from A (ball and cone-twist hold none)
+    c[:, 3:6] = np.einsum("jik,ji->jk", wa, swing)
+    turns = (kind == FIXED) | (kind == SLIDER)
+    if turns.any():
+        c[turns, 3:6] = np.einsum("jik,ji->jk", wa[turns], _rotation_vector(
+            wb[turns] @ axes[turns]))
     holds = _HOLDS[kind]
     j[:, :EQ] *= holds[:, :, None]
     c[:, :EQ] *= holds
@@ -156,19 +157,19 @@ def _clamped(model, joints, kind, wa, wb, axis_a, axis_b, swing, gap, ra, rb, h,
     what = np.zeros((n, 4), np.int64)
     limits = model.joint_use_limits[joints]
     lower, upper = model.joint_lower[joints], model.joint_upper[joints]
-    # the free coordinate of hinges (angle about z) and sliders (distance along z)
-    angle = np.arctan2(np.einsum("ji,ji->j", wb[:, :, 0], wa[:, :, 1]),
-                       np.einsum("ji,ji->j", wb[:, :, 0], wa[:, :, 0]))
-    slide = np.einsum("ji,ji->j", axis_a, gap)
     driven = (kind == HINGE) | (kind == SLIDER)
-    # side A's coordinate relative to side B (the base: the world, a frame or the second
-    # body): a hinged door turns by its angle, its motor turns it that way
-    free = -np.where(kind == SLIDER, slide, angle)
     on = driven & limits
     motor = driven & model.joint_use_motor[joints]
     spring = driven & model.joint_use_spring[joints] & \
         ((model.joint_stiffness[joints] > 0.0) | (model.joint_damping[joints] > 0.0))
     if (on | motor | spring).any():
+        # the free coordinate of hinges (angle about z) and sliders (distance along z)
+        angle = np.arctan2(np.einsum("ji,ji->j", wb[:, :, 0], wa[:, :, 1]),
+                           np.einsum("ji,ji->j", wb[:, :, 0], wa[:, :, 0]))
+        slide = np.einsum("ji,ji->j", axis_a, gap)
+        # side A's coordinate relative to side B (the base: the world, a frame or the second
+        # body): a hinged door turns by its angle, its motor turns it that way
+        free = -np.where(kind == SLIDER, slide, angle)
         row = -np.where((kind == SLIDER)[:, None], pivot[:, 2], _angular(axis_a))
         j[on, 0], c[on, 0], what[on, 0] = row[on], (free - lower)[on], LIMIT
         j[on, 1], c[on, 1], what[on, 1] = -row[on], (upper - free)[on], LIMIT
@@ -353,13 +354,38 @@ def displacement(r: JointRows, count: int, momentum: np.ndarray | None = None,
     sum dx x P; a group of free bodies joined only to each other keeps it to first order:
     ``group`` (count,) labels such groups (-1: none), ``momentum`` (count, 3) and
     ``inv_mass`` (count,) of the rows, and their moves satisfy sum P x dx = 0 per group too."""
-    move = np.zeros((count, 6))
-    if not len(r):
-        return move
+    return Displacement(r, count, momentum, inv_mass, group)(r)
+
+
+class Displacement:
+    """:func:`displacement`'s system at the rows ``r``, factorised once: called with the
+    rows at a later pose, the moves that take those rows' errors to zero through the first
+    rows' linearisation (a chord step of Newton's method: the projection's later steps, a
+    small move from the first, reuse its factorisation while the same rows are in use)."""
+
+    def __init__(self, r: JointRows, count: int, momentum: np.ndarray | None = None,
+                 inv_mass: np.ndarray | None = None, group: np.ndarray | None = None):
+        self.use = _in_use(r)
+        self.op = _Rows(r, count, self.use, None, momentum, inv_mass, group) if len(r) \
+            else None
+        self.count = count
+        self.solve = _solver(self.op) if len(r) else None
+
+    def fits(self, r: JointRows) -> bool:
+        """Whether ``r`` (the same joints at another pose) uses the same rows."""
+        use = _in_use(r)
+        return use.shape == self.use.shape and bool((use == self.use).all())
+
+    def __call__(self, r: JointRows) -> np.ndarray:
+        if self.op is None:
+            return np.zeros((self.count, 6))
+        return self.op.moves(self.solve(self.op.pack(-r.c, 0.0)))
+
+
+def _in_use(r: JointRows) -> np.ndarray:
+    """(J, ROWS) the rows a projection takes to zero: the equality rows, passed limits."""
     passed = (r.kind == LIMIT) & (r.c[:, EQ:] < 0.0)
-    use = np.concatenate([r.holds, passed], axis=1)
-    op = _Rows(r, count, use, None, momentum, inv_mass, group)
-    return op.moves(_linear_solve(op, op.pack(-r.c, 0.0)))
+    return np.concatenate([r.holds, passed], axis=1)
 
 
 def drift(r: JointRows) -> float:
@@ -418,6 +444,34 @@ class _Rows:
             move[self.rows, :3] += self.w[:, None] * cross(nu[self.member], self.p)
         return move
 
+    def group_columns(self) -> np.ndarray:
+        """(size, 3 G) the system's columns of the groups' rows (``self(e)`` for each unit
+        vector e of them, all at once): a group's unit impulse along axis k moves its members
+        by w (e_k x P), and only its own joints and its own rows see it."""
+        r, n = self.r, len(self.r)
+        g3 = 3 * self.groups
+        out = np.zeros((self.size, g3))
+        if not g3:
+            return out
+        axes = np.eye(3)
+        move = np.zeros((3, self.count, 6))  # one move per axis, every group at once
+        move[:, self.rows, :3] = self.w[:, None] * cross(axes[:, None], self.p[None])
+        side = np.full(self.count, -1, np.int64)  # each row's group
+        side[self.rows] = self.member
+        block = out[:n * ROWS].reshape(n, ROWS, self.groups, 3)
+        for k in range(2):  # each side of the joints: its group's columns see its rows
+            rows = r.ab[:, k]
+            owner = side[rows]
+            mine = np.nonzero(owner >= 0)[0]
+            seen = r.j[mine, :, 6 * k:6 * k + 6] @ move[:, rows[mine]].transpose(1, 2, 0)
+            block[mine, :, owner[mine]] += seen * self.use[mine, :, None]
+        turn = cross(self.p[None], move[:, self.rows, :3])  # (3, R, 3): P x move per axis
+        group = np.zeros((self.groups, 3, 3))  # [group, row axis, column axis]
+        np.add.at(group, self.member, turn.transpose(1, 2, 0))
+        tail = out[n * ROWS:].reshape(self.groups, 3, self.groups, 3)
+        tail[np.arange(self.groups), :, np.arange(self.groups), :] = group
+        return out
+
     def __call__(self, x):
         move = self.moves(x)
         joint = np.einsum("jri,ji->jr", self.r.j, move[self.r.ab].reshape(len(self.r), 12)) + \
@@ -440,14 +494,21 @@ class _Rows:
 
 
 def _linear_solve(op, b: np.ndarray) -> np.ndarray:
-    """x with op(x) = b: directly along chains (:mod:`.joint_chains`) where the joints form
-    them, else by conjugate gradients."""
+    """x with op(x) = b (see :func:`_solver`)."""
+    return _solver(op)(b)
+
+
+def _solver(op):
+    """b -> x with op(x) = b: directly along chains (:mod:`.joint_chains`, factorised here)
+    where the joints form them, else by conjugate gradients."""
     if op.r.paths is not None:
         try:
-            return ChainSolver(op, op.r.paths).solve(b)
+            chain = ChainSolver(op, op.r.paths)
         except np.linalg.LinAlgError:  # redundant joints (two hinges on one axis): iterate
             pass
-    return _pcg(op, b)
+        else:
+            return chain.solve
+    return lambda b: _pcg(op, b)
 
 
 def _pcg(op, b: np.ndarray) -> np.ndarray:

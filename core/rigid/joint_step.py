@@ -19,6 +19,9 @@ from .joints import FRAME
 
 PROJECTIONS = 4  # Newton steps (at most) putting bodies back on their joints after a move
 PROJECTION_TOLERANCE = 1e-7  # [m], [rad]: joints closer than this are left as they are
+# within a frame, a sub-step's projection stops once a Newton step has shrunk the drift this
+# much (the next sub-step's takes the rest); the frame's last goes to the tolerance
+WITHIN_FRAME_GAIN = 100.0
 
 
 @dataclass
@@ -90,10 +93,13 @@ def pose(model, step, inverse_inertia) -> None:
         np.concatenate([step.inv_mass, np.zeros(f)]),
         np.concatenate([inv_inertia, np.zeros((f, 3, 3))]), step.h)
 
-def project(model, step, inverse_inertia) -> None:
+def project(model, step, inverse_inertia, last: bool = True) -> None:
     """Put the bodies back on their joints after they moved (post-stabilisation: the
     positions only, PROJECTIONS Newton steps): a chain whipping round does not stretch
-    however fast its links turn."""
+    however fast its links turn. The frame's ``last`` sub-step takes them to
+    PROJECTION_TOLERANCE; the others stop sooner once a step has shrunk the drift
+    WITHIN_FRAME_GAIN times (Newton's steps square it: the second would take a few
+    micrometres to nothing, and the next sub-step's projection starts again anyway)."""
     js, b = step.joints, step.bodies
     if not len(js.ids):
         return
@@ -104,10 +110,14 @@ def project(model, step, inverse_inertia) -> None:
     momentum[d] = m.body_mass[d, None] * step.v[d]
     inv_mass = np.concatenate([step.inv_mass, np.zeros(len(js.rows))])
     group = _free_groups(step, rows)
+    enough = PROJECTION_TOLERANCE
     for _ in range(PROJECTIONS):
         pose(model, step, inverse_inertia)
-        if js_.drift(js.solve) <= PROJECTION_TOLERANCE:
+        drift = js_.drift(js.solve)
+        if drift <= enough:
             break
+        if not last:
+            enough = max(PROJECTION_TOLERANCE, drift / WITHIN_FRAME_GAIN)
         move = js_.displacement(js.solve, rows, momentum, inv_mass, group)
         b.x[d] += move[d, :3]
         b.q[d] = quat.normalized(quat.multiply(quat.from_rotation_vector(move[d, 3:]),

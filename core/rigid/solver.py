@@ -292,7 +292,8 @@ class RigidBodySolver:
             js_.solve(vel, js.solve, js.impulse, h, use_bias=True)
         cs_.solve(vel, cs, step.rows, cs_.Scales.of(cs, step.separation, h, soft, hard, True))
         self._integrate(step)
-        joint_step.project(step.model, step, self._inverse_inertia)
+        joint_step.project(step.model, step, self._inverse_inertia,
+                           last=k == self.substeps - 1)
         self._pose_contacts(step)  # the bodies moved: arms, inertias and gaps at the new poses
         joint_step.pose(step.model, step, self._inverse_inertia)
         if js.solve is not None:

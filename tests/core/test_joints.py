@@ -306,6 +306,41 @@ def test_newtons_cradle_one_in_one_out():
     assert rise[first:, 0].max() > 0.9 * drop  # ... and goes out again when it swings back
 
 
+def _disturbed_chain(anchored: bool, n: int = 12, link: float = 0.3):
+    """A chain of n links (hinges and balls by turns; hung from the world by a ball when
+    ``anchored``) run 3 frames, then its joints' rows at a slightly disturbed pose: (rows,
+    row count, momenta, inverse masses, the whole chain one free group unless anchored)."""
+    from physanim.core.rigid import joint_solver as js
+
+    bodies = [box(f"L{i}", (link / 2, 0.03, 0.03), ((i + 0.5) * link, 0.0, 2.0),
+                  velocity=(0.0, 0.0, 0.3 * i), angular_velocity=(0.0, 1.0, 0.2))
+              for i in range(n)]
+    joints = [JointSettings(f"J{i}", "HINGE" if i % 2 else "BALL", i - 1, i,
+                            matrix=joint_frame((i * link, 0.0, 2.0), (0.0, 1.0, 0.0)))
+              for i in range(1, n)]
+    if anchored:
+        joints.insert(0, JointSettings("Top", "BALL", 0, matrix=joint_frame((0, 0, 2.0))))
+    _, solver, state = build(bodies, joints)
+    run(solver, state, 3, gravity=(0.0, 0.0, -G))
+    model = solver.model
+    x, q = state.body_x.copy(), state.body_q.copy()
+    # the rows at a slightly disturbed pose: equality errors to remove
+    x += np.random.default_rng(3).normal(scale=1e-3, size=x.shape)
+    frame = np.eye(4)[None].repeat(1, axis=0)
+    rot = np.concatenate([quat.to_matrix(q), frame[:, :3, :3]])
+    inv_inertia = np.concatenate([quat.to_matrix(q) @ model.body_inv_inertia @
+                                  np.swapaxes(quat.to_matrix(q), 1, 2), np.zeros((1, 3, 3))])
+    ids = np.arange(model.joints.joint_count)
+    ab = np.stack([model.joints.joint_a, np.where(model.joints.joint_b < 0, n,
+                                                  model.joints.joint_b)], axis=1)
+    inv_mass = np.concatenate([model.body_inv_mass, [0.0]])
+    r = js.rows(model.joints, ids, ab, np.concatenate([x, np.zeros((1, 3))]), rot, inv_mass,
+                inv_inertia, DT / 8)
+    momentum = np.concatenate([state.body_P, np.zeros((1, 3))])
+    group = None if anchored else np.concatenate([np.zeros(n, np.int64), [-1]])
+    return r, n + 1, momentum, inv_mass, group
+
+
 def test_the_direct_chain_solve_equals_conjugate_gradients():
     """The joints of a hanging 12-link chain (and a free-floating one, whose angular momentum
     rows couple it whole) solved directly along the chain and by conjugate gradients: the
@@ -313,40 +348,33 @@ def test_the_direct_chain_solve_equals_conjugate_gradients():
     from physanim.core.rigid import joint_solver as js
 
     for anchored in (True, False):
-        n, link = 12, 0.3
-        bodies = [box(f"L{i}", (link / 2, 0.03, 0.03), ((i + 0.5) * link, 0.0, 2.0),
-                      velocity=(0.0, 0.0, 0.3 * i), angular_velocity=(0.0, 1.0, 0.2))
-                  for i in range(n)]
-        joints = [JointSettings(f"J{i}", "HINGE" if i % 2 else "BALL", i - 1, i,
-                                matrix=joint_frame((i * link, 0.0, 2.0), (0.0, 1.0, 0.0)))
-                  for i in range(1, n)]
-        if anchored:
-            joints.insert(0, JointSettings("Top", "BALL", 0, matrix=joint_frame((0, 0, 2.0))))
-        _, solver, state = build(bodies, joints)
-        run(solver, state, 3, gravity=(0.0, 0.0, -G))
-        model = solver.model
-        x, q = state.body_x.copy(), state.body_q.copy()
-        # the rows at a slightly disturbed pose: equality errors to remove
-        x += np.random.default_rng(3).normal(scale=1e-3, size=x.shape)
-        frame = np.eye(4)[None].repeat(1, axis=0)
-        rot = np.concatenate([quat.to_matrix(q), frame[:, :3, :3]])
-        inv_inertia = np.concatenate([quat.to_matrix(q) @ model.body_inv_inertia @
-                                      np.swapaxes(quat.to_matrix(q), 1, 2), np.zeros((1, 3, 3))])
-        ids = np.arange(model.joints.joint_count)
-        ab = np.stack([model.joints.joint_a, np.where(model.joints.joint_b < 0, n,
-                                                      model.joints.joint_b)], axis=1)
-        r = js.rows(model.joints, ids, ab, np.concatenate([x, np.zeros((1, 3))]), rot,
-                    np.concatenate([model.body_inv_mass, [0.0]]), inv_inertia, DT / 8)
+        r, count, momentum, inv_mass, group = _disturbed_chain(anchored)
         assert r.paths is not None and len(r.paths) == 1
-        momentum = np.concatenate([state.body_P, np.zeros((1, 3))])
-        group = None if anchored else np.concatenate([np.zeros(n, np.int64), [-1]])
-        direct = js.displacement(r, n + 1, momentum,
-                                 np.concatenate([model.body_inv_mass, [0.0]]), group)
+        direct = js.displacement(r, count, momentum, inv_mass, group)
         r.paths = None
-        iterative = js.displacement(r, n + 1, momentum,
-                                    np.concatenate([model.body_inv_mass, [0.0]]), group)
+        iterative = js.displacement(r, count, momentum, inv_mass, group)
         assert np.abs(direct - iterative).max() < 1e-5 * np.abs(iterative).max()
         assert np.abs(direct).max() > 1e-5  # it moved something
+
+
+def test_the_groups_columns_are_the_systems_own():
+    """The columns of the angular-momentum rows of groups of free joined bodies, built all at
+    once, equal the system applied to each of their unit vectors — for one group, and for the
+    links split into three groups at random (a joint's two sides in different groups)."""
+    from physanim.core.rigid import joint_solver as js
+
+    r, count, momentum, inv_mass, group = _disturbed_chain(False)
+    rng = np.random.default_rng(7)
+    for labels in (group, np.concatenate([rng.integers(0, 3, count - 1), [-1]])):
+        use = np.concatenate([r.holds, rng.random((len(r), 4)) < 0.5], axis=1)
+        op = js._Rows(r, count, use, None, momentum, inv_mass, labels)
+        unit = np.eye(3 * op.groups)
+        expected = np.array([op(op.pack(np.zeros(use.shape), e)) for e in unit]).T
+        columns = op.group_columns()
+        assert columns.shape == expected.shape and op.groups == len(np.unique(labels)) - 1
+        np.testing.assert_allclose(columns, expected, rtol=0, atol=1e-12 * np.abs(
+            expected).max())
+        assert np.abs(columns[:len(r) * js.ROWS]).max() > 0.0
 
 
 def test_keyed_joint_values_change_the_motor_limit_and_breaking_frame_by_frame():
