@@ -119,7 +119,6 @@ def rows(model: JointModel, joints: np.ndarray, ab: np.ndarray, x: np.ndarray,
     j[:, :3] = pivot
     c[:, :3] = np.einsum("jik,ji->jk", wa, gap)  # the gap along the joint's axes
     swing = cross(axis_a, axis_b)
-    hinge = kind == HINGE
     j[:, 3:6] = _angular(axes)  # turning about the joint's axes
     # a hinge's turning errors are its axes' swing; those of joints that hold every turn
     # (fixed, slider) B's turn from A (ball and cone-twist hold none)
