@@ -312,17 +312,22 @@ def solve(vel: np.ndarray, r: JointRows, impulse: np.ndarray, h: float, use_bias
         fixed = let_go | saturated | into
         known = np.where(into, push, np.where(fixed, held, 0.0))
         free = active & ~fixed
-        trial = vel.copy()
-        _apply(trial, r, known, slice(None))
+        trial = vel
+        if known.any():
+            trial = vel.copy()
+            _apply(trial, r, known, slice(None))
         rel = np.einsum("jri,ji->jr", r.j, trial[r.ab].reshape(n, 12))
         b = target - rel - soft * (impulse + known)
         op = _Rows(r, len(vel), free, soft)
         delta = known + op.split(_linear_solve(op, op.pack(b, 0.0)))[0] * free
         total = impulse + delta
-        after = rel + np.einsum("jri,ji->jr", r.j, _moved(r, len(vel), delta - known))
         pull = is_limit & free & (total < 0.0)
         beyond = is_motor & free & (np.abs(total) > bound)
-        approach = is_limit & ~active & (after < target - 1e-9 * (np.abs(target) + 1e-3))
+        waiting = is_limit & ~active  # limits left out: do they now approach?
+        approach = waiting
+        if waiting.any():
+            after = rel + np.einsum("jri,ji->jr", r.j, _moved(r, len(vel), delta - known))
+            approach = waiting & (after < target - 1e-9 * (np.abs(target) + 1e-3))
         if not (pull.any() or beyond.any() or approach.any()):
             break
         held = np.where(pull, -impulse, np.where(beyond, np.clip(total, -bound, bound) -
