@@ -165,7 +165,8 @@ def test_a_symmetric_load_on_four_coplanar_points_is_shared_equally():
 
 
 @pytest.mark.parametrize("paths, length, rows", [(1, 100, 6), (3, 37, 5), (2, 65, 6), (2, 1, 4),
-                                                  (4, 2, 3), (1, 3, 2)])
+                                                  (4, 2, 3), (1, 3, 2), (1, 13, 5), (20, 9, 10),
+                                                  (1, 1000, 5)])
 def test_block_cyclic_reduction_solves_block_tridiagonal_systems(paths, length, rows):
     # The joints' chain solve against a dense solve of the same symmetric positive definite
     # block-tridiagonal systems (one per path, several right-hand sides), to rounding.
