@@ -74,6 +74,43 @@ def _chains(ab_bytes: bytes, moved_bytes: bytes, n: int) -> list[np.ndarray] | N
     return out
 
 
+class _Layout:
+    """How the joints lie along a set of paths (the same for every pose of those joints):
+    ``index`` (C, L) each path's joints (-1 past its end), ``idx``/``pad`` the same clipped
+    and where padded, ``shared`` (C, L - 1, 2, 2) which side of a joint is which side of the
+    next (the body they share), and for chains (one body shared at most) ``side``: the
+    take_along_axis indices of those sides, ``any_shared`` where there is one. Remembered
+    for the last paths asked (:func:`chains` returns the same paths object for the same
+    joints)."""
+
+    _last: tuple | None = None
+
+    def __init__(self, paths: list[np.ndarray], ab: np.ndarray):
+        length = max(len(p) for p in paths)
+        self.index = np.full((len(paths), length), -1, np.int64)
+        for c, p in enumerate(paths):
+            self.index[c, :len(p)] = p
+        self.idx, self.pad = np.maximum(self.index, 0), self.index < 0
+        ab = ab[self.idx]  # (C, L, 2)
+        # the bodies a joint shares with the next along the path: side sa of one, sb of the
+        # next (a body impulses do not move has zero inverse masses: its block is zero)
+        self.shared = ab[:, :-1, :, None] == ab[:, 1:, None, :]  # (C, L - 1, sa, sb)
+        self.side = None
+        if (self.shared.sum(axis=(2, 3)) <= 1).all():
+            side = np.argmax(self.shared.reshape(*self.shared.shape[:2], 4), axis=2)
+            self.side = (side // 2)[..., None, None, None], (side % 2)[..., None, None, None]
+            self.any_shared = self.shared.any(axis=(2, 3))[..., None, None]
+
+    @classmethod
+    def of(cls, paths: list[np.ndarray], ab: np.ndarray) -> "_Layout":
+        last = cls._last
+        if last is not None and last[0] is paths and np.array_equal(last[1], ab):
+            return last[2]
+        layout = cls(paths, ab)
+        cls._last = (paths, ab.copy(), layout)
+        return layout
+
+
 class ChainSolver:
     """The factorised system of :class:`.joint_solver._Rows` ``op`` over the paths ``paths``;
     :meth:`solve` takes the packed right-hand side to the packed solution."""
@@ -83,10 +120,9 @@ class ChainSolver:
         self.op, self.rows = op, rows
         # the rows any joint uses (a hinge's five of ten): the blocks are that size
         self.cols = np.flatnonzero(op.use.any(axis=0)) if op.use.any() else np.arange(1)
-        length = max(len(p) for p in paths)
-        self.index = np.full((len(paths), length), -1, np.int64)
-        for c, p in enumerate(paths):
-            self.index[c, :len(p)] = p
+        self.layout = _Layout.of(paths, r.ab)
+        self.index = self.layout.index
+        length = self.index.shape[1]
         key = (op.use.tobytes(), op.soft.tobytes())  # (the rows and paths are r's)
         factors = r.factors.get(key)
         if factors is None:
@@ -105,29 +141,26 @@ class ChainSolver:
     def _factor(self, r, op, length: int, count: int) -> tuple[list, np.ndarray]:
         """The block-tridiagonal system along the paths (each joint's rows in use, the
         springs' softness on the diagonal, unused rows identity), reduced (:func:`reduce`)."""
-        idx, pad = np.maximum(self.index, 0), self.index < 0
+        lay = self.layout
+        idx, pad = lay.idx, lay.pad
         cols = self.cols
         rows = len(cols)
-        use = op.use[idx][..., cols] & ~pad[..., None]  # (C, L, R): each path's joints
-        j, mj = r.j[idx][..., cols, :], r.mj[idx][..., cols, :]
+        use = op.use[idx[..., None], cols] & ~pad[..., None]  # (C, L, R): each path's joints
+        j, mj = r.j[idx[..., None], cols], r.mj[idx[..., None], cols]
         # (matmul: three times as fast as einsum on these small blocks)
         diag = j @ mj.swapaxes(-1, -2) + np.eye(rows) * \
             op.soft[idx][..., cols][..., None, :]
         pair = use[..., :, None] & use[..., None, :]
         eye = np.eye(rows, dtype=bool)
         d = np.where(pair, diag, np.where(eye, 1.0, 0.0))
-        ab = r.ab[idx]  # (C, L, 2)
         upper = np.zeros((count, max(length - 1, 0), rows, rows))
-        # the bodies a joint shares with the next along the path: side sa of one, sb of the
-        # next (a body impulses do not move has zero inverse masses: its block is zero)
-        shared = ab[:, :-1, :, None] == ab[:, 1:, None, :]  # (C, L - 1, sa, sb)
-        if (shared.sum(axis=(2, 3)) <= 1).all():  # one body at most (a chain): one product
-            side = np.argmax(shared.reshape(*shared.shape[:2], 4), axis=2)
-            pick = (side // 2)[..., None, None, None], (side % 2)[..., None, None, None]
-            ja = np.take_along_axis(j[:, :-1].reshape(*upper.shape[:3], 2, 6), pick[0], 3)
-            mb = np.take_along_axis(mj[:, 1:].reshape(*upper.shape[:3], 2, 6), pick[1], 3)
+        shared = lay.shared
+        if lay.side is not None:  # one body at most shared (a chain): one product
+            sa, sb = lay.side
+            ja = np.take_along_axis(j[:, :-1].reshape(*upper.shape[:3], 2, 6), sa, 3)
+            mb = np.take_along_axis(mj[:, 1:].reshape(*upper.shape[:3], 2, 6), sb, 3)
             block = ja[..., 0, :] @ mb[..., 0, :].swapaxes(-1, -2)
-            upper += np.where(shared.any(axis=(2, 3))[..., None, None], block, 0.0)
+            upper += np.where(lay.any_shared, block, 0.0)
         else:
             for sa in range(2):
                 for sb in range(2):
@@ -140,7 +173,7 @@ class ChainSolver:
         """A^-1 b for packed joint parts b (J * R, m)."""
         r, rows = self.op.r, self.rows
         m = b.shape[1]
-        idx, pad = np.maximum(self.index, 0), self.index < 0
+        idx, pad = self.layout.idx, self.layout.pad
         x = reduced_solve(self.levels, self.inv, b.reshape(len(r), rows, m)[idx][..., self.cols, :]
                           * ~pad[..., None, None])
         out = np.zeros((len(r), rows, m))
