@@ -102,7 +102,7 @@ class _Layout:
             self.any_shared = self.shared.any(axis=(2, 3))[..., None, None]
 
     @classmethod
-    def of(cls, paths: list[np.ndarray], ab: np.ndarray) -> "_Layout":
+    def of(cls, paths: list[np.ndarray], ab: np.ndarray) -> _Layout:
         last = cls._last
         if last is not None and last[0] is paths and np.array_equal(last[1], ab):
             return last[2]
