@@ -133,6 +133,10 @@ def find_contacts(bodies: Bodies, frame_dt: float, gravity: np.ndarray,
 
         parts.append(mesh_contacts(bodies, rot, reach, interval))
     i, j = _candidate_pairs(bodies, reach, ground | (bodies.shape == MESH), kept)
+    excluded = bodies.excluded is not None and len(bodies.excluded)
+    if excluded:  # pairs that do not collide (joined) skip the narrow phase
+        keep = ~np.isin(np.minimum(i, j) * len(bodies) + np.maximum(i, j), bodies.excluded)
+        i, j = i[keep], j[keep]
     margin = SPECULATIVE + _closing(bodies, i, j, frame_dt, interval, gravity)
     # pairs whose bounding spheres are further apart than their margin have no point within it
     gap = np.linalg.norm(bodies.x[i] - bodies.x[j], axis=1) - bodies.bound[i] - bodies.bound[j]
@@ -145,7 +149,7 @@ def find_contacts(bodies: Bodies, frame_dt: float, gravity: np.ndarray,
             a, b, at = sel
             parts.append(_keyed(bodies, a, b, run(bodies, rot, centre, a, b, margin[at])))
     found = Found.join(parts)
-    if bodies.excluded is not None and len(bodies.excluded):
+    if excluded:  # (the ground's and meshes' contacts)
         pair = np.minimum(found.a, found.b) * len(bodies) + np.maximum(found.a, found.b)
         keep = ~np.isin(pair, bodies.excluded)
         found = Found(*(getattr(found, f)[keep] for f in
