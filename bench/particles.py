@@ -25,8 +25,9 @@ after another as a bake runs them (garbage collected once before them, not befor
 
 Part "colliders" (``--parts colliders``) — the steady particles (symplectic Euler) beside one
 collider of each kind out of their reach (none, the ground below, a sphere, a box, a mesh, and
-the sphere, box and mesh moving and turning as an animated object does), at the first two
-``--sizes``: what a collider costs the particles it is far from.
+the sphere, box and mesh moving and turning as an animated object does, and twenty boxes in a
+grid, still and moving), at the first two ``--sizes``: what a collider costs the particles it
+is far from.
 
 Part 3, "memory" (``--parts memory``; not run by default: it writes gigabytes) — the peak memory
 of a ``--memory-count`` particle bake at the defaults for each of ``--memory-frames`` frame
@@ -114,15 +115,24 @@ def beside_colliders() -> dict:
     moved = np.array([[c, -s, 0.0, 0.2], [s, c, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0],
                       [0.0, 0.0, 0.0, 1.0]]) @ at
 
-    def frame(name, shape, end=at, **mesh):
-        return contact.ColliderFrame(name, shape, at, end, RESTITUTION, FRICTION, **mesh)
+    def frame(name, shape, end=at, start=at, **mesh):
+        return contact.ColliderFrame(name, shape, start, end, RESTITUTION, FRICTION, **mesh)
     mesh = {"vertices0": verts, "vertices1": verts, "triangles": tris}
+    # twenty boxes 3 m apart in a 5 x 4 grid beside the particles (a scene's props)
+    grid = []
+    for k in range(20):
+        m = at.copy()
+        m[:3, 3] += (3.0 * (k % 5), 3.0 * (k // 5), 0.0)
+        grid.append(m)
     return {"none": [], "ground below (half-space)": None,
             "sphere beside": [frame("Sphere", "SPHERE")], "box beside": [frame("Box", "BOX")],
             f"mesh beside ({len(tris):,} triangles)": [frame("Mesh", "MESH", **mesh)],
             "sphere moving beside": [frame("Sphere", "SPHERE", moved)],
             "box moving beside": [frame("Box", "BOX", moved)],
-            "mesh moving beside": [frame("Mesh", "MESH", moved, **mesh)]}
+            "mesh moving beside": [frame("Mesh", "MESH", moved, **mesh)],
+            "20 boxes beside": [frame(f"Box{k}", "BOX", m, m) for k, m in enumerate(grid)],
+            "20 boxes moving beside": [frame(f"Box{k}", "BOX", moved @ np.linalg.inv(at) @ m, m)
+                                       for k, m in enumerate(grid)]}
 
 
 def collider_costs(opts: Options) -> list[str]:

@@ -7,8 +7,8 @@ import numpy as np
 
 from ..transforms import rows_at, take
 from .frame import ColliderFrame
-from .path import (CONTACT_DISTANCE, ColliderPath, Features, Hits, SurfacePoints, padded_box,
-                   rows_meeting)
+from .path import (CONTACT_DISTANCE, ColliderPath, Features, Hits, SurfacePoints, farthest,
+                   padded_box, rows_meeting)
 
 SHAPES = ("HALF_SPACE", "PLANE", "SPHERE", "BOX")
 EPS = float(np.finfo(np.float64).eps)
@@ -133,7 +133,7 @@ class AnalyticPath(ColliderPath):
         rounding: relatively, and by what the shape's own tests may round to over the farthest
         point asked (a sphere's discriminant by about eps |l|^2: a long segment grazing it may
         be found to touch it); None where every row meets it, or a point is not finite."""
-        far = _farthest(*local)
+        far = farthest(*local)
         if not far < np.inf:  # (NaN too): the shape's tests answer for every row
             return None
         lo, hi = padded_box(np.zeros(3), self.extent + grow + self._rounding(far))
@@ -256,20 +256,26 @@ class AnalyticPath(ColliderPath):
         """The rows whose points (their box, over several arrays: segments) come within
         ``distance`` (scaled as :meth:`_bounds` says) of a still sphere's or box's world box;
         None where every row may (or there is no such box)."""
-        bounds = self._bounds()
-        if bounds is None:
-            return None
-        lo, hi, factor = bounds
-        far = _farthest(*points)
+        far = farthest(*points)
         if not far < np.inf:  # (NaN too): the shape's tests answer for every row
             return None
-        # what the shape's tests may round to, over the farthest point: in local units the
-        # point lies within sqrt(3) (far + |origin|) / least stretch, and a local length maps
-        # to at most sqrt(3) times the largest stretch along a world axis
+        cut = self.world_cut(distance, far)
+        return None if cut is None else rows_meeting(*cut, *points)
+
+    def world_cut(self, distance: float, far: float) -> tuple | None:
+        """A still sphere's or box's world box (:meth:`_bounds`) grown by ``distance`` (scaled
+        as it says) and by what the shape's tests may round to over a point ``far`` from the
+        origin: in local units the point lies within sqrt(3) (far + |origin|) / least
+        stretch, and a local length maps to at most sqrt(3) times the largest stretch along a
+        world axis. None for other colliders."""
+        bounds = self._bounds()
+        if bounds is None or not far < np.inf:
+            return None
+        lo, hi, factor = bounds
         big, small = self._stretches()
         origin = float(np.abs(self.path.m0[:3, 3]).max())
         grow = distance * factor + 2.0 * big * self._rounding((far + origin) / small)
-        return rows_meeting(lo - grow, hi + grow, *points)
+        return lo - grow, hi + grow
 
     def _stretches(self) -> tuple[float, float]:
         """A still shape's matrix's largest and least stretch (singular values), worked out
@@ -302,18 +308,6 @@ class AnalyticPath(ColliderPath):
             return np.nonzero(z1 < level)[0]
         z0 = self._local_z(start, s_start)
         return np.nonzero((z0 > level) & (z1 <= level) | (z0 < -level) & (z1 >= -level))[0]
-
-
-def _farthest(*arrays: np.ndarray) -> float:
-    """The largest absolute coordinate of the points of ``arrays`` (0 for none; inf where one
-    is not finite)."""
-    far = 0.0
-    for a in arrays:
-        if len(a):
-            top = max(float(a.max()), -float(a.min()))  # (NaN where a has one)
-            if not top <= far:
-                far = top if top > far else np.inf  # (NaN: inf, which every caller refuses)
-    return far
 
 
 def _affine_row(x: np.ndarray, row: np.ndarray) -> np.ndarray:

@@ -196,6 +196,11 @@ class MeshPath(ColliderPath):
         half = np.abs(m[:3, :3]) @ ((self._hi - self._lo) / 2.0 + reach)
         return padded_box(m[:3, :3] @ ((self._hi + self._lo) / 2.0) + m[:3, 3], half)
 
+    def world_cut(self, distance: float, far: float) -> tuple | None:
+        """A still mesh's world box (:meth:`_world_box`: its own cut, for every question);
+        None for a moving or deforming one."""
+        return self._world_box()
+
     def _near_rows(self, *points: np.ndarray, s: float | None = None) -> np.ndarray | None:
         """The rows of ``points`` (their box over the arrays) within a still mesh's world box
         (:meth:`_world_box`), or with ``s`` (points at that one time) within the world box

@@ -42,6 +42,73 @@ def padded_box(centre: np.ndarray, half: np.ndarray) -> tuple[np.ndarray, np.nda
     return centre - half - pad, centre + half + pad
 
 
+def farthest(*arrays: np.ndarray) -> float:
+    """The largest absolute coordinate of the points of ``arrays`` (0 for none; inf where one
+    is not finite)."""
+    far = 0.0
+    for a in arrays:
+        if len(a):
+            top = max(float(a.max()), -float(a.min()))  # (NaN where a has one)
+            if not top <= far:
+                far = top if top > far else np.inf  # (NaN: inf, which every caller refuses)
+    return far
+
+
+def cut_rows(colliders: list, distance: float, *points: np.ndarray) -> list | None:
+    """For each of ``colliders``, the rows of ``points`` (one or more (n, 3) arrays: each
+    row's points, e.g. a segment's two ends) whose box meets its world cut
+    (:meth:`ColliderPath.world_cut` for ``distance``), all worked out together: the rows' boxes
+    and their farthest coordinate once, then each collider's few comparisons. None for a
+    collider without a cut (or met by every row: all its rows are asked), and None for all when
+    fewer than two have one or a point is not finite (each collider then cuts its own). The
+    same rows as each collider's own cut (:func:`rows_meeting` on its box): asked for just
+    those, it answers as it would for all."""
+    if len(colliders) < 2 or not len(points[0]):
+        return None
+    far = farthest(*points)
+    if not far < np.inf:
+        return None
+    cuts = [col.world_cut(distance, far) for col in colliders]
+    if sum(cut is not None for cut in cuts) < 2:
+        return None
+    bounds = []
+    for k in range(3):  # each row's least and most coordinate, contiguous
+        columns = [a[:, k] for a in points]
+        least = np.minimum(columns[0], columns[1]) if len(columns) > 1 else \
+            np.ascontiguousarray(columns[0])
+        most = np.maximum(columns[0], columns[1]) if len(columns) > 1 else least
+        for c in columns[2:]:
+            np.minimum(least, c, out=least)
+            np.maximum(most, c, out=most)
+        bounds.append((least, most))
+    out: list = [None] * len(colliders)
+    meets = np.empty(len(points[0]), bool)
+    here = np.empty_like(meets)
+    for i, cut in enumerate(cuts):
+        if cut is None:
+            continue
+        lo, hi = cut
+        for k, (least, most) in enumerate(bounds):
+            if k:
+                np.greater_equal(most, lo[k], out=here)
+                meets &= here
+            else:
+                np.greater_equal(most, lo[k], out=meets)
+            np.less_equal(least, hi[k], out=here)
+            meets &= here
+        rows = np.nonzero(meets)[0]
+        out[i] = None if len(rows) == len(meets) else rows
+    return out
+
+
+def times_of(s: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """The times ``s`` (n,) of the points ``rows``: one broadcast value stays one
+    (:func:`same_times`)."""
+    if s.strides == (0,) and len(s):
+        return same_times(float(s[0]), len(rows))
+    return take(s, rows)
+
+
 def rows_meeting(lo: np.ndarray, hi: np.ndarray, *points: np.ndarray) -> np.ndarray | None:
     """Indices of the rows whose box over ``points`` (one or more (n, 3) arrays: each row's
     points, e.g. a segment's two ends) meets the world box [lo, hi], or None when every row
@@ -276,6 +343,13 @@ class ColliderPath:
     def near_surface(self, x: np.ndarray, s: float) -> SurfacePoints:
         """Points x (n, 3) whose ``gap`` to the surface at s is below CONTACT_DISTANCE."""
         raise NotImplementedError
+
+    def world_cut(self, distance: float, far: float) -> tuple | None:
+        """A world box (lo, hi) (3,) outside which no point (whose coordinates are at most
+        ``far`` in size) lies within ``distance`` [m] of the collider, enters it or is inside
+        it at any time of the interval: what its own first cut keeps (:func:`cut_rows` asks
+        every collider's at once); None where it has none."""
+        return None
 
     def apart(self, points: tuple, s: float, distance: float) -> bool:
         """Whether every point of the (n, 3) arrays ``points``, and every segment between

@@ -17,9 +17,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..transforms import rows_at
+from ..transforms import rows_at, take
 from .contacts import Contacts
-from .path import CONTACT_DISTANCE, SKIN, ColliderPath, SurfacePoints, same_times
+from .path import (CONTACT_DISTANCE, SKIN, ColliderPath, SurfacePoints, cut_rows, same_times,
+                   times_of)
 
 PASSES = 3  # a bounce's remaining motion may hit another collider: re-test up to this often
 
@@ -169,8 +170,16 @@ def _nearest_hits(colliders: list[ColliderPath], segments: tuple) -> _Nearest | 
     start, x, s_start, s_end = segments
     count = len(x)
     nearest = None  # made at the first hit (most sub-steps have none)
+    cuts = cut_rows(colliders, 0.0, start, x)
     for ci, col in enumerate(colliders):
-        hits = col.first_hits(start, x, s_start, s_end)
+        rows = None if cuts is None else cuts[ci]
+        if rows is None:
+            hits = col.first_hits(start, x, s_start, s_end)
+        elif len(rows):
+            hits = col.first_hits(take(start, rows), take(x, rows), times_of(s_start, rows),
+                                  times_of(s_end, rows)).of_rows(rows)
+        else:
+            continue
         if not len(hits.index):
             continue
         if nearest is None:
@@ -287,10 +296,17 @@ def resting_contacts(colliders: list[ColliderPath], x: np.ndarray, v: np.ndarray
     """Points resting on a collider at parameter s: within CONTACT_DISTANCE of its surface and
     not moving away faster than ``rest_speed`` (the nearest surface where several are)."""
     found = []  # per collider: (its index, its SurfacePoints of the resting points)
+    cuts = cut_rows(colliders, CONTACT_DISTANCE, x)
     for ci, col in enumerate(colliders if len(x) else ()):
-        if col.apart((x,), s, CONTACT_DISTANCE):
+        rows = None if cuts is None else cuts[ci]
+        if rows is not None:
+            if not len(rows):
+                continue
+            surf = col.near_surface(take(x, rows), s).of_rows(rows)
+        elif col.apart((x,), s, CONTACT_DISTANCE):
             continue
-        surf = col.near_surface(x, s)
+        else:
+            surf = col.near_surface(x, s)
         if surf.axis is not None:  # a still ground: the normal speed is one column
             un = rows_at(v, surf.index)[:, surf.axis[0]] * surf.axis[1]
         else:

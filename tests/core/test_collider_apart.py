@@ -364,3 +364,65 @@ def test_a_sheared_mesh_keeps_its_thickness_whatever_else_is_asked():
                        (np.array([resting, far]), np.array([resting, far + [0.0, 0.0, 20.0]]))):
         hits = path.first_hits(start, end, np.zeros(len(start)), np.ones(len(start)))
         assert hits.index.tolist() == [0] and hits.t.tolist() == [1.0]
+
+
+def _crowd():
+    """Still spheres, boxes and meshes side by side (scaled and turned), a moving box, a ground
+    and a plane: the colliders of one scene."""
+    verts, tris = _wavy(12)
+    frames = []
+    for i in range(9):
+        m = np.eye(4)
+        m[:3, 3] = (1.2 * (i % 3) - 1.2, 1.2 * (i // 3) - 1.2, 0.4)
+        m = m @ _turn(i % 3, 0.3 * i) @ np.diag([0.4, 0.3 + 0.05 * i, 0.35, 1.0])
+        shape = ("SPHERE", "BOX", "MESH")[i % 3]
+        mesh = {"vertices0": verts, "vertices1": verts, "triangles": tris} if shape == "MESH" \
+            else {}
+        frames.append(ColliderFrame(f"C{i}", shape, m, m, 0.5, 0.3,
+                                    thickness=0.02 * (i % 2), **mesh))
+    moved = frames[1].matrix0.copy()
+    moved[:3, 3] += (0.1, 0.0, 0.05)
+    frames.append(ColliderFrame("Moving", "BOX", frames[1].matrix0, moved, 0.5, 0.3))
+    frames.append(ColliderFrame("Ground", "HALF_SPACE", np.eye(4), np.eye(4), 0.5, 0.3))
+    frames.append(ColliderFrame("Plane", "PLANE", _turn(0, 0.2), _turn(0, 0.2), 0.5, 0.3))
+    return ColliderPaths().of(frames, DT)
+
+
+def test_colliders_cut_together_as_each_cuts_alone(monkeypatch):
+    """The rows the colliders' world cuts keep, worked out for all of them together, are each
+    collider's own; and the collision passes answer to the bit as when each collider cuts its
+    own rows: rain through a crowd of still spheres, boxes and meshes, a moving box, a ground
+    and a plane (bounces, resting contacts), segments and points alike."""
+    from physanim.core.contact import path as path_
+    from physanim.core.contact import response
+
+    colliders = _crowd()
+    rng = np.random.default_rng(3)
+    x0 = rng.uniform((-2.0, -2.0, -0.1), (2.0, 2.0, 1.2), (20000, 3))
+    x1 = x0 + rng.normal(scale=0.08, size=x0.shape) + (0.0, 0.0, -0.05)
+    for points, distance in (((x0, x1), 0.0), ((x0,), CONTACT_DISTANCE)):
+        cuts = path_.cut_rows(colliders, distance, *points)
+        far = path_.farthest(*points)
+        for col, rows in zip(colliders, cuts):
+            own = col.world_cut(distance, far)
+            if own is None:
+                assert rows is None
+                continue
+            alone = path_.rows_meeting(*own, *points)
+            assert alone is not None and 0 < len(alone) < len(x0) // 3
+            assert np.array_equal(rows, alone)
+    v0 = (x1 - x0) / 0.02
+
+    def ask():
+        return (response.respond(colliders, x0, x1, v0, v0.copy(), 0.25, 0.5, 0.02, 0.1),
+                response.resting_contacts(colliders, x0, v0, 0.25, 0.1))
+
+    moved, resting = ask()
+    assert moved.count > 500 and len(resting.index) > 50
+    monkeypatch.setattr(response, "cut_rows", lambda *a: None)  # each collider cuts alone
+    alone_moved, alone_resting = ask()
+    assert moved.count == alone_moved.count
+    assert np.array_equal(moved.x, alone_moved.x) and np.array_equal(moved.v, alone_moved.v)
+    for key, value in vars(alone_resting).items():
+        if isinstance(value, np.ndarray):
+            assert np.array_equal(getattr(resting, key), value), key
