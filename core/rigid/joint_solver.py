@@ -359,38 +359,13 @@ def displacement(r: JointRows, count: int, momentum: np.ndarray | None = None,
     sum dx x P; a group of free bodies joined only to each other keeps it to first order:
     ``group`` (count,) labels such groups (-1: none), ``momentum`` (count, 3) and
     ``inv_mass`` (count,) of the rows, and their moves satisfy sum P x dx = 0 per group too."""
-    return Displacement(r, count, momentum, inv_mass, group)(r)
-
-
-class Displacement:
-    """:func:`displacement`'s system at the rows ``r``, factorised once: called with the
-    rows at a later pose, the moves that take those rows' errors to zero through the first
-    rows' linearisation (a chord step of Newton's method: the projection's later steps, a
-    small move from the first, reuse its factorisation while the same rows are in use)."""
-
-    def __init__(self, r: JointRows, count: int, momentum: np.ndarray | None = None,
-                 inv_mass: np.ndarray | None = None, group: np.ndarray | None = None):
-        self.use = _in_use(r)
-        self.op = _Rows(r, count, self.use, None, momentum, inv_mass, group) if len(r) \
-            else None
-        self.count = count
-        self.solve = _solver(self.op) if len(r) else None
-
-    def fits(self, r: JointRows) -> bool:
-        """Whether ``r`` (the same joints at another pose) uses the same rows."""
-        use = _in_use(r)
-        return use.shape == self.use.shape and bool((use == self.use).all())
-
-    def __call__(self, r: JointRows) -> np.ndarray:
-        if self.op is None:
-            return np.zeros((self.count, 6))
-        return self.op.moves(self.solve(self.op.pack(-r.c, 0.0)))
-
-
-def _in_use(r: JointRows) -> np.ndarray:
-    """(J, ROWS) the rows a projection takes to zero: the equality rows, passed limits."""
+    move = np.zeros((count, 6))
+    if not len(r):
+        return move
     passed = (r.kind == LIMIT) & (r.c[:, EQ:] < 0.0)
-    return np.concatenate([r.holds, passed], axis=1)
+    use = np.concatenate([r.holds, passed], axis=1)
+    op = _Rows(r, count, use, None, momentum, inv_mass, group)
+    return op.moves(_linear_solve(op, op.pack(-r.c, 0.0)))
 
 
 def drift(r: JointRows) -> float:
