@@ -197,9 +197,10 @@ class MeshPath(ColliderPath):
         return padded_box(m[:3, :3] @ ((self._hi + self._lo) / 2.0) + m[:3, 3], half)
 
     def world_cut(self, distance: float, far: float) -> tuple | None:
-        """A still mesh's world box (:meth:`_world_box`: its own cut, for every question);
-        None for a moving or deforming one."""
-        return self._world_box()
+        """A still mesh's world box (:meth:`_world_box`: its own cut, for every question,
+        which holds the contact distance); None for a moving or deforming one, or asked for
+        more than the contact distance."""
+        return self._world_box() if distance <= CONTACT_DISTANCE else None
 
     def _near_rows(self, *points: np.ndarray, s: float | None = None) -> np.ndarray | None:
         """The rows of ``points`` (their box over the arrays) within a still mesh's world box

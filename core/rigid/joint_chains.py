@@ -191,6 +191,19 @@ class ChainSolver:
 
 
 DENSE_WORK = 3e5  # a reduced system this small (paths x (positions x rows)^3) is inverted whole
+SINGULAR = 1e-3  # an inverse this far from one (|M M^-1 - I|) is of a singular system
+
+
+def _inverse(m: np.ndarray) -> np.ndarray:
+    """Inverses of stacked square matrices. Redundant joints (a door on two hinges on one
+    axis: ten rows holding five freedoms) make the system singular only to rounding: no pivot
+    is exactly zero, so LAPACK returns an inverse, made of huge values that do not cancel. It
+    is checked (M M^-1 = I), and a singular one raises LinAlgError: the caller then solves by
+    conjugate gradients, which a consistent singular system does not trouble."""
+    inv = np.linalg.inv(m)
+    if np.abs(m @ inv - np.eye(m.shape[-1])).max() > SINGULAR:
+        raise np.linalg.LinAlgError("the joints' chain system is singular (redundant joints)")
+    return inv
 
 
 def reduce(d: np.ndarray, u: np.ndarray) -> tuple[list, np.ndarray]:
@@ -215,7 +228,7 @@ def reduce(d: np.ndarray, u: np.ndarray) -> tuple[list, np.ndarray]:
         even_low, odd_low = low[:, 0::2], low[:, 1::2]
         even_up, odd_up = up[:, 0::2], up[:, 1::2]
         evens, odds = even_d.shape[1], odd_d.shape[1]
-        inv = np.linalg.inv(odd_d)
+        inv = _inverse(odd_d)
         # even position 2t: odd t - 1 on its left, odd t on its right
         alpha, gamma = np.zeros_like(even_d), np.zeros_like(even_d)
         alpha[:, 1:] = -even_low[:, 1:] @ inv[:, :evens - 1]
@@ -233,7 +246,7 @@ def reduce(d: np.ndarray, u: np.ndarray) -> tuple[list, np.ndarray]:
     whole[:, at, :, at, :] = d.swapaxes(0, 1)
     whole[:, at[:-1], :, at[1:], :] = up[:, :-1].swapaxes(0, 1)
     whole[:, at[1:], :, at[:-1], :] = low[:, 1:].swapaxes(0, 1)
-    return levels, np.linalg.inv(whole.reshape(count, m * rows, m * rows))
+    return levels, _inverse(whole.reshape(count, m * rows, m * rows))
 
 
 def reduced_solve(levels: list, inv: np.ndarray, b: np.ndarray) -> np.ndarray:

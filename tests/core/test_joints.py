@@ -464,3 +464,43 @@ def test_a_spring_joint_holds_a_box_as_a_damped_spring():
     assert errors[1] < 0.06 and 3.0 < errors[0] / errors[1] < 5.0
     with pytest.raises(PhysanimError, match="needs a stiffness or a damping"):
         JointSettings("Slack", "SPRING", 0)
+
+
+@pytest.mark.parametrize("case", ["door on two hinges", "door on two hinges, motor",
+                                  "two links on two hinges", "hinge and fixed joint"])
+def test_redundant_joints_hold_without_blowing_up(case):
+    """Joints that hold the same freedoms twice (a door hung on two hinges on one axis; two
+    links joined by two hinges on one axis, or by a hinge and a fixed joint) make the joints'
+    system singular: it is solved by conjugate gradients instead of the chain solve, and the
+    door swings about its hinges' axis (driven at its motor's speed), the links stay joined."""
+    if case.startswith("door"):
+        kw = dict(use_motor=True, motor_velocity=1.0, motor_max=50.0) if "motor" in case \
+            else {}
+        bodies = [box("Door", (0.4, 0.02, 1.0), (0.4, 0.0, 1.0), mass=20.0,
+                      angular_velocity=(0.0, 0.0, 0.5), angular_damping=0.0)]
+        joints = [JointSettings("Low", "HINGE", 0, matrix=joint_frame((0.0, 0.0, 0.2)), **kw),
+                  JointSettings("High", "HINGE", 0, matrix=joint_frame((0.0, 0.0, 1.8)))]
+    else:
+        bodies = [box(f"L{i}", (0.15, 0.03, 0.03), ((i + 0.5) * 0.3, 0.0, 2.0),
+                      angular_velocity=(0.0, 1.0, 0.3)) for i in range(2)]
+        second = "FIXED" if "fixed" in case else "HINGE"
+        joints = [JointSettings("A", "HINGE", 0, 1, matrix=joint_frame((0.3, 0, 2), (0, 1, 0))),
+                  JointSettings("B", second, 0, 1, matrix=joint_frame((0.3, 0, 2), (0, 1, 0)))]
+    _, solver, state = build(bodies, joints)
+    run(solver, state, 48)
+    rot = quat.to_matrix(state.body_q)
+    assert np.isfinite(state.body_x).all() and np.isfinite(state.body_L).all()
+    if case.startswith("door"):
+        # the hinge edge stays on the axis, the door upright, and it turned
+        edge = state.body_x[0] + rot[0] @ np.array([-0.4, 0.0, 0.0])
+        assert np.abs(edge[:2]).max() < 1e-5 and rot[0][2, 2] > 1 - 1e-6
+        w = rot[0] @ np.linalg.solve(solver.model.body_inertia[0],
+                                     rot[0].T @ state.body_L[0])
+        assert abs(w[2]) > 0.1 and np.abs(w[:2]).max() < 1e-3
+        if "motor" in case:
+            assert w[2] == pytest.approx(1.0, rel=0.02)
+    else:  # the shared pivot: the same point of both links
+        pivot = [state.body_x[i] + rot[i] @ np.array([0.15 - 0.3 * i, 0.0, 0.0])
+                 for i in range(2)]
+        assert np.abs(pivot[0] - pivot[1]).max() < 1e-6
+        assert np.abs(state.body_x[:, 2] - 2.0).max() > 0.5  # they fell (freely, joined)
