@@ -104,18 +104,10 @@ class AnalyticPath(ColliderPath):
         return self._near_closest_all(x, s)
 
     def _near_moving(self, x, s) -> np.ndarray | None:
-        """:meth:`_moving_rows` for :meth:`near_surface`: a point found near lies within the
-        contact distance times the matrix's condition number of the shape (as for
-        :meth:`_bounds`; bounded here by the product of the matrix's and its inverse's
-        Frobenius norms), and a world metre spans at most its inverse's row length along each
-        local axis."""
-        m = self._at(s)
-        if m.ndim != 2:
-            return None
-        inv3 = self._inverse(s)[:3, :3]
-        condition = float(np.linalg.norm(m[:3, :3]) * np.linalg.norm(inv3))
-        grow = CONTACT_DISTANCE * condition * np.linalg.norm(inv3, axis=1) * (1.0 + 1e-9)
-        return self._moving_rows(x, s, grow)
+        """:meth:`_moving_rows` for :meth:`near_surface`: the rows within :meth:`world_cut`
+        at ``s``; None where the points' times differ, or every row is within."""
+        cut = self.world_cut(CONTACT_DISTANCE, 0.0, s)
+        return None if cut is None else rows_meeting(*cut, x)
 
     def _moving_rows(self, x, s, grow: np.ndarray) -> np.ndarray | None:
         """The rows of a moving sphere's or box's points ``x`` at one ``s`` (scalar, or the same
@@ -262,12 +254,27 @@ class AnalyticPath(ColliderPath):
         cut = self.world_cut(distance, far)
         return None if cut is None else rows_meeting(*cut, *points)
 
-    def world_cut(self, distance: float, far: float) -> tuple | None:
+    def world_cut(self, distance: float, far: float, s=None) -> tuple | None:
         """A still sphere's or box's world box (:meth:`_bounds`) grown by ``distance`` (scaled
         as it says) and by what the shape's tests may round to over a point ``far`` from the
         origin: in local units the point lies within sqrt(3) (far + |origin|) / least
         stretch, and a local length maps to at most sqrt(3) times the largest stretch along a
-        world axis. None for other colliders."""
+        world axis. A moving one's at one time ``s`` (points asked at that time): the world
+        box of its local box (its extent, which holds a sphere too) grown, in its own units,
+        by the distance times the matrix's condition number (a point found within it of the
+        surface lies within that of the shape; bounded here by the product of the matrix's
+        and its inverse's Frobenius norms) along each local axis, as far as a world metre
+        spans there (its inverse's row length). None for other colliders and times."""
+        if not self.path.static:
+            if s is None or self.frame.shape not in ("SPHERE", "BOX"):
+                return None
+            m = self._at(s)
+            if m.ndim != 2:
+                return None
+            inv3 = self._inverse(s)[:3, :3]
+            condition = float(np.linalg.norm(m[:3, :3]) * np.linalg.norm(inv3))
+            grow = distance * condition * np.linalg.norm(inv3, axis=1) * (1.0 + 1e-9)
+            return padded_box(m[:3, 3], np.abs(m[:3, :3]) @ (self.extent + grow))
         bounds = self._bounds()
         if bounds is None or not far < np.inf:
             return None

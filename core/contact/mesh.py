@@ -196,11 +196,16 @@ class MeshPath(ColliderPath):
         half = np.abs(m[:3, :3]) @ ((self._hi - self._lo) / 2.0 + reach)
         return padded_box(m[:3, :3] @ ((self._hi + self._lo) / 2.0) + m[:3, 3], half)
 
-    def world_cut(self, distance: float, far: float) -> tuple | None:
+    def world_cut(self, distance: float, far: float, s=None) -> tuple | None:
         """A still mesh's world box (:meth:`_world_box`: its own cut, for every question,
-        which holds the contact distance); None for a moving or deforming one, or asked for
+        which holds the contact distance), or a moving or deforming one's at one time ``s``
+        (points asked at that time: :meth:`_near_rows`); None for other times, or asked for
         more than the contact distance."""
-        return self._world_box() if distance <= CONTACT_DISTANCE else None
+        if distance > CONTACT_DISTANCE:
+            return None
+        if self._still:
+            return self._world_box()
+        return None if s is None else self._box_at(self._at(s))
 
     def _near_rows(self, *points: np.ndarray, s: float | None = None) -> np.ndarray | None:
         """The rows of ``points`` (their box over the arrays) within a still mesh's world box

@@ -54,10 +54,11 @@ def farthest(*arrays: np.ndarray) -> float:
     return far
 
 
-def cut_rows(colliders: list, distance: float, *points: np.ndarray) -> list | None:
+def cut_rows(colliders: list, distance: float, *points: np.ndarray, s=None) -> list | None:
     """For each of ``colliders``, the rows of ``points`` (one or more (n, 3) arrays: each
     row's points, e.g. a segment's two ends) whose box meets its world cut
-    (:meth:`ColliderPath.world_cut` for ``distance``), all worked out together: the rows' boxes
+    (:meth:`ColliderPath.world_cut` for ``distance``; at one time ``s`` for points asked at
+    that time, else over the interval), all worked out together: the rows' boxes
     and their farthest coordinate once, then each collider's few comparisons. None for a
     collider without a cut (or met by every row: all its rows are asked), and None for all when
     fewer than two have one or a point is not finite (each collider then cuts its own). The
@@ -68,7 +69,7 @@ def cut_rows(colliders: list, distance: float, *points: np.ndarray) -> list | No
     far = farthest(*points)
     if not far < np.inf:
         return None
-    cuts = [col.world_cut(distance, far) for col in colliders]
+    cuts = [col.world_cut(distance, far, s) for col in colliders]
     if sum(cut is not None for cut in cuts) < 2:
         return None
     bounds = []
@@ -344,11 +345,11 @@ class ColliderPath:
         """Points x (n, 3) whose ``gap`` to the surface at s is below CONTACT_DISTANCE."""
         raise NotImplementedError
 
-    def world_cut(self, distance: float, far: float) -> tuple | None:
+    def world_cut(self, distance: float, far: float, s=None) -> tuple | None:
         """A world box (lo, hi) (3,) outside which no point (whose coordinates are at most
         ``far`` in size) lies within ``distance`` [m] of the collider, enters it or is inside
-        it at any time of the interval: what its own first cut keeps (:func:`cut_rows` asks
-        every collider's at once); None where it has none."""
+        it at any time of the interval (with ``s``: at that time): what its own first cut
+        keeps (:func:`cut_rows` asks every collider's at once); None where it has none."""
         return None
 
     def apart(self, points: tuple, s: float, distance: float) -> bool:

@@ -296,7 +296,7 @@ def resting_contacts(colliders: list[ColliderPath], x: np.ndarray, v: np.ndarray
     """Points resting on a collider at parameter s: within CONTACT_DISTANCE of its surface and
     not moving away faster than ``rest_speed`` (the nearest surface where several are)."""
     found = []  # per collider: (its index, its SurfacePoints of the resting points)
-    cuts = cut_rows(colliders, CONTACT_DISTANCE, x)
+    cuts = cut_rows(colliders, CONTACT_DISTANCE, x, s=s)
     for ci, col in enumerate(colliders if len(x) else ()):
         rows = None if cuts is None else cuts[ci]
         if rows is not None:

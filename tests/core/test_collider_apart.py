@@ -367,8 +367,8 @@ def test_a_sheared_mesh_keeps_its_thickness_whatever_else_is_asked():
 
 
 def _crowd():
-    """Still spheres, boxes and meshes side by side (scaled and turned), a moving box, a ground
-    and a plane: the colliders of one scene."""
+    """Still spheres, boxes and meshes side by side (scaled and turned), a moving sphere, box and
+    mesh, a ground and a plane: the colliders of one scene."""
     verts, tris = _wavy(12)
     frames = []
     for i in range(9):
@@ -380,9 +380,12 @@ def _crowd():
             else {}
         frames.append(ColliderFrame(f"C{i}", shape, m, m, 0.5, 0.3,
                                     thickness=0.02 * (i % 2), **mesh))
-    moved = frames[1].matrix0.copy()
-    moved[:3, 3] += (0.1, 0.0, 0.05)
-    frames.append(ColliderFrame("Moving", "BOX", frames[1].matrix0, moved, 0.5, 0.3))
+    for i in (0, 1, 2):  # a moving sphere, box and mesh (their own cuts at one time only)
+        moved = _turn(2, 0.1) @ frames[i].matrix0
+        moved[:3, 3] += (0.1, 0.0, 0.05)
+        frames.append(ColliderFrame(f"Moving{i}", frames[i].shape, frames[i].matrix0, moved,
+                                    0.5, 0.3, **({"vertices0": verts, "vertices1": verts,
+                                                  "triangles": tris} if i == 2 else {})))
     frames.append(ColliderFrame("Ground", "HALF_SPACE", np.eye(4), np.eye(4), 0.5, 0.3))
     frames.append(ColliderFrame("Plane", "PLANE", _turn(0, 0.2), _turn(0, 0.2), 0.5, 0.3))
     return ColliderPaths().of(frames, DT)
@@ -390,9 +393,10 @@ def _crowd():
 
 def test_colliders_cut_together_as_each_cuts_alone(monkeypatch):
     """The rows the colliders' world cuts keep, worked out for all of them together, are each
-    collider's own; and the collision passes answer to the bit as when each collider cuts its
-    own rows: rain through a crowd of still spheres, boxes and meshes, a moving box, a ground
-    and a plane (bounces, resting contacts), segments and points alike."""
+    collider's own (a moving one's at the one time points are asked at); and the collision
+    passes answer to the bit as when each collider cuts its own rows: rain through a crowd of
+    still spheres, boxes and meshes, moving ones, a ground and a plane (bounces, resting
+    contacts), segments and points alike."""
     from physanim.core.contact import path as path_
     from physanim.core.contact import response
 
@@ -400,13 +404,14 @@ def test_colliders_cut_together_as_each_cuts_alone(monkeypatch):
     rng = np.random.default_rng(3)
     x0 = rng.uniform((-2.0, -2.0, -0.1), (2.0, 2.0, 1.2), (20000, 3))
     x1 = x0 + rng.normal(scale=0.08, size=x0.shape) + (0.0, 0.0, -0.05)
-    for points, distance in (((x0, x1), 0.0), ((x0,), CONTACT_DISTANCE)):
-        cuts = path_.cut_rows(colliders, distance, *points)
+    for points, distance, s in (((x0, x1), 0.0, None), ((x0,), CONTACT_DISTANCE, 0.25)):
+        cuts = path_.cut_rows(colliders, distance, *points, s=s)
         far = path_.farthest(*points)
         for col, rows in zip(colliders, cuts):
-            own = col.world_cut(distance, far)
-            if own is None:
-                assert rows is None
+            own = col.world_cut(distance, far, s)
+            if own is None:  # a plane, the ground; moving ones over the interval
+                assert rows is None and (col.frame.shape in ("HALF_SPACE", "PLANE") or
+                                         s is None and col.frame.name.startswith("Moving"))
                 continue
             alone = path_.rows_meeting(*own, *points)
             assert alone is not None and 0 < len(alone) < len(x0) // 3
@@ -419,7 +424,7 @@ def test_colliders_cut_together_as_each_cuts_alone(monkeypatch):
 
     moved, resting = ask()
     assert moved.count > 500 and len(resting.index) > 50
-    monkeypatch.setattr(response, "cut_rows", lambda *a: None)  # each collider cuts alone
+    monkeypatch.setattr(response, "cut_rows", lambda *a, **k: None)  # each collider cuts alone
     alone_moved, alone_resting = ask()
     assert moved.count == alone_moved.count
     assert np.array_equal(moved.x, alone_moved.x) and np.array_equal(moved.v, alone_moved.v)
