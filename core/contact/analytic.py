@@ -104,8 +104,9 @@ class AnalyticPath(ColliderPath):
         return self._near_closest_all(x, s)
 
     def _near_moving(self, x, s) -> np.ndarray | None:
-        """:meth:`_moving_rows` for :meth:`near_surface`: the rows within :meth:`world_cut`
-        at ``s``; None where the points' times differ, or every row is within."""
+        """A moving sphere's or box's cut for :meth:`near_surface`: the rows of the points
+        ``x`` within its :meth:`world_cut` for the contact distance at their one time ``s``;
+        None where the points' times differ, or every row is within."""
         cut = self.world_cut(CONTACT_DISTANCE, 0.0, s)
         return None if cut is None else rows_meeting(*cut, x)
 
