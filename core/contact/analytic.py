@@ -115,10 +115,16 @@ class AnalyticPath(ColliderPath):
         for every point) within the world box of its local box (its extent, which holds a
         sphere too) grown by ``grow`` (3,) at ``s``: every point whose local point lies in that
         grown box. None where the points' times differ, or every row is within."""
+        box = self._moving_box(s, grow)
+        return None if box is None else rows_meeting(*box, x)
+
+    def _moving_box(self, s, grow: np.ndarray) -> tuple | None:
+        """The world box at one ``s`` of a moving sphere's or box's local box (its extent)
+        grown by ``grow`` (3,), padded against rounding; None where ``s`` is several times."""
         m = self._at(s)
         if m.ndim != 2:
             return None
-        return rows_meeting(*padded_box(m[:3, 3], np.abs(m[:3, :3]) @ (self.extent + grow)), x)
+        return padded_box(m[:3, 3], np.abs(m[:3, :3]) @ (self.extent + grow))
 
     def _local_rows(self, grow: np.ndarray, *local: np.ndarray) -> np.ndarray | None:
         """The rows whose local points (their box over the arrays) meet the shape's local box
@@ -275,7 +281,7 @@ class AnalyticPath(ColliderPath):
             inv3 = self._inverse(s)[:3, :3]
             condition = float(np.linalg.norm(m[:3, :3]) * np.linalg.norm(inv3))
             grow = distance * condition * np.linalg.norm(inv3, axis=1) * (1.0 + 1e-9)
-            return padded_box(m[:3, 3], np.abs(m[:3, :3]) @ (self.extent + grow))
+            return self._moving_box(s, grow)
         bounds = self._bounds()
         if bounds is None or not far < np.inf:
             return None

@@ -244,21 +244,14 @@ class _Rows:
 
 
 def _linear_solve(op, b: np.ndarray) -> np.ndarray:
-    """x with op(x) = b (see :func:`_solver`)."""
-    return _solver(op)(b)
-
-
-def _solver(op):
-    """b -> x with op(x) = b: directly along chains (:mod:`.joint_chains`, factorised here)
-    where the joints form them, else by conjugate gradients."""
+    """x with op(x) = b: directly along chains (:mod:`.joint_chains`) where the joints form
+    them, else by conjugate gradients."""
     if op.r.paths is not None:
         try:
-            chain = ChainSolver(op, op.r.paths)
+            return ChainSolver(op, op.r.paths).solve(b)
         except np.linalg.LinAlgError:  # redundant joints (two hinges on one axis): iterate
             pass
-        else:
-            return chain.solve
-    return lambda b: _pcg(op, b)
+    return _pcg(op, b)
 
 
 def _pcg(op, b: np.ndarray) -> np.ndarray:
