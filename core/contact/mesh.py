@@ -196,7 +196,8 @@ class MeshPath(ColliderPath):
         half = np.abs(m[:3, :3]) @ ((self._hi - self._lo) / 2.0 + reach)
         return padded_box(m[:3, :3] @ ((self._hi + self._lo) / 2.0) + m[:3, 3], half)
 
-    def world_cut(self, distance: float, far: float, s=None) -> tuple | None:
+    def world_cut(self, distance: float, far: float, s=None, sweep: tuple | None = None
+                  ) -> tuple | None:
         """A still mesh's world box (:meth:`_world_box`: its own cut, for every question,
         which holds the contact distance), or a moving or deforming one's at one time ``s``
         (points asked at that time: :meth:`_near_rows`); None for other times, or asked for

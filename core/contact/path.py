@@ -54,11 +54,34 @@ def farthest(*arrays: np.ndarray) -> float:
     return far
 
 
-def cut_rows(colliders: list, distance: float, *points: np.ndarray, s=None) -> list | None:
+def uniform_time(s: np.ndarray) -> float | None:
+    """The one time of the points' times ``s`` (n,) where they are all one (known without a
+    look at the values where it is one value broadcast: :func:`same_times`), else None."""
+    if not len(s) or not (s.strides == (0,) or s.min() == s.max()):
+        return None
+    return float(s[0])
+
+
+def reach(start: np.ndarray, end: np.ndarray) -> float:
+    """A bound on the length of every segment start -> end ((n, 3) each): the length of the
+    vector of the columns' largest absolute differences (inf where a value is not finite)."""
+    if not len(start):
+        return 0.0
+    total = 0.0
+    for k in range(3):
+        d = end[:, k] - start[:, k]
+        total += max(float(d.max()), -float(d.min())) ** 2  # (NaN where d has one)
+    return float(np.sqrt(total)) if total < np.inf else np.inf
+
+
+def cut_rows(colliders: list, distance: float, *points: np.ndarray, s=None,
+             times: tuple | None = None) -> list | None:
     """For each of ``colliders``, the rows of ``points`` (one or more (n, 3) arrays: each
     row's points, e.g. a segment's two ends) whose box meets its world cut
     (:meth:`ColliderPath.world_cut` for ``distance``; at one time ``s`` for points asked at
-    that time, else over the interval), all worked out together: the rows' boxes
+    that time; for segments from ``times`` (s_start, s_end: (n,) each, their two ends'
+    times) over the time between them where each is one value, else over the interval),
+    all worked out together: the rows' boxes
     and their farthest coordinate once, then each collider's few comparisons. None for a
     collider without a cut (or met by every row: all its rows are asked), and None for all when
     fewer than two have one or a point is not finite (each collider then cuts its own). The
@@ -69,7 +92,12 @@ def cut_rows(colliders: list, distance: float, *points: np.ndarray, s=None) -> l
     far = farthest(*points)
     if not far < np.inf:
         return None
-    cuts = [col.world_cut(distance, far, s) for col in colliders]
+    sweep = None  # (s_start, s_end, reach) for moving colliders' cuts of segments
+    if times is not None and len(points) == 2 and not all(c.path.static for c in colliders):
+        s0, s1 = (uniform_time(t) for t in times)
+        if s0 is not None and s1 is not None:
+            sweep = (s0, s1, reach(*points))
+    cuts = [col.world_cut(distance, far, s, sweep) for col in colliders]
     if sum(cut is not None for cut in cuts) < 2:
         return None
     bounds = []
@@ -345,11 +373,14 @@ class ColliderPath:
         """Points x (n, 3) whose ``gap`` to the surface at s is below CONTACT_DISTANCE."""
         raise NotImplementedError
 
-    def world_cut(self, distance: float, far: float, s=None) -> tuple | None:
+    def world_cut(self, distance: float, far: float, s=None, sweep: tuple | None = None
+                  ) -> tuple | None:
         """A world box (lo, hi) (3,) outside which no point (whose coordinates are at most
         ``far`` in size) lies within ``distance`` [m] of the collider, enters it or is inside
-        it at any time of the interval (with ``s``: at that time): what its own first cut
-        keeps (:func:`cut_rows` asks every collider's at once); None where it has none."""
+        it at any time of the interval (with ``s``: at that time; with ``sweep`` (s_start,
+        s_end, reach): no segment from s_start to s_end of at most ``reach`` [m] enters it
+        or ends inside it): what its own first cut keeps (:func:`cut_rows` asks every
+        collider's at once); None where it has none."""
         return None
 
     def apart(self, points: tuple, s: float, distance: float) -> bool:

@@ -170,7 +170,7 @@ def _nearest_hits(colliders: list[ColliderPath], segments: tuple) -> _Nearest | 
     start, x, s_start, s_end = segments
     count = len(x)
     nearest = None  # made at the first hit (most sub-steps have none)
-    cuts = cut_rows(colliders, 0.0, start, x)
+    cuts = cut_rows(colliders, 0.0, start, x, times=(s_start, s_end))
     for ci, col in enumerate(colliders):
         rows = None if cuts is None else cuts[ci]
         if rows is None:

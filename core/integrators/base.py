@@ -109,6 +109,34 @@ def all_finite(*arrays: np.ndarray) -> bool:
     return all(bool(np.isfinite(a).all()) for a in arrays)
 
 
+class _Quiet:
+    """``np.errstate(over="ignore", invalid="ignore", divide="ignore")`` (underflow as it was)
+    in a quarter of its time where numpy keeps its error modes in one object (numpy 1.x:
+    entering and leaving errstate cost about 3 us, a hundredth of a 10,000-particle step).
+    Every step's arithmetic runs inside it: non-finite results are found and named, not
+    warned about."""
+
+    __slots__ = ("_old",)
+    # numpy 1.x's error mask: 3 bits per kind (divide at 0, over 3, under 6, invalid 9),
+    # 0 = ignore
+    _MASK = ~((7 << 0) | (7 << 3) | (7 << 9))
+
+    def __enter__(self) -> None:
+        old = self._old = np.geterrobj()
+        np.seterrobj([old[0], old[1] & self._MASK, old[2]])
+
+    def __exit__(self, *exc) -> None:
+        np.seterrobj(self._old)
+
+
+def quiet():
+    """A context in which overflow, invalid values and division by zero pass silently (as
+    ``np.errstate`` with those three ignored)."""
+    if hasattr(np, "seterrobj"):
+        return _Quiet()
+    return np.errstate(over="ignore", invalid="ignore", divide="ignore")  # (numpy 2)
+
+
 def finite_sum(a: np.ndarray) -> bool:
     """Whether the sum of ``a``'s values is finite: True means every value is (a NaN or an
     infinity makes the sum NaN or infinite); False, that one is not or that the sum of finite
@@ -147,7 +175,7 @@ class Integrator:
         if not all_finite(y):
             raise non_finite(y, "the state before the step")
         # Overflow is detected below and reported as SimulationError, not as a numpy warning.
-        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        with quiet():
             y_new, report = self._step_impl(system, float(t), y, float(dt))
         if not all_finite(y_new):
             raise non_finite(y_new, "the new state")

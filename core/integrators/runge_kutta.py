@@ -8,8 +8,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import SimulationError
-from .base import (Derivative, Integrator, PointSystem, StepReport, all_finite, check_step, finite_sum, is_a,
-                   non_finite)
+from .base import (Derivative, Integrator, PointSystem, StepReport, all_finite, check_step,
+                   finite_sum, is_a, non_finite, quiet)
 
 
 @dataclass(frozen=True, eq=False)
@@ -280,7 +280,7 @@ class SymplecticEuler(Integrator):
             return super().step(system, t, dt)
         check_step(t, dt)
         x, v = system.points()
-        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        with quiet():
             a = system.acceleration(float(t), x, v)
             into = system.new_points()
             v_new, x_new = _kick_drift(a, x, v, float(dt), *(

@@ -213,7 +213,8 @@ def test_a_moving_solid_answers_as_if_every_point_were_tested(shape, name, thick
     def counted(cut):
         def count(self, *args):
             rows = cuts[cut](self, *args)
-            asked.append(n if rows is None else len(rows))
+            given = next(len(a) for a in args if np.ndim(a) == 2)  # (after an earlier cut)
+            asked.append(given if rows is None else len(rows))
             return rows
         return count
     for cut in cuts:
@@ -257,6 +258,105 @@ def test_long_segments_grazing_a_small_solid_are_answered_as_every_segment_teste
     monkeypatch.setattr(type(path), "_local_rows", lambda self, *args: None)
     monkeypatch.setattr(type(path), "_bounds", lambda self: None)
     _assert_same((got,), (path.first_hits(start, end, s, s),))
+
+
+def _sweeps(m: np.ndarray) -> dict:
+    """Motions from ``m`` over one sub-step, about the shape's origin, as a rigid body's or an
+    animated object's: slow (moved 5 cm, turned 0.05 rad), a fast move (more than its own
+    size), a fast turn (0.4 rad) and a growth by a third."""
+    def about(k):
+        out = np.eye(4)
+        out[:3, 3] = m[:3, 3]
+        return out @ k @ np.linalg.inv(out) @ m
+    slow = about(_turn(1, 0.05))
+    slow[:3, 3] += (0.05, -0.02, 0.03)
+    fast = m.copy()
+    fast[:3, 3] += (2.5, -1.0, 0.5)
+    return {"slow": slow, "fast move": fast, "fast turn": about(_turn(2, 0.4) @ _turn(0, 0.1)),
+            "growing": about(np.diag([1.3, 1.3, 1.3, 1.0]))}
+
+
+@pytest.mark.parametrize("shape", ["SPHERE", "BOX"])
+@pytest.mark.parametrize("name", list(SOLIDS))
+@pytest.mark.parametrize("motion", ["slow", "fast move", "fast turn", "growing"])
+def test_a_moving_solid_cuts_segments_over_their_time_as_if_every_one_were_tested(
+        shape, name, motion, monkeypatch):
+    """Segments over one time span (the first pass of every sub-step) meet a moving sphere or
+    box only within a world box about it (:meth:`AnalyticPath._sweep_box`): every hit, and
+    every point the shape moved onto, as when every segment is mapped into its frame. Points
+    lying still where it sweeps over them (which only its move brings it to), segments about
+    its surface, and far ones, which the cut skips."""
+    rng = np.random.default_rng(21)
+    m0 = SOLIDS[name]
+    m1 = _sweeps(m0)[motion]
+    path = _path(shape, m0, m1, thickness=0.02)
+    x0 = _around(rng, path, 2000)
+    x1 = x0 + rng.normal(scale=0.05, size=x0.shape)
+    swept = np.linspace(0.0, 1.0, 400)[:, None] * (m1[:3, 3] - m0[:3, 3]) + m0[:3, 3] + \
+        rng.normal(scale=0.3, size=(400, 3)) * np.abs(np.diag(m0)[:3])
+    size = float(np.abs(m0[:3, :3]).sum()) + float(np.linalg.norm(m1[:3, 3] - m0[:3, 3]))
+    way = rng.normal(size=(600, 3))
+    far = m0[:3, 3] + way / np.linalg.norm(way, axis=1, keepdims=True) * rng.uniform(
+        4.0 * size, 10.0 * size, (600, 1))  # far from everywhere it goes
+    x0 = np.vstack([x0, swept, far])
+    x1 = np.vstack([x1, swept, far + rng.normal(scale=0.05, size=far.shape)])
+    n = len(x0)
+    kept = []
+    sweep_rows = type(path)._sweep_rows
+
+    def counted(self, *args):
+        rows = sweep_rows(self, *args)
+        kept.append(n if rows is None else len(rows))
+        return rows
+    monkeypatch.setattr(type(path), "_sweep_rows", counted)
+    for times in ((np.zeros(n), np.ones(n)), (np.full(n, 0.25), np.full(n, 0.75))):
+        times = times if times[0][0] else tuple(np.broadcast_to(t[:1], (n,)) for t in times)
+        got = path.first_hits(x0, x1, *times)
+        assert kept[-1] <= n - len(far)  # the far ones skipped ...
+        assert len(got.index) > 20  # ... not the hits
+        with monkeypatch.context() as every:
+            every.setattr(type(path), "_sweep_rows", lambda self, *args: None)
+            _assert_same((got,), (path.first_hits(x0, x1, *times),))
+
+
+def test_a_solid_moving_over_still_points_finds_them_all():
+    """A box moving ten times its size in one sub-step over points lying still along its way:
+    each one it reaches is found (its hit, or inside at the end), however far from where the
+    box started — the cut's box about its start is grown by how far it moves."""
+    m0, m1 = np.diag([0.2, 0.2, 0.2, 1.0]), np.diag([0.2, 0.2, 0.2, 1.0])
+    m1[0, 3] = 4.0
+    path = _path("BOX", m0, m1)
+    x = np.column_stack([np.linspace(0.5, 3.9, 50), np.zeros(50), np.zeros(50)])
+    times = (np.broadcast_to(0.0, (50,)), np.broadcast_to(1.0, (50,)))
+    assert path.first_hits(x, x, *times).index.tolist() == list(range(50))
+
+
+def test_a_turning_box_finds_what_its_turn_reaches(monkeypatch):
+    """A box turning 0.4 rad in one sub-step: long segments crossing where it turns to (its
+    local segment bends with the turn: some pass more than 2 m off its box at the start and
+    still hit), and points lying still that its corners sweep over. Every one is found, as
+    when every segment is tested."""
+    m1 = _turn(2, 0.4)
+    path = _path("BOX", np.eye(4), m1)
+    rng = np.random.default_rng(5)
+    n = 3000
+    length, angle = rng.uniform(5.0, 40.0, n), rng.uniform(0.0, 2.0 * np.pi, n)
+    along = np.column_stack([np.cos(angle), np.sin(angle), np.zeros(n)])
+    across = np.column_stack([-np.sin(angle), np.cos(angle), np.zeros(n)])
+    centre = across * rng.uniform(-6.0, 6.0, (n, 1)) + along * rng.uniform(-3.0, 3.0, (n, 1))
+    long0, long1 = centre - along * length[:, None] / 2, centre + along * length[:, None] / 2
+    ring = rng.uniform(-1.0, 1.0, (n, 2)) * 1.45
+    still = np.column_stack([ring, rng.uniform(-0.9, 0.9, n)])
+    still = still[np.abs(still[:, :2]).max(axis=1) > 1.0]  # outside it at the start
+    times = (np.broadcast_to(0.0, (n,)), np.broadcast_to(1.0, (n,)))
+    got = [path.first_hits(long0, long1, *times),
+           path.first_hits(still, still, *(t[:len(still)] for t in times))]
+    lo, hi = np.minimum(long0, long1)[got[0].index], np.maximum(long0, long1)[got[0].index]
+    assert np.maximum(lo - 1.0, -1.0 - hi).max() > 2.0  # hits far off its box at the start
+    assert len(got[1].index) > 100
+    monkeypatch.setattr(type(path), "_sweep_rows", lambda self, *args: None)
+    _assert_same(got, [path.first_hits(long0, long1, *times),
+                       path.first_hits(still, still, *(t[:len(still)] for t in times))])
 
 
 def test_a_moving_solid_tests_every_point():
@@ -404,14 +504,20 @@ def test_colliders_cut_together_as_each_cuts_alone(monkeypatch):
     rng = np.random.default_rng(3)
     x0 = rng.uniform((-2.0, -2.0, -0.1), (2.0, 2.0, 1.2), (20000, 3))
     x1 = x0 + rng.normal(scale=0.08, size=x0.shape) + (0.0, 0.0, -0.05)
-    for points, distance, s in (((x0, x1), 0.0, None), ((x0,), CONTACT_DISTANCE, 0.25)):
-        cuts = path_.cut_rows(colliders, distance, *points, s=s)
+    span = tuple(np.broadcast_to(t, (len(x0),)) for t in (0.25, 0.5))
+    for points, distance, s, times in (((x0, x1), 0.0, None, None),
+                                       ((x0, x1), 0.0, None, span),
+                                       ((x0,), CONTACT_DISTANCE, 0.25, None)):
+        cuts = path_.cut_rows(colliders, distance, *points, s=s, times=times)
         far = path_.farthest(*points)
+        sweep = None if times is None else (0.25, 0.5, path_.reach(*points))
         for col, rows in zip(colliders, cuts):
-            own = col.world_cut(distance, far, s)
-            if own is None:  # a plane, the ground; moving ones over the interval
+            own = col.world_cut(distance, far, s, sweep)
+            if own is None:  # a plane, the ground; moving ones over the interval, a moving
+                # mesh over a time span
                 assert rows is None and (col.frame.shape in ("HALF_SPACE", "PLANE") or
-                                         s is None and col.frame.name.startswith("Moving"))
+                                         s is None and col.frame.name.startswith("Moving") and
+                                         (times is None or col.frame.shape == "MESH"))
                 continue
             alone = path_.rows_meeting(*own, *points)
             assert alone is not None and 0 < len(alone) < len(x0) // 3

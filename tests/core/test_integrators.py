@@ -524,3 +524,21 @@ def test_all_finite_tells_finite_states_from_nan_and_infinities():
     both = np.array([np.inf, -np.inf, 1.0])  # sums to NaN
     assert not all_finite(both)
     assert not all_finite(np.array([1e308, 1e308, np.nan]))
+
+
+@pytest.mark.parametrize("outer", [{}, {"all": "raise"}, {"under": "warn", "over": "print"}])
+def test_quiet_ignores_what_errstate_ignores_and_restores(outer):
+    """A step's quick error context (:func:`quiet`) sets numpy's error modes as
+    np.errstate(over, invalid, divide = "ignore") does, underflow as it was, and restores
+    them, from any outer modes."""
+    from physanim.core.integrators.base import quiet
+
+    with np.errstate(**outer):
+        before = np.geterr()
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            expected = np.geterr()
+        with quiet():
+            assert np.geterr() == expected
+            np.float64(1e308) * 10.0  # (would raise or warn outside)
+            np.float64(0.0) / np.float64(0.0)
+        assert np.geterr() == before

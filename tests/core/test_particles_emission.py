@@ -4,6 +4,7 @@ distribution (fixed seeds make them deterministic anyway).
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -514,3 +515,45 @@ def test_renaming_an_emitter_reseeds_it():
     b = _run([EmitterSettings("Fountain.001", direction="RANDOM", seed=21)])
     n = min(a.particle_count, b.particle_count)
     assert not np.array_equal(a.particle_x[:n], b.particle_x[:n])
+
+
+# -- a frame's values checked ---------------------------------------------------------------------
+
+_BAD_FRAME_VALUES = [
+    ("rate", -1.0, "rate must be >= 0"), ("rate", math.nan, "rate must be finite"),
+    ("rate_random", math.inf, "rate_random must be finite"),
+    ("speed", -0.5, "speed must be >= 0"), ("speed_random", math.nan, "speed_random"),
+    ("lifetime", -2.0, "lifetime must be >= 0"), ("lifetime_random", 3.0, "life spans"),
+    ("size", -0.1, "size must be >= 0"), ("size_random", 0.06, "sizes would become negative"),
+    ("spread", -0.1, "spread must be >= 0"), ("inherit_velocity", math.inf, "inherit_velocity"),
+    ("mass", 0.0, "mass must be > 0"), ("mass", math.nan, "mass must be > 0"),
+    ("rate", 2e7, "at most 10000000"), ("launch", (0.0, math.nan, 0.0), "launch velocity"),
+    ("launch", (1.0, 2.0), "launch velocity"),
+    ("matrix0", np.diag([1.0, 1.0, math.inf, 1.0]), "matrix0 has non-finite"),
+    ("matrix1", np.eye(3), "matrix1 must be a 4x4"),
+    ("matrices", np.stack([np.eye(4), np.full((4, 4), math.nan)]), "sub-frame matrix 1"),
+    ("verts0", np.array([[0.0, 0.0, 0.0], [math.nan, 0.0, 0.0]]), "vertex 1"),
+    ("verts1", np.array([[0.0, -math.inf, 0.0]]), "vertex 0"),
+]
+
+
+@pytest.mark.parametrize("key, value, words", _BAD_FRAME_VALUES,
+                         ids=[f"{k}={v!r}"[:40] for k, v, _ in _BAD_FRAME_VALUES])
+def test_every_bad_frame_value_is_refused_naming_it(key, value, words):
+    """The one-expression check of a frame's values (the common case, every frame) lets no
+    bad value through: each is refused with the full check's message."""
+    good = EmitterFrame(rate=5.0, rate_random=1.0, lifetime=2.0, lifetime_random=1.0,
+                        size=0.05, size_random=0.01, matrices=np.stack([np.eye(4)] * 3),
+                        verts0=np.zeros((2, 3)), verts1=np.ones((2, 3)))
+    assert good.validated("Spout") is good
+    bad = dataclasses.replace(good, **{key: value})
+    with pytest.raises(ValueError) as info:
+        bad.validated("Spout")
+    assert 'emitter "Spout"' in str(info.value) and words in str(info.value)
+
+
+def test_frame_values_whose_sum_overflows_are_still_valid():
+    """Finite values whose sum overflows fail the quick check only: the full one passes them."""
+    huge = np.full((4, 4), 1e308)
+    frame = EmitterFrame(matrix0=huge, matrix1=huge, verts0=np.full((3, 3), 1e308))
+    assert frame.validated("Far") is frame
