@@ -9,11 +9,10 @@ from ..transforms import rows_at, take
 from .frame import ColliderFrame
 from .analytic_shapes import closest, inside, segment_hit, shape_features
 from .path import (CONTACT_DISTANCE, ColliderPath, Features, Hits, SurfacePoints, farthest,
-                   padded_box, reach, rows_meeting, times_of, uniform_time)
+                   padded_box, rows_meeting, times_of)
 
 SHAPES = ("HALF_SPACE", "PLANE", "SPHERE", "BOX")
 EPS = float(np.finfo(np.float64).eps)
-_CORNERS = np.array([[1.0, 1.0, 1.0], [1.0, 1.0, -1.0], [1.0, -1.0, 1.0], [-1.0, 1.0, 1.0]])
 
 
 class AnalyticPath(ColliderPath):
@@ -47,7 +46,7 @@ class AnalyticPath(ColliderPath):
             # over their time (:meth:`_sweep_box`) in its local space, then only those whose
             # local box meets the shape's are tested (a segment that enters the shape, or ends
             # in it, has a point in that box)
-            near = self._sweep_rows(start, end, s_start, s_end)
+            near = self.sweep_rows(start, end, s_start, s_end)
             if near is not None:
                 if not len(near):
                     return Hits.none()
@@ -78,64 +77,13 @@ class AnalyticPath(ColliderPath):
             hit = hit | stuck
         return Hits(cand[hit], t[hit], n_local[hit], l_hit[hit])
 
-    def _sweep_rows(self, start, end, s_start, s_end) -> np.ndarray | None:
-        """A moving sphere's or box's cut of segments start -> end, each from the one time
-        s_start to the one time s_end: the rows whose box meets :meth:`_sweep_box`; None where
-        the times differ, every row meets it, or it bounds nothing."""
-        s0, s1 = uniform_time(s_start), uniform_time(s_end)
-        if s0 is None or s1 is None:
-            return None
-        far = farthest(start, end)
-        box = self._sweep_box(s0, s1, reach(start, end), far) if far < np.inf else None
-        return None if box is None else rows_meeting(*box, start, end)
-
     def _sweep_box(self, s0: float, s1: float, length: float, far: float) -> tuple | None:
-        """A world box that every segment from time ``s0`` to ``s1``, at most ``length`` [m]
-        long with coordinates at most ``far``, meets if it enters the moving shape or ends
-        inside it (:meth:`first_hits` tests the straight local segment l0 -> l1, each end
-        mapped at its own time): the shape's world box at s0 grown by how far its motion
-        relative to the segment can carry the meeting point.
-
-        Measure local points in metres but unturned: y = S l, with A0 = R S the matrix at s0
-        split into a rotation (or reflection) R and a stretch S. At s0, y = R^T (x - c0)
-        (c0 the shape's origin then), a rigid map of the world point x; at s1, y = Q y0 + q
-        with Q = S B1 R and q = S (B1 c0 + d1) (B1, d1 the inverse at s1): the identity and
-        nothing for a shape standing still, a turn and a move for a rigid body. A hit at t is
-        a point y = (1 - t) y0(x0) + t y1(x1) of the shape (|y| <= r, its farthest corner
-        from its origin), and y0(x) at the segment's point x = (1 - t) x0 + t x1 differs from
-        it by t ((Q - I) y0(x1) + q), at most w = (b (r + length) + |q|) / (1 - b) with
-        b = |Q - I| (as |y0(x1)| <= |y0(x)| + length <= r + w + length). So x lies within
-        A0's image of the shape's box, grown by w along every world axis. None where b is not
-        small (a turn or change of scale too fast for a bound). A point ending inside is the
-        hit at t = 1. (Worked out once per pair of times: the segments' length and reach
-        only grow it.)"""
-        m0 = self._at(s0)
-        inv1 = self._inverse(s1)
-        if m0.ndim != 2 or inv1.ndim != 2:
-            return None
-        known = self.__dict__.setdefault("_swept", {})
-        motion = known.get((s0, s1))
-        if motion is None:
-            a0, c0 = m0[:3, :3], m0[:3, 3]
-            u, stretch, vt = np.linalg.svd(a0)
-            turn, s = u @ vt, (vt.T * stretch) @ vt
-            b = float(np.linalg.norm(s @ inv1[:3, :3] @ turn - np.eye(3), 2))
-            q = float(np.linalg.norm(s @ (inv1[:3, :3] @ c0 + inv1[:3, 3])))
-            motion = known[(s0, s1)] = (b, q, float(stretch[0]))
-        b, q, largest = motion
-        if not b < 0.5:
-            return None
-        a0 = m0[:3, :3]
-        # local coordinates of points up to far: what the tests and the maps may round by
-        local = max(float(np.abs(inv[:3, :3]).sum(axis=1).max()) * far +
-                    float(np.abs(inv[:3, 3]).max()) for inv in (self._inverse(s0), inv1))
-        e = self.extent + (self._rounding(local) + 64.0 * EPS * local)
-        if self.frame.shape == "SPHERE":
-            r = largest * float(e[0])
-        else:  # the farthest corner (each corner's opposite as far)
-            r = float(np.linalg.norm(a0 @ (e * _CORNERS).T, axis=0).max())
-        w = (b * (r + length) + q) / (1.0 - b)
-        return padded_box(m0[:3, 3], (np.abs(a0) @ e + w) * (1.0 + 1e-9))
+        """A moving sphere's or box's world cut of segments from time s0 to s1
+        (:meth:`ColliderPath._swept_box` of its local box, padded by what its tests may round
+        to over points up to ``far``)."""
+        local = self._local_far(far, s0, s1)
+        half = self.extent + (self._rounding(local) + 64.0 * EPS * local)
+        return self._swept_box(s0, s1, np.zeros(3), half, length)
 
     def push_out(self, x, s, start, s_start) -> SurfacePoints:
         # only points within a sphere's or box's world box (a still one's, or a moving one's

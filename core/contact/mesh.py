@@ -42,8 +42,9 @@ from ..transforms import (cross, divide_rows, inverse_affine, norm_rows, scale_r
                           transform_vectors, where_rows)
 from .frame import ColliderFrame
 from .path import (CONTACT_DISTANCE, ColliderPath, Features, Hits, SurfacePoints, padded_box,
-                   rows_meeting, same_times)
+                   rows_meeting, same_times, times_of)
 
+EPS = float(np.finfo(np.float64).eps)
 BVH_KIND = "aabb"  # refits cheaply and exactly for deforming meshes
 BVH_CACHE = 8  # hierarchies kept per interval (refits for the sub-step times in use)
 
@@ -206,7 +207,21 @@ class MeshPath(ColliderPath):
             return None
         if self._still:
             return self._world_box()
-        return None if s is None else self._box_at(self._at(s))
+        if s is None:
+            return None if sweep is None or distance or not far < np.inf else \
+                self._sweep_box(*sweep, far)
+        return self._box_at(self._at(s))
+
+    def _sweep_box(self, s0: float, s1: float, length: float, far: float) -> tuple | None:
+        """A moving or deforming mesh's world cut of segments from time s0 to s1
+        (:meth:`ColliderPath._swept_box` of its local bounds over the interval grown by the
+        thickness and the contact distance, as :meth:`_box_at`, and by what the maps may round
+        to over points up to ``far``): a segment that enters it or ends within its thickness
+        has a local point there."""
+        local = self._local_far(far, s0, s1)
+        grow = (self.frame.thickness + CONTACT_DISTANCE) * self._local_metre * (1.0 + 1e-9)
+        return self._swept_box(s0, s1, (self._hi + self._lo) / 2.0,
+                               (self._hi - self._lo) / 2.0 + grow + 64.0 * EPS * local, length)
 
     def _near_rows(self, *points: np.ndarray, s: float | None = None) -> np.ndarray | None:
         """The rows of ``points`` (their box over the arrays) within a still mesh's world box
@@ -220,12 +235,13 @@ class MeshPath(ColliderPath):
         """Segment hits on the mesh at the end times, kept where the segment came from the side
         it hits; then the hits at t = 1 that the segment test cannot see (see the module). Of a
         still mesh, only the segments whose box meets its world box are tested."""
-        sub = self._near_rows(start, end)
+        sub = self._near_rows(start, end) if self._still else \
+            self.sweep_rows(start, end, s_start, s_end)
         if sub is not None:
             if not len(sub):
                 return Hits.none()
-            return self._first_hits(take(start, sub), take(end, sub), take(s_start, sub),
-                                    take(s_end, sub)).of_rows(sub)
+            return self._first_hits(take(start, sub), take(end, sub), times_of(s_start, sub),
+                                    times_of(s_end, sub)).of_rows(sub)
         return self._first_hits(start, end, s_start, s_end)
 
     def _first_hits(self, start, end, s_start, s_end) -> Hits:

@@ -28,6 +28,7 @@ from .frame import ColliderFrame
 
 SKIN = 1e-4  # [m] particles are placed this far outside a surface after a hit
 CONTACT_DISTANCE = 1e-3  # [m] closer than this (and not separating) counts as resting contact
+_CORNERS = np.array([(x, y, z) for x in (-1.0, 1.0) for y in (-1.0, 1.0) for z in (-1.0, 1.0)])
 
 
 def same_times(s: float, n: int) -> np.ndarray:
@@ -382,6 +383,73 @@ class ColliderPath:
         or ends inside it): what its own first cut keeps (:func:`cut_rows` asks every
         collider's at once); None where it has none."""
         return None
+
+    # -- segments over one time span: where a moving collider can meet them ---------------------
+    def _swept_box(self, s0: float, s1: float, centre: np.ndarray, half: np.ndarray,
+                   length: float) -> tuple | None:
+        """A world box that every segment from time ``s0`` to ``s1``, at most ``length`` [m]
+        long, meets if a point of its local segment (l0 -> l1, each end mapped at its own
+        time, as the kinds test them) lies in the local box ``centre`` +- ``half`` (3,) (the
+        shape, padded by what its tests may round to): that box's world box at s0 grown by
+        how far the collider's motion relative to the segment can carry the meeting point.
+
+        Measure local points in metres but unturned: y = S l, with A0 = R S the matrix at s0
+        split into a rotation (or reflection) R and a stretch S. At s0, y = R^T (x - c0)
+        (c0 the local origin then), a rigid map of the world point x; at s1, y = Q y0 + q
+        with Q = S B1 R and q = S (B1 c0 + d1) (B1, d1 the inverse at s1): the identity and
+        nothing for a collider standing still, a turn and a move for a rigid body. A meeting
+        point y = (1 - t) y0(x0) + t y1(x1) lies in the box (|y| <= r, its farthest corner
+        from the origin), and y0(x) at the segment's point x = (1 - t) x0 + t x1 differs
+        from it by t ((Q - I) y0(x1) + q), at most w = (b (r + length) + |q|) / (1 - b) with
+        b = |Q - I| (as |y0(x1)| <= |y0(x)| + length <= r + w + length). So x lies within
+        A0's image of the box, grown by w along every world axis. None where b is not small
+        (a turn or change of scale too fast for a bound), or the times are not one each."""
+        m0, inv1 = self._at(s0), self._inverse(s1)
+        if m0.ndim != 2 or inv1.ndim != 2:
+            return None
+        b, q = self._motion(s0, s1)
+        if not b < 0.5:
+            return None
+        a0 = m0[:3, :3]
+        r = float(norm_rows((centre + half * _CORNERS) @ a0.T).max())
+        w = (b * (r + length) + q) / (1.0 - b)
+        return padded_box(a0 @ centre + m0[:3, 3], (np.abs(a0) @ half + w) * (1.0 + 1e-9))
+
+    def _motion(self, s0: float, s1: float) -> tuple[float, float]:
+        """b and |q| of the motion from s0 to s1 (:meth:`_swept_box`), worked out once per
+        pair of times."""
+        known = self.__dict__.setdefault("_swept", {})  # (paths saved before it: none)
+        motion = known.get((s0, s1))
+        if motion is None:
+            m0, inv1 = self._at(s0), self._inverse(s1)
+            a0, c0 = m0[:3, :3], m0[:3, 3]
+            u, stretch, vt = np.linalg.svd(a0)
+            turn, unturned = u @ vt, (vt.T * stretch) @ vt
+            b = float(np.linalg.norm(unturned @ inv1[:3, :3] @ turn - np.eye(3), 2))
+            q = float(np.linalg.norm(unturned @ (inv1[:3, :3] @ c0 + inv1[:3, 3])))
+            motion = known[(s0, s1)] = (b, q)
+        return motion
+
+    def _local_far(self, far: float, s0: float, s1: float) -> float:
+        """The largest local coordinate, at s0 or s1, of a point up to ``far`` along every
+        world axis (what the maps and the tests may round by)."""
+        return max(float(np.abs(inv[:3, :3]).sum(axis=1).max()) * far +
+                   float(np.abs(inv[:3, 3]).max())
+                   for inv in (self._inverse(s0), self._inverse(s1)))
+
+    def sweep_rows(self, start: np.ndarray, end: np.ndarray, s_start: np.ndarray,
+                   s_end: np.ndarray) -> np.ndarray | None:
+        """A moving collider's cut of segments start -> end, each from the one time s_start
+        to the one time s_end: the rows whose box meets its world cut over that span
+        (:meth:`world_cut` with a sweep); None where the times differ, every row meets it,
+        or it bounds nothing."""
+        s0, s1 = uniform_time(s_start), uniform_time(s_end)
+        if s0 is None or s1 is None:
+            return None
+        far = farthest(start, end)
+        box = self.world_cut(0.0, far, None, (s0, s1, reach(start, end))) \
+            if far < np.inf else None
+        return None if box is None else rows_meeting(*box, start, end)
 
     def apart(self, points: tuple, s: float, distance: float) -> bool:
         """Whether every point of the (n, 3) arrays ``points``, and every segment between

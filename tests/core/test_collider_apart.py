@@ -302,20 +302,20 @@ def test_a_moving_solid_cuts_segments_over_their_time_as_if_every_one_were_teste
     x1 = np.vstack([x1, swept, far + rng.normal(scale=0.05, size=far.shape)])
     n = len(x0)
     kept = []
-    sweep_rows = type(path)._sweep_rows
+    sweep_rows = type(path).sweep_rows
 
     def counted(self, *args):
         rows = sweep_rows(self, *args)
         kept.append(n if rows is None else len(rows))
         return rows
-    monkeypatch.setattr(type(path), "_sweep_rows", counted)
+    monkeypatch.setattr(type(path), "sweep_rows", counted)
     for times in ((np.zeros(n), np.ones(n)), (np.full(n, 0.25), np.full(n, 0.75))):
         times = times if times[0][0] else tuple(np.broadcast_to(t[:1], (n,)) for t in times)
         got = path.first_hits(x0, x1, *times)
         assert kept[-1] <= n - len(far)  # the far ones skipped ...
         assert len(got.index) > 20  # ... not the hits
         with monkeypatch.context() as every:
-            every.setattr(type(path), "_sweep_rows", lambda self, *args: None)
+            every.setattr(type(path), "sweep_rows", lambda self, *args: None)
             _assert_same((got,), (path.first_hits(x0, x1, *times),))
 
 
@@ -354,7 +354,7 @@ def test_a_turning_box_finds_what_its_turn_reaches(monkeypatch):
     lo, hi = np.minimum(long0, long1)[got[0].index], np.maximum(long0, long1)[got[0].index]
     assert np.maximum(lo - 1.0, -1.0 - hi).max() > 2.0  # hits far off its box at the start
     assert len(got[1].index) > 100
-    monkeypatch.setattr(type(path), "_sweep_rows", lambda self, *args: None)
+    monkeypatch.setattr(type(path), "sweep_rows", lambda self, *args: None)
     _assert_same(got, [path.first_hits(long0, long1, *times),
                        path.first_hits(still, still, *(t[:len(still)] for t in times))])
 
@@ -438,6 +438,50 @@ def test_a_moving_mesh_tests_every_point():
                           triangles=tris)
     path = ColliderPaths().of([frame], DT)[0]
     assert path._near_rows(np.array([[9.0, 9.0, 9.0]])) is None
+
+
+@pytest.mark.parametrize("name", ["unit", "turned and stretched", "turned"])
+@pytest.mark.parametrize("motion", ["slow", "fast move", "fast turn", "growing"])
+@pytest.mark.parametrize("deforming", [False, True])
+def test_a_moving_mesh_cuts_segments_over_their_time_as_if_every_one_were_tested(
+        name, motion, deforming, monkeypatch):
+    """Segments over one time span meet a moving (or deforming) mesh only within the world box
+    of its bounds at the start grown by its motion (:meth:`ColliderPath._swept_box`): every
+    hit, at its thickness too, and every point it moved onto, as when every segment is mapped
+    into its frame; the far ones skipped."""
+    verts, tris = _wavy()
+    m0 = SOLIDS[name]
+    m1 = _sweeps(m0)[motion]
+    verts1 = verts * [1.0, 1.0, 1.3] if deforming else verts
+    frame = ColliderFrame("Wavy", "MESH", m0, m1, 0.5, 0.3, thickness=0.02, vertices0=verts,
+                          vertices1=verts1, triangles=tris)
+    path = ColliderPaths().of([frame], DT)[0]
+    rng = np.random.default_rng(7)
+    on = verts[rng.integers(0, len(verts), 2000)] + rng.normal(scale=0.01, size=(2000, 3))
+    x0 = np.vstack([on, on[:600] + [0.0, 0.0, 0.2]]) @ m0[:3, :3].T + m0[:3, 3]
+    x1 = np.vstack([on + rng.normal(scale=0.03, size=on.shape),
+                    on[:600] - [0.0, 0.0, 0.2]]) @ m0[:3, :3].T + m0[:3, 3]  # (crossing)
+    swept = np.linspace(0.0, 1.0, 400)[:, None] * (m1[:3, 3] - m0[:3, 3]) + m0[:3, 3] + \
+        rng.uniform(-1.0, 1.0, (400, 3)) @ m0[:3, :3].T  # lying still where it goes
+    size = float(np.abs(m0[:3, :3]).sum()) + float(np.linalg.norm(m1[:3, 3] - m0[:3, 3]))
+    way = rng.normal(size=(600, 3))
+    far = m0[:3, 3] + way / np.linalg.norm(way, axis=1, keepdims=True) * rng.uniform(
+        4.0 * size, 10.0 * size, (600, 1))
+    x0, x1 = np.vstack([x0, swept, far]), np.vstack([x1, swept, far + 0.05])
+    n = len(x0)
+    kept = []
+    sweep_rows = type(path).sweep_rows
+
+    def counted(self, *args):
+        rows = sweep_rows(self, *args)
+        kept.append(n if rows is None else len(rows))
+        return rows
+    monkeypatch.setattr(type(path), "sweep_rows", counted)
+    times = (np.broadcast_to(0.0, (n,)), np.broadcast_to(1.0, (n,)))
+    got = path.first_hits(x0, x1, *times)
+    assert kept[-1] <= n - len(far) and len(got.index) > 100
+    monkeypatch.setattr(type(path), "sweep_rows", lambda self, *args: None)
+    _assert_same((got,), (path.first_hits(x0, x1, *times),))
 
 
 def test_a_sheared_mesh_keeps_its_thickness_whatever_else_is_asked():
