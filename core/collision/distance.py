@@ -78,8 +78,8 @@ def closest_points(bvh: BVH, points, *, max_distance: float = np.inf,
             ``max_distance`` spans a few of its cells; the answers are the same as without it.
     """
     p = check_points(bvh.mesh.name, "query point", points, kind="mesh")
-    if not max_distance > 0:
-        raise ValueError(f"max_distance must be > 0 (got {max_distance})")
+    if not np.all(np.asarray(max_distance) > 0):
+        raise ValueError(f"max_distance must be > 0 (got {np.min(max_distance)})")
     scale = 1.0
     if matrix is not None:
         scale = similarity_scale(matrix, bvh.mesh.name)
@@ -136,9 +136,11 @@ def closest_on_triangles(p: np.ndarray, tri: np.ndarray):
     return best_q, best_d2, feature
 
 
-def _search(bvh: BVH, p: np.ndarray, max_distance: float, cells: TriangleCells | None = None):
+def _search(bvh: BVH, p: np.ndarray, max_distance, cells: TriangleCells | None = None):
+    """Each point's nearest triangle within ``max_distance`` (one for all, or one each)."""
     n = len(p)
-    bound = np.full(n, float(max_distance))
+    bound = np.array(np.broadcast_to(np.asarray(max_distance, np.float64), (n,)))
+    max_distance = bound.copy()  # each point's own limit
     best_d = np.full(n, np.inf)
     best_tri = np.full(n, -1, dtype=np.int64)
     best_q = np.zeros((n, 3))
@@ -147,8 +149,8 @@ def _search(bvh: BVH, p: np.ndarray, max_distance: float, cells: TriangleCells |
     tri = bvh.ordered_triangles
     pt = np.arange(n)
     n_v = n_p = 0
-    if cells is not None and cells.usable and n and np.isfinite(max_distance):
-        reach = max_distance + margin
+    if cells is not None and cells.usable and n and np.isfinite(max_distance).all():
+        reach = (max_distance + margin)[:, None]
         q, pos, pt = cells.candidates(p - reach, p + reach)
         n_v += n - len(pt)
         n_p += _pair_tests(bvh, p, q, pos, tri, bound, best_d, best_tri, best_q, best_f,
@@ -199,7 +201,7 @@ def _pair_tests(bvh, p, s, pos, tri, bound, best_d, best_tri, best_q, best_f,
         head[1:] = sc[1:] != sc[:-1]
         sc, d, tri_id, q, f = sc[head], d[head], tri_id[head], q[head], f[head]
         better = ((d < best_d[sc]) | ((d == best_d[sc]) & (tri_id < best_tri[sc])))
-        better &= d <= max_distance
+        better &= d <= max_distance[sc]
         g = sc[better]
         best_d[g], best_tri[g] = d[better], tri_id[better]
         best_q[g], best_f[g] = q[better], f[better]

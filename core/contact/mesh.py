@@ -120,8 +120,9 @@ class MeshPath(ColliderPath):
         ids = self.triangles[tri]
         return self.vertices0[ids] + np.asarray(s, float).reshape(-1, 1, 1) * self.vertex_step[ids]
 
-    def _closest(self, l: np.ndarray, s: np.ndarray, reach: float):
-        """Closest points of local points l (k, 3) on the mesh at their times s (k,).
+    def _closest(self, l: np.ndarray, s: np.ndarray, reach):
+        """Closest points of local points l (k, 3) on the mesh at their times s (k,), within
+        ``reach`` (one for all, or (k,) one each).
 
         Returns (found, point, diff = l - point, distance, face normal, triangle, side): side is
         +1/-1 in front of/behind the winding normal, 0 where not found, on the surface, or
@@ -129,7 +130,7 @@ class MeshPath(ColliderPath):
         """
         values = np.unique(s)
         bvh = self.bvh_at(values[-1])
-        cp = closest_points(bvh, l, max_distance=max(reach, 1e-300), cells=self._cells)
+        cp = closest_points(bvh, l, max_distance=np.maximum(reach, 1e-300), cells=self._cells)
         found = cp.triangle >= 0
         tri = np.where(found, cp.triangle, 0)
         q, feature = cp.point, cp.feature
@@ -255,7 +256,9 @@ class MeshPath(ColliderPath):
         cand = self._near_box(np.minimum(l0, l1), np.maximum(l0, l1), reach)
         if len(cand) == 0:
             return Hits.none()
-        l0, l1, sa, sb, r = l0[cand], l1[cand], s_start[cand], s_end[cand], float(reach[cand].max())
+        # (each segment's own reach bounds its searches: the largest of them all made every
+        # search as wide as the fastest particle's)
+        l0, l1, sa, sb, r = l0[cand], l1[cand], s_start[cand], s_end[cand], reach[cand]
         entries = self._segment_entries(l0, l1, sb)
         side0 = tri0 = None
         if not self._still:
@@ -301,7 +304,7 @@ class MeshPath(ColliderPath):
         side = np.where(near, side0[g], plane)
         found.hit[g[side * np.where(found.front[g], 1.0, -1.0) < 0.0]] = False
 
-    def _late_entries(self, found: _Entries, l1: np.ndarray, sb: np.ndarray, r: float,
+    def _late_entries(self, found: _Entries, l1: np.ndarray, sb: np.ndarray, r: np.ndarray,
                       side0: np.ndarray | None) -> None:
         """Hits at t = 1 on the end-time surface, for segments ``found`` did not hit: the mesh
         moved over the particle (its side changed from side0), or the particle ended within

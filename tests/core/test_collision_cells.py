@@ -68,6 +68,27 @@ def test_grid_answers_equal_the_tree_and_brute_force(kind):
     assert (grid_cp.triangle >= 0).all()
 
 
+@pytest.mark.parametrize("grid", [False, True])
+def test_each_point_its_own_reach_answers_as_asked_alone(grid):
+    """closest_points with a reach per point: each point's answer is the one it gets asked
+    with its reach alone (found within it, or not at all), through the tree and the grid."""
+    mesh = _bumpy()
+    bvh = build_bvh(mesh, "aabb")
+    cells = TriangleCells(bvh) if grid else None
+    rng = np.random.default_rng(4)
+    p = _near_surface(mesh, 3000, rng, 0.05)
+    reach = rng.choice([1e-3, 0.01, 0.05, 0.3], len(p))
+    got = closest_points(bvh, p, max_distance=reach, cells=cells)
+    for r in np.unique(reach):
+        rows = np.nonzero(reach == r)[0]
+        alone = closest_points(bvh, p[rows], max_distance=float(r), cells=cells)
+        for name in ("distance", "point", "triangle", "feature"):
+            np.testing.assert_array_equal(getattr(got, name)[rows], getattr(alone, name),
+                                          err_msg=name)
+    found = got.triangle >= 0
+    assert 0.1 < found.mean() < 0.95 and (got.distance[found] <= reach[found]).all()
+
+
 def test_grid_on_cell_boundaries_with_large_and_zero_area_triangles():
     # a detailed grid beside one huge ground quad (too many cells: tested by every query), and
     # zero-area triangles (never hit, but their edges are closest points)

@@ -376,3 +376,36 @@ def test_deforming_mesh_with_two_sheets_stops_a_particle_at_the_far_one():
     x, v_after, count, _ = coll.respond([path], x0, x0 + DT * v, v, v.copy(), 0.0, 1.0, DT, 0.1)
     assert count == 1
     assert 0.09 < x[0, 2] < 0.1 and v_after[0, 2] <= 0.0
+
+
+def test_a_particle_between_two_sheets_is_not_pulled_onto_one_by_a_fast_neighbour():
+    """A moving mesh finds each particle's side of it within that particle's own reach: a slow
+    particle midway between two sheets (half a metre from each), whose nearest sheet changes
+    as it drifts up, crossed neither — with or without a fast particle beside it. (The search
+    was as wide as the fastest particle's reach: the side change then counted as the mesh
+    passing over the slow one, which was put on the upper sheet 0.49 m away.)"""
+    from physanim.core.contact import ColliderPaths
+
+    square = np.array([[-2, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0]], float)
+    verts = np.vstack([square, square + [0.0, 0.0, 1.0]])
+    tris = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
+    sliding = np.eye(4)
+    sliding[0, 3] = 0.01  # (moving: its sides are tracked)
+    frame = ColliderFrame("Sheets", "MESH", np.eye(4), sliding, vertices0=verts,
+                          vertices1=verts, triangles=tris)
+    path = ColliderPaths().of([frame], DT)[0]
+    slow0, slow1 = np.array([[0.0, 0.0, 0.49]]), np.array([[0.0, 0.0, 0.51]])
+    fast0, fast1 = np.array([[-1.5, 1.5, 0.25]]), np.array([[1.5, 1.5, 0.25]])  # (between)
+    for x0, x1 in ((slow0, slow1), (np.vstack([slow0, fast0]), np.vstack([slow1, fast1]))):
+        times = (np.broadcast_to(0.0, (len(x0),)), np.broadcast_to(1.0, (len(x0),)))
+        assert len(path.first_hits(x0, x1, *times).index) == 0
+    # a particle the sheets do pass over is still found: the lower sheet, lifted 3 cm past it
+    lifted = np.eye(4)
+    lifted[2, 3] = 0.03
+    path = ColliderPaths().of([ColliderFrame("Sheets", "MESH", np.eye(4), lifted,
+                                             vertices0=verts, vertices1=verts,
+                                             triangles=tris)], DT)[0]
+    x = np.array([[0.0, 0.0, 0.01], [1.5, 1.5, -3.0]])
+    times = (np.broadcast_to(0.0, (2,)), np.broadcast_to(1.0, (2,)))
+    hits = path.first_hits(x, x + [[0.0, 0.0, 0.0], [0.0, 0.0, 1.5]], *times)
+    assert hits.index.tolist() == [0]  # (where its path crosses the sheet, in its frame)
