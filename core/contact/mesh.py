@@ -125,8 +125,12 @@ class MeshPath(ColliderPath):
         ``reach`` (one for all, or (k,) one each).
 
         Returns (found, point, diff = l - point, distance, face normal, triangle, side): side is
-        +1/-1 in front of/behind the winding normal, 0 where not found, on the surface, or
-        nearest to an open boundary edge or corner.
+        +1/-1 in front of/behind the surface, 0 where not found, on the surface, or nearest to
+        an open boundary edge or corner. In front or behind is judged by the angle-weighted
+        pseudo-normal of the nearest feature (its face, edge or corner): a point nearest an
+        edge or a corner is on the side the surface around it faces (by the nearest
+        triangle's own face normal, a point off an acute edge of a closed mesh could be judged
+        behind it, metres outside).
         """
         values = np.unique(s)
         bvh = self.bvh_at(values[-1])
@@ -145,8 +149,10 @@ class MeshPath(ColliderPath):
         divide_rows(face, np.maximum(norm_rows(face), 1e-300), out=face)
         diff = l - q
         dist = norm_rows(diff)
-        on_boundary = self._boundary[tri, np.maximum(feature, 0)]
-        side = np.where(found & ~on_boundary, np.sign(np.einsum("ij,ij->i", diff, face)), 0.0)
+        feature = np.maximum(feature, 0)
+        on_boundary = self._boundary[tri, feature]
+        pseudo = take(bvh.mesh.feature_normals, 7 * tri + feature)
+        side = np.where(found & ~on_boundary, np.sign(np.einsum("ij,ij->i", diff, pseudo)), 0.0)
         return found, q, diff, dist, face, tri, side
 
     def _touching(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -190,6 +196,13 @@ class MeshPath(ColliderPath):
             self._box = self._box_at(self.path.m0)
         return self._box
 
+    def _metre(self, *matrices: np.ndarray) -> float:
+        """The most local units a world metre spans over the interval's samples and under
+        ``matrices`` (an animation whose scale passes zero between its samples spans more
+        between them)."""
+        return max(self._local_metre, *(float(np.linalg.norm(np.linalg.inv(m[:3, :3]), 2))
+                                        for m in matrices))
+
     def _box_at(self, m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The world box of the mesh's local bounds (over the interval: a deforming mesh's
         vertices at both ends) grown by the thickness and the contact distance, under the
@@ -218,9 +231,14 @@ class MeshPath(ColliderPath):
         (:meth:`ColliderPath._swept_box` of its local bounds over the interval grown by the
         thickness and the contact distance, as :meth:`_box_at`, and by what the maps may round
         to over points up to ``far``): a segment that enters it or ends within its thickness
-        has a local point there."""
+        has a local point there, and so has a particle the mesh passed over (its side changed:
+        it ends inside a closed mesh, or crossed an open sheet's faces; sides are judged by
+        pseudo-normals, so outside that box a consistent mesh has no side change without a
+        crossing). A triangle soup with faces wound every which way can change a far point's
+        side without one: that spurious hit, beyond the box, is the one answer the cut drops."""
         local = self._local_far(far, s0, s1)
-        grow = (self.frame.thickness + CONTACT_DISTANCE) * self._local_metre * (1.0 + 1e-9)
+        metre = self._metre(self._at(s0), self._at(s1))
+        grow = (self.frame.thickness + CONTACT_DISTANCE) * metre * (1.0 + 1e-9)
         return self._swept_box(s0, s1, (self._hi + self._lo) / 2.0,
                                (self._hi - self._lo) / 2.0 + grow + 64.0 * EPS * local, length)
 

@@ -403,7 +403,8 @@ class ColliderPath:
         from it by t ((Q - I) y0(x1) + q), at most w = (b (r + length) + |q|) / (1 - b) with
         b = |Q - I| (as |y0(x1)| <= |y0(x)| + length <= r + w + length). So x lies within
         A0's image of the box, grown by w along every world axis. None where b is not small
-        (a turn or change of scale too fast for a bound), or the times are not one each."""
+        (a turn or change of scale too fast for a bound) or a matrix is not one (``s0`` and
+        ``s1`` are single times: :meth:`sweep_rows` and :func:`cut_rows` ask only then)."""
         m0, inv1 = self._at(s0), self._inverse(s1)
         if m0.ndim != 2 or inv1.ndim != 2:
             return None

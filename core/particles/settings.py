@@ -247,9 +247,10 @@ class EmitterFrame:
                 0.0 <= self.speed < inf and 0.0 <= self.speed_random < inf and
                 0.0 <= self.lifetime_random <= self.lifetime < inf and
                 0.0 <= self.size_random <= self.size < inf and 0.0 <= self.spread < inf and
-                -inf < self.inherit_velocity < inf and 0.0 < self.mass < inf and
-                self.rate + self.rate_random <= LIMIT_BIRTHS_PER_FRAME and
-                len(launch) == 3 and -inf < launch[0] + launch[1] + launch[2] < inf and
+                math.isfinite(self.inherit_velocity) and self.mass > 0.0 and
+                math.isfinite(self.mass) and self.rate + self.rate_random <=
+                LIMIT_BIRTHS_PER_FRAME and len(launch) == 3 and math.isfinite(launch[0]) and
+                math.isfinite(launch[1]) and math.isfinite(launch[2]) and
                 _finite(self.matrix0, (4, 4)) and _finite(self.matrix1, (4, 4)) and
                 (self.matrices is None or _finite(self.matrices, (len(self.matrices), 4, 4)))
                 and (self.verts0 is None or _finite(self.verts0)) and
@@ -292,19 +293,17 @@ class EmitterFrame:
                 raise ValueError(f"{owner}: vertex {bad} has a non-finite position")
 
 
-
-
 _ZEROS = np.zeros(16)
 _ZEROS.flags.writeable = False
 
 
 def _finite(a, shape: tuple | None = None) -> bool:
-    """Whether ``a`` is a float array (of ``shape``) of finite values: a matrix by one product
-    with zeros (0 exactly for finite values, NaN for a NaN or an infinity, never an overflow
-    or a warning), vertices by numpy's test."""
-    if not (type(a) is np.ndarray and a.dtype.kind == "f" and (shape is None or a.shape == shape)):
-        return False
+    """Whether ``a`` is a float array (of ``shape``) of finite values: a matrix (float64, as
+    the full check reads it) by one product with zeros (0 exactly for finite values, NaN for
+    a NaN or an infinity, never an overflow or a warning), vertices by numpy's test."""
     if shape is None:
-        return bool(np.isfinite(a).all())
+        return type(a) is np.ndarray and a.dtype.kind == "f" and bool(np.isfinite(a).all())
+    if not (type(a) is np.ndarray and a.dtype == np.float64 and a.shape == shape):
+        return False
     flat = a.ravel()
     return np.dot(flat, _ZEROS if len(flat) == 16 else np.zeros(len(flat))) == 0.0

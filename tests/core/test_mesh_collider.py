@@ -409,3 +409,56 @@ def test_a_particle_between_two_sheets_is_not_pulled_onto_one_by_a_fast_neighbou
     times = (np.broadcast_to(0.0, (2,)), np.broadcast_to(1.0, (2,)))
     hits = path.first_hits(x, x + [[0.0, 0.0, 0.0], [0.0, 0.0, 1.5]], *times)
     assert hits.index.tolist() == [0]  # (where its path crosses the sheet, in its frame)
+
+
+def test_a_particle_flying_round_an_acute_edge_of_a_closed_mesh_is_not_hit(monkeypatch):
+    """Which side of a closed mesh a point is on is judged by the pseudo-normal of its nearest
+    feature: a particle flying past a tetrahedron's edge 3 m outside it stays outside on both
+    sides of the edge (by the nearest triangle's own face normal it was behind one face, and
+    the side change counted as the moving mesh passing over it: it was put on the edge)."""
+    from physanim.core.contact import ColliderPaths
+
+    verts = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]], float)
+    tris = np.array([[0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 3, 2]])  # closed, outward
+    moved = np.eye(4)
+    moved[0, 3] = 0.01
+    path = ColliderPaths().of([ColliderFrame("Tet", "MESH", np.eye(4), moved, vertices0=verts,
+                                             vertices1=verts, triangles=tris)], DT)[0]
+    n1, n2 = np.array([1.0, 1.0, -1.0]), np.array([1.0, -1.0, 1.0])  # the edge's two faces
+
+    def out(a):
+        d = a * n1 + (1.0 - a) * n2
+        return np.array([1.0, 0.0, 0.0]) + 3.0 * d / np.linalg.norm(d)
+    x0, x1 = np.array([out(a) for a in (0.9, 0.8, 0.7)]), np.array([out(a) for a in
+                                                                      (0.05, 0.1, 0.2)])
+    times = (np.broadcast_to(0.0, (3,)), np.broadcast_to(1.0, (3,)))
+    assert len(path.first_hits(x0, x1, *times).index) == 0
+    monkeypatch.setattr(type(path), "sweep_rows", lambda self, *args: None)  # every segment
+    assert len(path.first_hits(x0, x1, *times).index) == 0  # tested: still none
+
+
+def test_a_mesh_flipping_its_scale_within_a_frame_keeps_its_thickness(monkeypatch):
+    """A mesh animated from scale x = 1 to x = -1 over the frame is thin in x midway: a world
+    metre spans far more of its local units there than at either end. A particle ending
+    7.9 mm off it (its thickness 10 mm) over a sub-step there is a hit, with the world cut of
+    segments as with every segment tested (that cut was grown by the ends' metre: it dropped
+    the particle)."""
+    from physanim.core.contact import ColliderPaths
+
+    h = 5e-4
+    verts = np.array([(x, y, z) for x in (-h, h) for y in (-h, h) for z in (-h, h)])
+    tris = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
+                     [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
+    frame = ColliderFrame("Flip", "MESH", np.eye(4), np.diag([-1.0, 1.0, 1.0, 1.0]),
+                          thickness=0.01, vertices0=verts, vertices1=verts, triangles=tris)
+    path = ColliderPaths().of([frame], DT)[0]
+    s0, s1 = 0.49, 0.4901
+    x0 = (path.path.matrices(s0)[:3, :3] @ [0.79, 0.0, 0.0])[None]
+    x1 = (path.path.matrices(s1)[:3, :3] @ [0.40, 0.0, 0.0])[None]
+    far = np.array([[3.0, 3.0, 3.0]])  # (and one far off: a cut is made)
+    x0, x1 = np.vstack([x0, far]), np.vstack([x1, far])
+    times = (np.broadcast_to(s0, (2,)), np.broadcast_to(s1, (2,)))
+    assert path.first_hits(x0, x1, *times).index.tolist() == [0]
+    assert path.sweep_rows(x0, x1, *times).tolist() == [0]
+    monkeypatch.setattr(type(path), "sweep_rows", lambda self, *args: None)
+    assert path.first_hits(x0, x1, *times).index.tolist() == [0]
