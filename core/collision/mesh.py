@@ -123,6 +123,11 @@ class TriangleMesh:
         return _frozen(first[inverse.reshape(-1)])
 
     @cached_property
+    def welded_corners(self) -> np.ndarray:
+        """(n_t, 3) each triangle's corners by their :attr:`welded` ids."""
+        return _frozen(self.welded[self.triangles])
+
+    @cached_property
     def pseudo_normals(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Angle-weighted pseudo-normals (Baerentzen & Aanaes 2005) for the sign of distances.
 

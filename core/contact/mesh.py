@@ -64,15 +64,18 @@ class MeshPath(ColliderPath):
         self.offset = frame.thickness
         self.triangles = frame.triangles
         self.vertices0 = frame.vertices0
-        self.vertex_step = frame.vertices1 - frame.vertices0
+        if frame.vertices1 is frame.vertices0:  # (one shape: a rigid body's, a still mesh's)
+            self.vertex_step = np.broadcast_to(0.0, frame.vertices0.shape)
+        else:
+            self.vertex_step = frame.vertices1 - frame.vertices0
         self.deforming = bool(np.any(self.vertex_step))
         # hits are found on the mesh as it is at the sub-step's end (see response.respond)
         self.hits_end_surface = self.deforming
-        self.max_step = float(norm_rows(self.vertex_step).max())
+        self.max_step = float(norm_rows(self.vertex_step).max()) if self.deforming else 0.0
         self._bvh0, self._boundary = hierarchies.of(frame)
         # a grid for the many short queries of particles on a mesh that keeps its shape
         self._cells = None if self.deforming else hierarchies.cells(frame.name, self._bvh0)
-        self._welded = self._bvh0.mesh.welded[frame.triangles]  # corners, duplicates merged
+        self._welded = self._bvh0.mesh.welded_corners  # corners, duplicates merged
         self._bvhs: dict[float, BVH] = {}
         if self.deforming:
             both = np.concatenate([frame.vertices0, frame.vertices1])
@@ -196,12 +199,17 @@ class MeshPath(ColliderPath):
             self._box = self._box_at(self.path.m0)
         return self._box
 
-    def _metre(self, *matrices: np.ndarray) -> float:
-        """The most local units a world metre spans over the interval's samples and under
-        ``matrices`` (an animation whose scale passes zero between its samples spans more
-        between them)."""
-        return max(self._local_metre, *(float(np.linalg.norm(np.linalg.inv(m[:3, :3]), 2))
-                                        for m in matrices))
+    def _metre(self, s0: float, s1: float) -> float:
+        """The most local units a world metre spans over the interval's samples and at the
+        times ``s0`` and ``s1`` (an animation whose scale passes zero between its samples spans
+        more between them); worked out once per pair of times."""
+        known = self.__dict__.setdefault("_metres", {})
+        metre = known.get((s0, s1))
+        if metre is None:
+            metre = known[(s0, s1)] = max(
+                self._local_metre, *(float(np.linalg.norm(self._inverse(s)[:3, :3], 2))
+                                     for s in (s0, s1)))
+        return metre
 
     def _box_at(self, m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The world box of the mesh's local bounds (over the interval: a deforming mesh's
@@ -237,7 +245,7 @@ class MeshPath(ColliderPath):
         crossing). A triangle soup with faces wound every which way can change a far point's
         side without one: that spurious hit, beyond the box, is the one answer the cut drops."""
         local = self._local_far(far, s0, s1)
-        metre = self._metre(self._at(s0), self._at(s1))
+        metre = self._metre(s0, s1)
         grow = (self.frame.thickness + CONTACT_DISTANCE) * metre * (1.0 + 1e-9)
         return self._swept_box(s0, s1, (self._hi + self._lo) / 2.0,
                                (self._hi - self._lo) / 2.0 + grow + 64.0 * EPS * local, length)
