@@ -82,18 +82,25 @@ class ColliderFrame:
         return all(_same_array(getattr(self, k), getattr(other, k)) for k in _ARRAYS)
 
     def _validate_mesh(self, owner: str) -> None:
+        given = (self.vertices0, self.vertices1)
         verts = []
-        for key in ("vertices0", "vertices1"):
-            if getattr(self, key) is None:
+        for key, value in zip(("vertices0", "vertices1"), given):
+            if value is None:
                 raise ValueError(f"{owner}: a MESH collider needs {key}")
-            v = np.array(getattr(self, key), dtype=np.float64)
-            if v.ndim != 2 or v.shape[1] != 3:
-                raise ValueError(f"{owner}: {key} must be an (n, 3) array (got shape {v.shape})")
-            bad = ~np.isfinite(v).all(axis=1)
-            if bad.any():
-                i = int(np.argmax(bad))
-                raise ValueError(f"{owner}: {key} vertex {i} is not finite: {v[i].tolist()}")
-            v.setflags(write=False)
+            if key == "vertices1" and value is given[0]:  # one shape over the interval (a
+                v = verts[0]  # rigid body's): checked once, one array (its path then knows
+                # it does not deform without comparing them)
+            else:
+                v = np.array(value, dtype=np.float64)
+                if v.ndim != 2 or v.shape[1] != 3:
+                    raise ValueError(f"{owner}: {key} must be an (n, 3) array (got shape "
+                                     f"{v.shape})")
+                bad = ~np.isfinite(v).all(axis=1)
+                if bad.any():
+                    i = int(np.argmax(bad))
+                    raise ValueError(f"{owner}: {key} vertex {i} is not finite: "
+                                     f"{v[i].tolist()}")
+                v.setflags(write=False)
             object.__setattr__(self, key, v)
             verts.append(v)
         if len(verts[0]) != len(verts[1]):

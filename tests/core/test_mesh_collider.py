@@ -462,3 +462,29 @@ def test_a_mesh_flipping_its_scale_within_a_frame_keeps_its_thickness(monkeypatc
     assert path.sweep_rows(x0, x1, *times).tolist() == [0]
     monkeypatch.setattr(type(path), "sweep_rows", lambda self, *args: None)
     assert path.first_hits(x0, x1, *times).index.tolist() == [0]
+
+
+def test_one_shape_over_the_frame_is_checked_once_and_kept_one():
+    """A mesh collider given one vertex array for both ends of the frame (a rigid body's
+    shape) keeps one checked array: its path knows it does not deform without comparing
+    them, and moves it as a whole; a bad vertex in it is named as ever."""
+    from physanim.core.contact import ColliderPaths
+    from physanim.core.errors import PhysanimError
+
+    grid = grid_mesh(4, 1.0, 0.1)
+    verts, tris = np.array(grid.vertices), np.array(grid.triangles)
+    moved = np.eye(4)
+    moved[2, 3] = 0.05
+    frame = ColliderFrame("Rock", "MESH", np.eye(4), moved, vertices0=verts, vertices1=verts,
+                          triangles=tris)
+    assert frame.vertices1 is frame.vertices0 and not frame.vertices0.flags.writeable
+    path = ColliderPaths().of([frame], DT)[0]
+    assert not path.deforming and path.max_step == 0.0 and not path.vertex_step.any()
+    copied = ColliderFrame("Rock", "MESH", np.eye(4), moved, vertices0=verts,
+                           vertices1=verts.copy(), triangles=tris)
+    assert not ColliderPaths().of([copied], DT)[0].deforming  # (the same values: no motion)
+    bad = verts.copy()
+    bad[3, 1] = np.nan
+    with pytest.raises((ValueError, PhysanimError), match="vertices0 vertex 3 is not finite"):
+        ColliderFrame("Rock", "MESH", np.eye(4), moved, vertices0=bad, vertices1=bad,
+                      triangles=tris)
