@@ -118,6 +118,7 @@ def beside_colliders() -> dict:
     def frame(name, shape, end=at, start=at, **mesh):
         return contact.ColliderFrame(name, shape, start, end, RESTITUTION, FRICTION, **mesh)
     mesh = {"vertices0": verts, "vertices1": verts, "triangles": tris}
+    rock = common.core_module("collision.shapes").sphere_mesh(1, 0.5, "rock")
     # twenty boxes 3 m apart in a 5 x 4 grid beside the particles (a scene's props)
     grid = []
     for k in range(20):
@@ -132,7 +133,12 @@ def beside_colliders() -> dict:
             "mesh moving beside": [frame("Mesh", "MESH", moved, **mesh)],
             "20 boxes beside": [frame(f"Box{k}", "BOX", m, m) for k, m in enumerate(grid)],
             "20 boxes moving beside": [frame(f"Box{k}", "BOX", moved @ np.linalg.inv(at) @ m, m)
-                                       for k, m in enumerate(grid)]}
+                                       for k, m in enumerate(grid)],
+            # rigid bodies' hulls as the particles meet them: one vertex array for the frame
+            f"20 rocks moving beside (hull meshes, {len(rock.triangles)} triangles)": [
+                frame(f"Rock{k}", "MESH", moved @ np.linalg.inv(at) @ m, m,
+                      vertices0=rock.vertices, vertices1=rock.vertices,
+                      triangles=rock.triangles) for k, m in enumerate(grid)]}
 
 
 def collider_costs(opts: Options) -> list[str]:

@@ -41,6 +41,7 @@ class ColliderPaths:
         self._kept.clear()
 
     def of(self, frames: Sequence[ColliderFrame], frame_dt: float) -> list[ColliderPath]:
+        self.hierarchies.in_use(sum(frame.shape == "MESH" for frame in frames))
         return [self.path(frame, frame_dt) for frame in frames]
 
     def path(self, frame: ColliderFrame, frame_dt: float) -> ColliderPath:

@@ -447,6 +447,21 @@ class MeshHierarchies:
         self._known: dict = {}  # collider name -> (triangles, vertices, BVH, boundary, refits)
         self._cells: dict = {}  # collider name -> (BVH, its grid)
 
+    def in_use(self, count: int) -> None:
+        """``count`` mesh colliders take part in the frame interval being made: every one of
+        them is kept (at least ``capacity``; with more than that, a cache of fewer would
+        build each one's hierarchy again every frame)."""
+        self._in_use = count
+
+    def _keep(self, table: dict, name: str, value) -> None:
+        """``table[name] = value``, last (the most recently used); a new name first makes room
+        by dropping the least recently used beyond what is kept."""
+        if table.pop(name, None) is None:
+            limit = max(self.capacity, getattr(self, "_in_use", 0))
+            while table and len(table) >= limit:
+                table.pop(next(iter(table)))
+        table[name] = value
+
     def __len__(self) -> int:
         return len(self._known)
 
@@ -458,9 +473,8 @@ class MeshHierarchies:
         """The grid over ``bvh``'s triangles (built on first use, kept while the hierarchy is)."""
         known = self._cells.get(name)
         if known is None or known[0] is not bvh:
-            if len(self._cells) >= self.capacity:
-                self._cells.clear()
-            known = self._cells[name] = (bvh, TriangleCells(bvh))
+            known = (bvh, TriangleCells(bvh))
+        self._keep(self._cells, name, known)  # (the most recently used last)
         return known[1]
 
     def of(self, frame: ColliderFrame) -> tuple[BVH, np.ndarray]:
@@ -469,17 +483,17 @@ class MeshHierarchies:
         known = self._known.get(frame.name)
         if known is not None and known[0].shape == tris.shape and np.array_equal(known[0], tris):
             if known[1].shape == verts.shape and np.array_equal(known[1], verts):
+                self._keep(self._known, frame.name, known)  # (the most recently used last)
                 return known[2], known[3]
             if known[1].shape == verts.shape and known[4] < REBUILD_AFTER:
                 bvh, _ = known[2].refit(verts)
                 boundary = _boundary_features(bvh.mesh)  # welding may change as vertices move
-                self._known[frame.name] = (known[0], verts.copy(), bvh, boundary, known[4] + 1)
+                self._keep(self._known, frame.name,
+                           (known[0], verts.copy(), bvh, boundary, known[4] + 1))
                 return bvh, boundary
         bvh = build_bvh(TriangleMesh(verts, tris, frame.name), BVH_KIND, "topdown")
         boundary = _boundary_features(bvh.mesh)
-        if len(self._known) >= self.capacity:
-            self._known.clear()
-        self._known[frame.name] = (tris.copy(), verts.copy(), bvh, boundary, 0)
+        self._keep(self._known, frame.name, (tris.copy(), verts.copy(), bvh, boundary, 0))
         return bvh, boundary
 
 

@@ -488,3 +488,37 @@ def test_one_shape_over_the_frame_is_checked_once_and_kept_one():
     with pytest.raises((ValueError, PhysanimError), match="vertices0 vertex 3 is not finite"):
         ColliderFrame("Rock", "MESH", np.eye(4), moved, vertices0=bad, vertices1=bad,
                       triangles=tris)
+
+
+def test_every_mesh_collider_of_a_frame_keeps_its_hierarchy(monkeypatch):
+    """Twenty moving mesh colliders (rigid bodies' hulls as particles meet them) build their
+    hierarchies once for the run, not every frame (a cache of eight colliders was emptied and
+    refilled by each frame's twenty: 4 ms per collider and frame); a collider gone from the
+    scene is dropped once the others need the room."""
+    from physanim.core.contact import ColliderPaths
+    from physanim.core.contact import mesh as mesh_
+
+    built = []
+    build = mesh_.build_bvh
+    monkeypatch.setattr(mesh_, "build_bvh", lambda *a, **k: built.append(1) or build(*a, **k))
+    rock = grid_mesh(3, 0.5, 0.1)
+    verts, tris = np.array(rock.vertices), np.array(rock.triangles)
+    paths = ColliderPaths()
+
+    def frames(count, f):
+        out = []
+        for k in range(count):
+            m0, m1 = np.eye(4), np.eye(4)
+            m0[:3, 3], m1[:3, 3] = (k, 0.0, 0.1 * f), (k, 0.0, 0.1 * (f + 1))
+            out.append(ColliderFrame(f"Rock{k}", "MESH", m0, m1, vertices0=verts,
+                                     vertices1=verts, triangles=tris))
+        return out
+    for f in range(5):
+        paths.of(frames(20, f), DT)
+    assert len(built) == 20
+    for f in range(5, 8):  # twelve rocks gone: eight kept, the others dropped as room is needed
+        paths.of(frames(8, f), DT)
+    assert len(built) == 20 and len(paths.hierarchies) == 20
+    paths.of([ColliderFrame("Other", "MESH", np.eye(4), np.eye(4), vertices0=verts,
+                            vertices1=verts, triangles=tris)], DT)
+    assert len(built) == 21 and len(paths.hierarchies) <= 20
