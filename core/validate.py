@@ -7,10 +7,20 @@ import math
 import numpy as np
 
 
+def is_finite(value) -> bool:
+    """``math.isfinite`` that answers False for an integer too large for a float (which
+    ``math.isfinite`` refuses with an OverflowError)."""
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
+
+
 def finite(owner: str, **values: float) -> None:
     for key, value in values.items():
-        if not math.isfinite(value):
-            raise ValueError(f'{owner}: {key} must be finite (got {value})')
+        if not is_finite(value):
+            shown = f"a {len(str(value))}-digit number" if isinstance(value, int) else value
+            raise ValueError(f'{owner}: {key} must be finite (got {shown})')
 
 
 def non_negative(owner: str, **values: float) -> None:

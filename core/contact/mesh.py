@@ -127,13 +127,14 @@ class MeshPath(ColliderPath):
         """Closest points of local points l (k, 3) on the mesh at their times s (k,), within
         ``reach`` (one for all, or (k,) one each).
 
-        Returns (found, point, diff = l - point, distance, face normal, triangle, side): side is
-        +1/-1 in front of/behind the surface, 0 where not found, on the surface, or nearest to
-        an open boundary edge or corner. In front or behind is judged by the angle-weighted
-        pseudo-normal of the nearest feature (its face, edge or corner): a point nearest an
-        edge or a corner is on the side the surface around it faces (by the nearest
-        triangle's own face normal, a point off an acute edge of a closed mesh could be judged
-        behind it, metres outside).
+        Returns (found, point, diff = l - point, distance, face normal, triangle, side,
+        outside, outward): side is +1/-1 in front of/behind the nearest triangle's face (what
+        a contact normal faces: :meth:`_facing`), outside +1/-1 in front of/behind the surface
+        around the nearest feature, judged by its angle-weighted pseudo-normal ``outward``
+        (what side tracking compares: by the nearest triangle's own face, a point off an
+        acute edge of a closed mesh is behind one of its faces, metres outside it); both 0
+        where not found, on the surface, or nearest to an open boundary edge or corner. At
+        per-point times on a deforming mesh both are the face's.
         """
         values = np.unique(s)
         bvh = self.bvh_at(values[-1])
@@ -141,7 +142,8 @@ class MeshPath(ColliderPath):
         found = cp.triangle >= 0
         tri = np.where(found, cp.triangle, 0)
         q, feature = cp.point, cp.feature
-        if len(values) > 1 and self.deforming:
+        one_time = not (len(values) > 1 and self.deforming)
+        if not one_time:
             # per-point times (re-tests after a hit): the triangle found at the latest time,
             # evaluated at each point's own time
             corners = self._corners(tri, s)
@@ -153,10 +155,13 @@ class MeshPath(ColliderPath):
         diff = l - q
         dist = norm_rows(diff)
         feature = np.maximum(feature, 0)
-        on_boundary = self._boundary[tri, feature]
-        pseudo = take(bvh.mesh.feature_normals, 7 * tri + feature)
-        side = np.where(found & ~on_boundary, np.sign(np.einsum("ij,ij->i", diff, pseudo)), 0.0)
-        return found, q, diff, dist, face, tri, side
+        valid = found & ~self._boundary[tri, feature]
+        side = np.where(valid, np.sign(np.einsum("ij,ij->i", diff, face)), 0.0)
+        outside, outward = side, face
+        if one_time:  # (the pseudo-normals are the mesh's at that one time)
+            outward = take(bvh.mesh.feature_normals, 7 * tri + feature)
+            outside = np.where(valid, np.sign(np.einsum("ij,ij->i", diff, outward)), 0.0)
+        return found, q, diff, dist, face, tri, side, outside, outward
 
     def _touching(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """(k,) whether triangles a and b are the same or share a (welded) corner."""
@@ -286,13 +291,13 @@ class MeshPath(ColliderPath):
         # search as wide as the fastest particle's)
         l0, l1, sa, sb, r = l0[cand], l1[cand], s_start[cand], s_end[cand], reach[cand]
         entries = self._segment_entries(l0, l1, sb)
-        side0 = tri0 = None
+        side0 = tri0 = outside0 = None
         if not self._still:
-            _, _, _, _, _, tri0, side0 = self._closest(l0, sa, r)
+            _, _, _, _, _, tri0, side0, outside0, _ = self._closest(l0, sa, r)
         if self.deforming and entries.hit.any():
             self._drop_entries_from_behind(entries, l0, sa, tri0, side0)
         if not (self._still and self.frame.thickness == 0.0):
-            self._late_entries(entries, l1, sb, r, side0)
+            self._late_entries(entries, l1, sb, r, outside0)
         return entries.hits(cand)
 
     def _segment_entries(self, l0: np.ndarray, l1: np.ndarray, sb: np.ndarray) -> _Entries:
@@ -331,18 +336,26 @@ class MeshPath(ColliderPath):
         found.hit[g[side * np.where(found.front[g], 1.0, -1.0) < 0.0]] = False
 
     def _late_entries(self, found: _Entries, l1: np.ndarray, sb: np.ndarray, r: np.ndarray,
-                      side0: np.ndarray | None) -> None:
+                      outside0: np.ndarray | None) -> None:
         """Hits at t = 1 on the end-time surface, for segments ``found`` did not hit: the mesh
-        moved over the particle (its side changed from side0), or the particle ended within
+        moved over the particle (its side changed from outside0), or the particle ended within
         the thickness (out to the grown surface). Modifies ``found`` in place."""
         k = len(l1)
-        f1, q1, diff1, d1, face1, tri1, side1 = self._closest(l1, sb, r)
+        f1, q1, diff1, d1, face1, tri1, side1, outside1, outward1 = self._closest(l1, sb, r)
         late = np.zeros(k, bool)
         late_n = np.zeros((k, 3))
         if not self._still:  # the mesh moving over a particle: a side change without a hit
-            crossed = ~found.hit & (side0 * side1 < 0.0)
+            # (judged by the surface around each nearest feature, not by the nearest
+            # triangle's own face: a particle flying past an acute edge of a closed mesh,
+            # metres outside it, changed sides by those)
+            crossed = ~found.hit & (outside0 * outside1 < 0.0)
             late |= crossed
-            late_n[crossed] = face1[crossed] * side0[crossed, None]
+            # facing the side it came from: the nearest face turned outward, times that side
+            # (a face of no area: the surface's own outward normal there)
+            c = np.nonzero(crossed)[0]
+            turn = np.sign(np.einsum("ij,ij->i", face1[c], outward1[c]))
+            late_n[c] = np.where((turn != 0.0)[:, None], face1[c] * (turn * outside0[c])[:, None],
+                                 outward1[c] * outside0[c, None])
         if self.frame.thickness > 0.0:  # ends within the thickness: out to the grown surface
             near = ~found.hit & ~late & f1
             near[near] = self._world_length(diff1[near], sb[near]) < self.frame.thickness
@@ -383,7 +396,7 @@ class MeshPath(ColliderPath):
         cand = self._near_box(l, l, reach)
         if len(cand) == 0:
             return SurfacePoints.none()
-        found, q, diff, dist, face, tri, side = self._closest(l[cand], s[cand], reach)
+        found, q, diff, dist, face, tri, side, _, _ = self._closest(l[cand], s[cand], reach)
         n_local = self._facing(diff, dist, face, side, 1.0)
         p_w, n_w = self.to_world(q, n_local, s[cand])
         gap = np.einsum("ij,ij->i", x[cand] - p_w, n_w) - self.frame.thickness
@@ -449,9 +462,11 @@ class MeshHierarchies:
 
     def in_use(self, count: int) -> None:
         """``count`` mesh colliders take part in the frame interval being made: every one of
-        them is kept (at least ``capacity``; with more than that, a cache of fewer would
-        build each one's hierarchy again every frame)."""
-        self._in_use = count
+        them is kept, and every one of those asked for just before (a frame asks once for the
+        scene's colliders, then again with the rigid bodies'), at least ``capacity``: a cache
+        of fewer would build each one's hierarchy again every frame."""
+        self._in_use = max(count, getattr(self, "_asked", 0))
+        self._asked = count
 
     def _keep(self, table: dict, name: str, value) -> None:
         """``table[name] = value``, last (the most recently used); a new name first makes room

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..curves import LifeCurve
-from ..validate import finite, matrix, non_negative
+from ..validate import finite, is_finite, matrix, non_negative
 
 SOURCES = ("ORIGIN", "VERTS", "FACES", "VOLUME", "DEATHS")
 DIRECTIONS = ("NORMAL", "AXIS", "RANDOM")
@@ -247,10 +247,10 @@ class EmitterFrame:
                 0.0 <= self.speed < inf and 0.0 <= self.speed_random < inf and
                 0.0 <= self.lifetime_random <= self.lifetime < inf and
                 0.0 <= self.size_random <= self.size < inf and 0.0 <= self.spread < inf and
-                math.isfinite(self.inherit_velocity) and self.mass > 0.0 and
-                math.isfinite(self.mass) and self.rate + self.rate_random <=
-                LIMIT_BIRTHS_PER_FRAME and len(launch) == 3 and math.isfinite(launch[0]) and
-                math.isfinite(launch[1]) and math.isfinite(launch[2]) and
+                is_finite(self.inherit_velocity) and self.mass > 0.0 and
+                is_finite(self.mass) and self.rate + self.rate_random <=
+                LIMIT_BIRTHS_PER_FRAME and len(launch) == 3 and is_finite(launch[0]) and
+                is_finite(launch[1]) and is_finite(launch[2]) and
                 _finite(self.matrix0, (4, 4)) and _finite(self.matrix1, (4, 4)) and
                 (self.matrices is None or _finite(self.matrices, (len(self.matrices), 4, 4)))
                 and (self.verts0 is None or _finite(self.verts0)) and
@@ -263,7 +263,7 @@ class EmitterFrame:
                       lifetime_random=self.lifetime_random, size=self.size,
                       size_random=self.size_random, spread=self.spread)
         finite(owner, inherit_velocity=self.inherit_velocity)
-        if len(self.launch) != 3 or not all(math.isfinite(v) for v in self.launch):
+        if len(self.launch) != 3 or not all(is_finite(v) for v in self.launch):
             raise ValueError(f"{owner}: launch velocity must be 3 finite numbers (got "
                              f"{tuple(self.launch)})")
         # +- random must not cross zero: a negative life span or size has no meaning, and
@@ -276,7 +276,7 @@ class EmitterFrame:
             raise ValueError(f"{owner}: size_random {self.size_random:g} is larger than size "
                              f"{self.size:g}: sizes would become negative — lower size_random or "
                              "raise size")
-        if not (self.mass > 0.0 and math.isfinite(self.mass)):
+        if not (self.mass > 0.0 and is_finite(self.mass)):
             raise ValueError(f"{owner}: mass must be > 0 (got {self.mass})")
         if self.rate + self.rate_random > LIMIT_BIRTHS_PER_FRAME:
             raise ValueError(f"{owner}: rate + rate_random may be at most "

@@ -522,3 +522,50 @@ def test_every_mesh_collider_of_a_frame_keeps_its_hierarchy(monkeypatch):
     paths.of([ColliderFrame("Other", "MESH", np.eye(4), np.eye(4), vertices0=verts,
                             vertices1=verts, triangles=tris)], DT)
     assert len(built) == 21 and len(paths.hierarchies) <= 20
+    # a frame asks twice (the scene's colliders, then with the rigid bodies'): a collider new
+    # in the first ask does not push the second's out
+    again = ColliderPaths()
+    built.clear()
+    for f in range(4):
+        scene = [ColliderFrame(f"Ground{f}", "MESH", np.eye(4), np.eye(4), vertices0=verts,
+                               vertices1=verts, triangles=tris)]
+        again.of(scene, DT)
+        again.of(scene + frames(20, f), DT)
+    assert len(built) == 20 + 4
+
+
+def _mesh_path(name, verts, tris, moved: bool, thickness: float):
+    from physanim.core.contact import ColliderPaths
+
+    m1 = np.eye(4)
+    m1[1, 3] = 1e-6 if moved else 0.0
+    return ColliderPaths().of([ColliderFrame(name, "MESH", np.eye(4), m1, thickness=thickness,
+                                             vertices0=verts, vertices1=verts,
+                                             triangles=tris)], DT)[0]
+
+
+@pytest.mark.parametrize("moved", [False, True])
+def test_contact_normals_face_the_particle_whatever_the_mesh_is_made_of(moved):
+    """A contact's normal is the nearest face turned to the particle: on a pyramid's apex
+    whose nearest triangle has no area (a face split at one edge, its gap closed by a
+    zero-area triangle) and on a roof ridge one of whose faces is wound the other way, a
+    particle falling onto the mesh is put on it, outside, moving up (judged by the surface
+    around the apex or the ridge, the zero-area face gave a zero normal and NaN, and the
+    flipped face one pointing into the roof)."""
+    from physanim.core.contact import respond
+
+    pyramid = (np.array([[0, 0, 0], [1, 1, -1], [-1, 1, -1], [-1, -1, -1], [1, -1, -1],
+                         [0.5, 0.5, -0.5]], float),
+               np.array([[0, 5, 1], [0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 5], [5, 4, 1],
+                         [1, 4, 3], [1, 3, 2]]), 0.0)
+    roof = (np.array([[0, -1, 0], [0, 1, 0], [-1, 0, -0.5], [1, 0, -0.5]], float),
+            np.array([[0, 1, 2], [0, 1, 3]]), 5e-4)
+    for verts, tris, off in (pyramid, roof):
+        path = _mesh_path("Mesh", verts, tris, moved, 0.01)
+        x0 = np.array([[off, 0.0, 0.05]])
+        v = np.array([[0.0, 0.0, -0.045 / DT]])
+        done = respond([path], x0, x0 + DT * v, v, v.copy(), 0.0, 1.0, DT, 0.1)
+        assert done.count == 1 and np.isfinite(done.x).all() and np.isfinite(done.v).all()
+        assert done.x[0, 2] > 0.0 and done.v[0, 2] > 0.0  # above the apex or ridge, going up
+        near = path.near_surface(np.array([[off, 0.0, 0.0105]]), 1.0)
+        assert np.isfinite(near.normal).all() and (near.normal[:, 2] > 0.0).all()
