@@ -276,6 +276,28 @@ def _sweeps(m: np.ndarray) -> dict:
             "growing": about(np.diag([1.3, 1.3, 1.3, 1.0]))}
 
 
+def _far_from(rng, m0: np.ndarray, m1: np.ndarray, count: int = 600) -> np.ndarray:
+    """Points far from everywhere a collider moving from m0 to m1 goes (4 to 10 times its size
+    and its move away from its start)."""
+    size = float(np.abs(m0[:3, :3]).sum()) + float(np.linalg.norm(m1[:3, 3] - m0[:3, 3]))
+    way = rng.normal(size=(count, 3))
+    return m0[:3, 3] + way / np.linalg.norm(way, axis=1, keepdims=True) * rng.uniform(
+        4.0 * size, 10.0 * size, (count, 1))
+
+
+def _counted_sweeps(monkeypatch, path, n: int) -> list:
+    """How many of ``n`` rows each of the path's segment cuts keeps (appended as it cuts)."""
+    kept = []
+    sweep_rows = type(path).sweep_rows
+
+    def counted(self, *args):
+        rows = sweep_rows(self, *args)
+        kept.append(n if rows is None else len(rows))
+        return rows
+    monkeypatch.setattr(type(path), "sweep_rows", counted)
+    return kept
+
+
 @pytest.mark.parametrize("shape", ["SPHERE", "BOX"])
 @pytest.mark.parametrize("name", list(SOLIDS))
 @pytest.mark.parametrize("motion", ["slow", "fast move", "fast turn", "growing"])
@@ -294,21 +316,11 @@ def test_a_moving_solid_cuts_segments_over_their_time_as_if_every_one_were_teste
     x1 = x0 + rng.normal(scale=0.05, size=x0.shape)
     swept = np.linspace(0.0, 1.0, 400)[:, None] * (m1[:3, 3] - m0[:3, 3]) + m0[:3, 3] + \
         rng.normal(scale=0.3, size=(400, 3)) * np.abs(np.diag(m0)[:3])
-    size = float(np.abs(m0[:3, :3]).sum()) + float(np.linalg.norm(m1[:3, 3] - m0[:3, 3]))
-    way = rng.normal(size=(600, 3))
-    far = m0[:3, 3] + way / np.linalg.norm(way, axis=1, keepdims=True) * rng.uniform(
-        4.0 * size, 10.0 * size, (600, 1))  # far from everywhere it goes
+    far = _far_from(rng, m0, m1)
     x0 = np.vstack([x0, swept, far])
     x1 = np.vstack([x1, swept, far + rng.normal(scale=0.05, size=far.shape)])
     n = len(x0)
-    kept = []
-    sweep_rows = type(path).sweep_rows
-
-    def counted(self, *args):
-        rows = sweep_rows(self, *args)
-        kept.append(n if rows is None else len(rows))
-        return rows
-    monkeypatch.setattr(type(path), "sweep_rows", counted)
+    kept = _counted_sweeps(monkeypatch, path, n)
     for times in ((np.zeros(n), np.ones(n)), (np.full(n, 0.25), np.full(n, 0.75))):
         times = times if times[0][0] else tuple(np.broadcast_to(t[:1], (n,)) for t in times)
         got = path.first_hits(x0, x1, *times)
@@ -463,20 +475,10 @@ def test_a_moving_mesh_cuts_segments_over_their_time_as_if_every_one_were_tested
                     on[:600] - [0.0, 0.0, 0.2]]) @ m0[:3, :3].T + m0[:3, 3]  # (crossing)
     swept = np.linspace(0.0, 1.0, 400)[:, None] * (m1[:3, 3] - m0[:3, 3]) + m0[:3, 3] + \
         rng.uniform(-1.0, 1.0, (400, 3)) @ m0[:3, :3].T  # lying still where it goes
-    size = float(np.abs(m0[:3, :3]).sum()) + float(np.linalg.norm(m1[:3, 3] - m0[:3, 3]))
-    way = rng.normal(size=(600, 3))
-    far = m0[:3, 3] + way / np.linalg.norm(way, axis=1, keepdims=True) * rng.uniform(
-        4.0 * size, 10.0 * size, (600, 1))
+    far = _far_from(rng, m0, m1)
     x0, x1 = np.vstack([x0, swept, far]), np.vstack([x1, swept, far + 0.05])
     n = len(x0)
-    kept = []
-    sweep_rows = type(path).sweep_rows
-
-    def counted(self, *args):
-        rows = sweep_rows(self, *args)
-        kept.append(n if rows is None else len(rows))
-        return rows
-    monkeypatch.setattr(type(path), "sweep_rows", counted)
+    kept = _counted_sweeps(monkeypatch, path, n)
     times = (np.broadcast_to(0.0, (n,)), np.broadcast_to(1.0, (n,)))
     got = path.first_hits(x0, x1, *times)
     assert kept[-1] <= n - len(far) and len(got.index) > 100
