@@ -496,7 +496,7 @@ def test_every_mesh_collider_of_a_frame_keeps_its_hierarchy(monkeypatch):
     refilled by each frame's twenty: 4 ms per collider and frame); a collider gone from the
     scene is dropped once the others need the room."""
     from physanim.core.contact import ColliderPaths
-    from physanim.core.contact import mesh as mesh_
+    from physanim.core.contact import mesh_hierarchies as mesh_
 
     built = []
     build = mesh_.build_bvh
