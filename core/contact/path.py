@@ -314,8 +314,9 @@ class ColliderPath:
         s = np.asarray(s, dtype=np.float64)
         if self.path.static:
             return self.path.m0
-        if s.ndim == 0 or (len(s) and (s.strides[0] == 0 or s.min() == s.max())):
-            return self._once(float(s.flat[0]) if s.size else 0.0)[0]
+        one = float(s) if s.ndim == 0 else uniform_time(s)
+        if one is not None:
+            return self._once(one)[0]
         return self.path.matrices(s)
 
     def _once(self, s: float) -> tuple:
