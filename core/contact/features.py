@@ -34,8 +34,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..collision.crossing import (KeptPairs, KeptTests, box_pairs, element_boxes,
-                                  segment_segment, triangle_point)
+from ..collision.crossing import box_pairs, element_boxes, segment_segment, triangle_point
+from ..collision.kept import KeptPairs, KeptTests
 from ..forces.springs import scatter_add
 from ..transforms import column_max, column_min, dot_rows, norm_rows, row_any, take
 from .contacts import Contacts

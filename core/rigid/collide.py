@@ -19,7 +19,7 @@ import numpy as np
 
 from ..transforms import cross
 from ..collision.broadphase import UniformGrid
-from ..collision.crossing import KeptPairs
+from ..collision.kept import KeptPairs
 from . import narrow, narrow_hull
 from . import quaternion as quat
 from .hull_shape import HullSet

@@ -35,8 +35,8 @@ from typing import NamedTuple
 import numpy as np
 
 from ..collision.broadphase_grid import TooManyCandidates, UniformGrid
-from ..collision.crossing import (KeptPairs, KeptTests, box_pairs, element_boxes, segment_segment,
-                                  triangle_point)
+from ..collision.crossing import box_pairs, element_boxes, segment_segment, triangle_point
+from ..collision.kept import KeptPairs, KeptTests
 from ..contact.features import FaceSet
 from ..contact.pair_solve import PointPairs, respond, separate, shares, within_cone
 from ..errors import SimulationError
@@ -93,7 +93,8 @@ class SelfCollision:
         self._faces_points = KeptPairs(partial(box_pairs,
                                                max_candidates=limit * len(faces.triangles)))
         self._edges = KeptPairs(partial(_pairs_within, max_candidates=limit * len(faces.edges)),
-                                within=True)
+                                within=True,
+                                across=partial(box_pairs, max_candidates=limit * len(faces.edges)))
         self._tests = KeptTests()  # and their tests, for the pairs whose points did not move
         self._margin: float | None = None
         self.carried: Carried | None = None
@@ -222,10 +223,14 @@ class SelfCollision:
         # the boxes sweep the motion relative to the mesh's mean motion: the pairs and their
         # gaps are the same in any frame moving with it, and a mesh falling or thrown as a
         # whole no longer sweeps each element's box across its neighbours' (a sheet falling
-        # on edge at 40 m/s: every triangle's box met 25 rows of others)
+        # on edge at 40 m/s: every triangle's box met 25 rows of others); and they are given
+        # about the mesh's centre at the start, so a mesh moving as a whole keeps its boxes
+        # within those its candidate pairs were found for (KeptPairs) from sub-step to sub-step
         drift = (x1 - x0).mean(axis=0)
-        x1_moving = x1 - drift
-        lo, hi = np.minimum(x0, x1_moving) - 0.5 * d, np.maximum(x0, x1_moving) + 0.5 * d
+        centre = x0.mean(axis=0)
+        x0_moving, x1_moving = x0 - centre, x1 - (drift + centre)
+        lo = np.minimum(x0_moving, x1_moving) - 0.5 * d
+        hi = np.maximum(x0_moving, x1_moving) + 0.5 * d
         if self._margin is None:
             self._margin = self.faces.margin(x0)
         vertex, weight, normal, depth = [], [], [], []

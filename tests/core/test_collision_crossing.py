@@ -10,9 +10,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from physanim.core.collision.crossing import (KeptPairs, KeptTests, box_pairs,
-                                              closest_on_segments, segment_segment,
+from physanim.core.collision.crossing import (box_pairs, closest_on_segments, segment_segment,
                                               triangle_point)
+from physanim.core.collision.kept import KeptPairs, KeptTests
 from physanim.core.collision.mesh import TriangleMesh
 from physanim.core.collision.shapes import box_mesh, cylinder_mesh
 from physanim.core.colouring import colour
@@ -358,6 +358,53 @@ def test_kept_pairs_equal_a_fresh_search_as_the_boxes_move(within):
     assert searches[-1] is not searches[-2]
     restored = pickle.loads(pickle.dumps(kept))
     assert restored._grown is None and restored._pairs is None and restored.within == within
+
+
+@pytest.mark.parametrize("within", [False, True])
+@pytest.mark.parametrize("one_by_one", [True, False])
+def test_kept_pairs_search_again_only_for_the_boxes_that_left_and_equal_a_fresh_search(
+        within, one_by_one, monkeypatch):
+    # A few boxes moving past their margin (some far across the set, some next to each
+    # other, some of B's too) are searched again alone — tried against every box, or through
+    # the search when they are not few — and merged into the kept pairs: the result is a fresh
+    # search's, pairs and order, at every step of a random walk; many leaving at once search
+    # everything again.
+    from physanim.core.collision import kept as kept_module
+    from physanim.core.springs.self_collision import _pairs_within
+
+    if not one_by_one:
+        monkeypatch.setattr(kept_module, "FEW_TIMES_ALL", 0)
+
+    rng = np.random.default_rng(12)
+    n = 700
+    c = rng.uniform(0.0, 1.0, (n, 3))
+    half = rng.uniform(0.005, 0.03, (n, 3))
+    kept = KeptPairs(_pairs_within, within=True) if within else KeptPairs()
+    margin = 0.01
+
+    def check(c):
+        lo, hi = c - half, c + half
+        if within:
+            got, want = kept.pairs(margin, lo, hi), _pairs_within(lo, hi)
+        else:
+            got = kept.pairs(margin, lo[:300], hi[:300], lo[300:], hi[300:])
+            want = box_pairs(lo[:300], hi[:300], lo[300:], hi[300:])
+        assert len(want[0]) > 20
+        np.testing.assert_array_equal(got[0], want[0])
+        np.testing.assert_array_equal(got[1], want[1])
+
+    check(c)
+    assert kept.searches == [1, 0]
+    for step in range(30):
+        c = c + rng.uniform(-0.002, 0.002, c.shape)  # all drift a little
+        movers = rng.choice(n, 12, replace=False)
+        c[movers] += rng.normal(0.0, 0.05, (12, 3))  # a few leave their grown boxes
+        c[movers[:2]] = c[movers[2:4]] + 0.01  # and some land on each other
+        check(c)
+    whole, partial = kept.searches
+    assert partial >= 25 and whole < 5
+    check(c + rng.normal(0.0, 0.05, c.shape))  # most leave: everything searched again
+    assert kept.searches[0] == whole + 1
 
 
 def test_kept_tests_equal_testing_every_pair_and_test_only_the_moved_ones():

@@ -256,7 +256,7 @@ def test_detections_through_kept_candidate_pairs_equal_fresh_ones(collider):
         assert fresh is not None and len(fresh.vertex) > 0
         for a, b in zip(fresh, kept):
             np.testing.assert_array_equal(a, b)
-        return [k._grown for k in near._kept.values()]  # the boxes they were found for
+        return [list(k.searches) for k in near._kept.values()]  # searches made (whole, part)
 
     down = x - (0.0, 0.0, 0.02)  # into the collider's top
     first = both(down)
@@ -268,6 +268,6 @@ def test_detections_through_kept_candidate_pairs_equal_fresh_ones(collider):
     # the sheet has no loose edges)
     searched = [0] if collider == "sphere" else [0, 1]
     moved = both(down + (0.05, 0.0, 0.0))
-    assert all(moved[k] is not first[k] for k in searched)
+    assert all(moved[k] != first[k] for k in searched)
     wider = both(down + (0.05, 0.0, 0.0), reach=0.2)
-    assert all(wider[k] is not moved[k] for k in searched)
+    assert all(wider[k] != moved[k] for k in searched)
