@@ -395,7 +395,7 @@ def test_kept_pairs_search_again_only_for_the_boxes_that_left_and_equal_a_fresh_
 
     check(c)
     assert kept.searches == [1, 0]
-    for step in range(30):
+    for _ in range(30):
         c = c + rng.uniform(-0.002, 0.002, c.shape)  # all drift a little
         movers = rng.choice(n, 12, replace=False)
         c[movers] += rng.normal(0.0, 0.05, (12, 3))  # a few leave their grown boxes
