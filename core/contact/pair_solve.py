@@ -29,8 +29,6 @@ TOLERANCE = 0.05  # a pass leaving every pair within this fraction of the gap is
 VELOCITY_PASSES = 4  # Gauss-Seidel velocity passes at most
 RELAXED_PASSES = 32  # relaxed Jacobi velocity passes at most
 SLIDE_TOLERANCE = 1e-4  # of the rest speed: a friction pass changing no slide more is the last
-APPROACH_TOLERANCE = 1e-3  # of the rest speed: a normal pass stopping no approach faster is the
-# last (a relaxed pass over a crowded heap takes about a third off the largest approach left)
 CROWD = 12  # pairs on one point beyond which passes are relaxed Jacobi, not coloured
 MIN_SHARE = 0.25  # of a pair's weight on moving points, below which pinned ones hold it
 
@@ -180,7 +178,6 @@ def respond(pairs: PointPairs, v: np.ndarray, inv_mass: np.ndarray, normal: np.n
     pushed = np.zeros(len(vertex))  # each pair's normal impulse so far
     held = np.zeros((len(vertex), 3))  # and its friction impulse
     still = SLIDE_TOLERANCE * rest_speed  # a friction change below this (m/s) changes nothing
-    stopped = APPROACH_TOLERANCE * rest_speed  # and an approach below this
     passes = RELAXED_PASSES if relax else VELOCITY_PASSES
     for _ in range(passes):
         changed = False
@@ -188,7 +185,7 @@ def respond(pairs: PointPairs, v: np.ndarray, inv_mass: np.ndarray, normal: np.n
             _, vn = normal_speed(g)
             dvn = np.maximum(floor[g] - vn, 0.0)
             if dvn.any():
-                changed |= bool(dvn.max() > stopped)
+                changed = True
                 step = dvn / denom[g]
                 pushed[g] += step * push(g, scale_rows(normal[g], step))
         if not changed:
