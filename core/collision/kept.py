@@ -78,12 +78,14 @@ class KeptPairs:
         if grown is None or any(b.shape != g.shape for b, g in zip(boxes, grown)):
             self._search(margin, boxes)
             return
-        left = [row_any(boxes[k] < grown[k]) | row_any(boxes[k + 1] > grown[k + 1])
+        # (a box with a NaN has left: the whole search refuses it, naming it)
+        left = [row_any(~(boxes[k] >= grown[k])) | row_any(~(boxes[k + 1] <= grown[k + 1]))
                 for k in range(0, len(boxes), 2)]
         count = sum(int(x.sum()) for x in left)
         if not count:
             return
-        if count > PARTIAL * sum(len(x) for x in left):
+        if count > PARTIAL * sum(len(x) for x in left) or not all(
+                np.isfinite(b[left[k // 2]]).all() for k, b in enumerate(boxes)):
             self._search(margin, boxes)
             return
         self.searches[1] += 1
