@@ -314,6 +314,22 @@ def test_box_pairs_refuse_more_candidates_than_allowed_before_making_them():
         box_pairs(a, a + 0.01, lo_b, hi_b, max_candidates=2999)
 
 
+def _kept_matches_fresh(kept: KeptPairs, margin: float, lo, hi, split: int):
+    """KeptPairs' pairs of the boxes lo, hi (within one set, or across its first ``split``
+    boxes and the rest) equal a fresh search's, pairs and order; returns them."""
+    from physanim.core.springs.self_collision import _pairs_within
+
+    if kept.within:
+        got, want = kept.pairs(margin, lo, hi), _pairs_within(lo, hi)
+    else:
+        got = kept.pairs(margin, lo[:split], hi[:split], lo[split:], hi[split:])
+        want = box_pairs(lo[:split], hi[:split], lo[split:], hi[split:])
+    assert len(want[0]) > 20
+    np.testing.assert_array_equal(got[0], want[0])
+    np.testing.assert_array_equal(got[1], want[1])
+    return want
+
+
 @pytest.mark.parametrize("within", [False, True])
 def test_kept_pairs_equal_a_fresh_search_as_the_boxes_move(within):
     # KeptPairs gives exactly box_pairs's pairs (or, within one set, the grid's), in its
@@ -332,14 +348,7 @@ def test_kept_pairs_equal_a_fresh_search_as_the_boxes_move(within):
 
     def check(c):
         lo, hi = c - half[:len(c)], c + half[:len(c)]
-        if within:
-            got, want = kept.pairs(margin, lo, hi), _pairs_within(lo, hi)
-        else:
-            got = kept.pairs(margin, lo[:200], hi[:200], lo[200:], hi[200:])
-            want = box_pairs(lo[:200], hi[:200], lo[200:], hi[200:])
-        assert len(want[0]) > 20
-        np.testing.assert_array_equal(got[0], want[0])
-        np.testing.assert_array_equal(got[1], want[1])
+        want = _kept_matches_fresh(kept, margin, lo, hi, 200)
         if within:  # only the pairs with a chosen box: the same as filtering afterwards
             only = rng.random(len(c)) < 0.2
             some = kept.pairs(margin, lo, hi, only=only)
@@ -384,15 +393,7 @@ def test_kept_pairs_search_again_only_for_the_boxes_that_left_and_equal_a_fresh_
     margin = 0.01
 
     def check(c):
-        lo, hi = c - half, c + half
-        if within:
-            got, want = kept.pairs(margin, lo, hi), _pairs_within(lo, hi)
-        else:
-            got = kept.pairs(margin, lo[:300], hi[:300], lo[300:], hi[300:])
-            want = box_pairs(lo[:300], hi[:300], lo[300:], hi[300:])
-        assert len(want[0]) > 20
-        np.testing.assert_array_equal(got[0], want[0])
-        np.testing.assert_array_equal(got[1], want[1])
+        _kept_matches_fresh(kept, margin, c - half, c + half, 300)
 
     check(c)
     assert kept.searches == [1, 0]
