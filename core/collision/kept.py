@@ -56,7 +56,11 @@ class KeptPairs:
         search within one set): just the pairs with at least one of them (the same pairs as
         filtering the result, tested fewer)."""
         boxes = (lo_a, hi_a) if self.within else (lo_a, hi_a, lo_b, hi_b)
-        self._update(margin, boxes)
+        try:
+            self._update(margin, boxes)
+        except BaseException:  # (a refused search: nothing half-updated is kept)
+            self._grown = self._pairs = None
+            raise
         i, j = self._pairs
         if only is not None and self.within:
             keep = np.flatnonzero(only[i] | only[j])
