@@ -354,3 +354,12 @@ def _across_cells(lo, hi, count_a: int, cell_lo, extent, dims,
     i, j = keep_overlapping(lo_t, hi_t, i, j)
     order = np.lexsort((j, i))
     return i[order], j[order] - count_a
+
+
+def __getattr__(name: str):
+    """KeptPairs and KeptTests, which moved to :mod:`.kept`: a checkpoint pickled before names
+    them here (imported on first use: :mod:`.kept` imports this module)."""
+    if name in ("KeptPairs", "KeptTests"):
+        from . import kept
+        return getattr(kept, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

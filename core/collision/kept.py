@@ -48,6 +48,10 @@ class KeptPairs:
         return {"find": self.find, "within": self.within, "across": self.across,
                 "_grown": None, "_pairs": None, "searches": [0, 0]}
 
+    def __setstate__(self, state: dict) -> None:
+        # (a checkpoint written before partial searches has neither of the first two)
+        self.__dict__.update({"across": box_pairs, "searches": [0, 0], **state})
+
     def pairs(self, margin: float, lo_a: np.ndarray, hi_a: np.ndarray,
               lo_b: np.ndarray | None = None, hi_b: np.ndarray | None = None,
               only: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:

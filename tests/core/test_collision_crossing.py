@@ -419,6 +419,30 @@ def test_kept_pairs_search_again_only_for_the_boxes_that_left_and_equal_a_fresh_
         check(moved)
 
 
+def test_kept_pairs_pickled_before_they_moved_to_kept_load_and_search(monkeypatch):
+    # a checkpoint written before KeptPairs moved to kept.py (and had partial searches) names
+    # it in crossing.py, with none of the new attributes: it loads and searches as a new one
+    import pickle
+
+    from physanim.core.springs.self_collision import _pairs_within
+
+    kept = KeptPairs(_pairs_within, within=True)
+    monkeypatch.setattr(KeptPairs, "__getstate__", lambda self: {
+        "find": self.find, "within": self.within, "_grown": None, "_pairs": None})
+    data = pickle.dumps(kept, protocol=2)
+    monkeypatch.undo()
+    assert b"physanim.core.collision.kept" in data
+    old = pickle.loads(data.replace(b"physanim.core.collision.kept",
+                                    b"physanim.core.collision.crossing"))
+    assert type(old) is KeptPairs and old.find is _pairs_within
+    rng = np.random.default_rng(13)
+    c, half = rng.uniform(0.0, 1.0, (500, 3)), rng.uniform(0.005, 0.03, (500, 3))
+    _kept_matches_fresh(old, 0.01, c - half, c + half, 0)
+    c[:5] += 0.1  # a few leave: a partial search
+    _kept_matches_fresh(old, 0.01, c - half, c + half, 0)
+    assert old.searches == [1, 1]
+
+
 def test_kept_tests_equal_testing_every_pair_and_test_only_the_moved_ones():
     # A detection after a separating round (some end points moved, the starts the same) gives
     # the same separations as testing every pair, to the bit, and tests only the pairs with
