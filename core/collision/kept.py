@@ -69,15 +69,7 @@ class KeptPairs:
         if only is not None and self.within:
             keep = np.flatnonzero(only[i] | only[j])
             i, j = i[keep], j[keep]
-        lo_b, hi_b = boxes[-2:]
-        for a in range(3):  # axis by axis, the pairs compacted after each (1-D gathers)
-            if not len(i):
-                break
-            ok = lo_a[:, a][i] <= hi_b[:, a][j]
-            ok &= lo_b[:, a][j] <= hi_a[:, a][i]
-            keep = np.flatnonzero(ok)
-            i, j = i[keep], j[keep]
-        return i, j
+        return _overlapping(lo_a, hi_a, *boxes[-2:], i, j)
 
     def _update(self, margin: float, boxes: tuple[np.ndarray, ...]) -> None:
         """The kept pairs made to hold for ``boxes``: as they were, partly or wholly searched
@@ -157,10 +149,19 @@ def _few_with_all(lo_f: np.ndarray, hi_f: np.ndarray, lo: np.ndarray, hi: np.nda
     if len(lo_f) * len(lo) > FEW_TIMES_ALL:
         return search(lo_f, hi_f, lo, hi)
     f, j = np.nonzero((lo_f[:, None, 0] <= hi[None, :, 0]) & (lo[None, :, 0] <= hi_f[:, None, 0]))
-    for a in (1, 2):
-        keep = np.flatnonzero((lo_f[:, a][f] <= hi[:, a][j]) & (lo[:, a][j] <= hi_f[:, a][f]))
-        f, j = f[keep], j[keep]
-    return f, j
+    return _overlapping(lo_f, hi_f, lo, hi, f, j, axes=(1, 2))
+
+
+def _overlapping(lo_a, hi_a, lo_b, hi_b, i: np.ndarray, j: np.ndarray, axes=(0, 1, 2)
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """The pairs (i into A's boxes, j into B's) that overlap on every axis of ``axes``, axis by
+    axis, compacted after each (1-D gathers)."""
+    for a in axes:
+        if not len(i):
+            break
+        keep = np.flatnonzero((lo_a[:, a][i] <= hi_b[:, a][j]) & (lo_b[:, a][j] <= hi_a[:, a][i]))
+        i, j = i[keep], j[keep]
+    return i, j
 
 
 def _merged(i: np.ndarray, j: np.ndarray, new_i: np.ndarray, new_j: np.ndarray, n: int

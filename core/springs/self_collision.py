@@ -92,9 +92,9 @@ class SelfCollision:
         limit = SEARCH_LIMIT * CROWD_LIMIT
         self._faces_points = KeptPairs(partial(box_pairs,
                                                max_candidates=limit * len(faces.triangles)))
-        self._edges = KeptPairs(partial(_pairs_within, max_candidates=limit * len(faces.edges)),
-                                within=True,
-                                across=partial(box_pairs, max_candidates=limit * len(faces.edges)))
+        per_edges = limit * len(faces.edges)
+        self._edges = KeptPairs(partial(_pairs_within, max_candidates=per_edges), within=True,
+                                across=partial(box_pairs, max_candidates=per_edges))
         self._tests = KeptTests()  # and their tests, for the pairs whose points did not move
         self._margin: float | None = None
         self.carried: Carried | None = None
