@@ -28,6 +28,8 @@ PASSES = 16  # position passes at most
 TOLERANCE = 0.05  # a pass leaving every pair within this fraction of the gap is the last
 VELOCITY_PASSES = 4  # Gauss-Seidel velocity passes at most
 RELAXED_PASSES = 32  # relaxed Jacobi velocity passes at most
+RELAXED_TOLERANCE = 1e-3  # of the rest speed: relaxed normal passes end once no pair approaches
+# faster (Gauss-Seidel's end once none approaches at all: each of its pairs is solved exactly)
 SLIDE_TOLERANCE = 1e-4  # of the rest speed: a friction pass changing no slide more is the last
 CROWD = 12  # pairs on one point beyond which passes are relaxed Jacobi, not coloured
 MIN_SHARE = 0.25  # of a pair's weight on moving points, below which pinned ones hold it
@@ -153,9 +155,14 @@ def respond(pairs: PointPairs, v: np.ndarray, inv_mass: np.ndarray, normal: np.n
     resting pile creep over each other: where a heap crowds dozens of pairs on a point, the
     relaxed passes give each pair a small part of its push at a time. Friction interleaved
     with the normal passes made the Gauss-Seidel order show: a cloth striking a box square
-    spun it five times faster.) ``coloured``: see :func:`_groups`. ``impulses``: a list, given
-    each row's normal impulse (c,) and friction impulse (c, 3) (per unit weight: point k of
-    a row took weight_k times them). Returns the pairs that can move (rows)."""
+    spun it five times faster.) ``coloured``: see :func:`_groups`. Relaxed normal passes
+    (crowded points) end once no pair approaches faster than RELAXED_TOLERANCE of the rest
+    speed: each gives a pair only a part of its push, so an approach never reaches exactly
+    zero, and all RELAXED_PASSES ran, the last ones for approaches of 1e-9 m/s. (Gauss-Seidel
+    passes end once none approaches at all; such a tolerance there left a cloth draped on
+    Suzanne creeping, never asleep.) ``impulses``: a list, given each row's normal impulse (c,)
+    and friction impulse (c, 3) (per unit weight: point k of a row took weight_k times them).
+    Returns the pairs that can move (rows)."""
     vertex, weight = pairs.vertex, pairs.weight
     share, denom, rows = shares(pairs, inv_mass)
     groups = _groups(pairs, rows, inv_mass, coloured) if len(rows) else []
@@ -178,6 +185,8 @@ def respond(pairs: PointPairs, v: np.ndarray, inv_mass: np.ndarray, normal: np.n
     pushed = np.zeros(len(vertex))  # each pair's normal impulse so far
     held = np.zeros((len(vertex), 3))  # and its friction impulse
     still = SLIDE_TOLERANCE * rest_speed  # a friction change below this (m/s) changes nothing
+    # a relaxed pass leaving no approach faster than this is the last
+    enough = RELAXED_TOLERANCE * rest_speed if relax else 0.0
     passes = RELAXED_PASSES if relax else VELOCITY_PASSES
     for _ in range(passes):
         changed = False
@@ -185,7 +194,7 @@ def respond(pairs: PointPairs, v: np.ndarray, inv_mass: np.ndarray, normal: np.n
             _, vn = normal_speed(g)
             dvn = np.maximum(floor[g] - vn, 0.0)
             if dvn.any():
-                changed = True
+                changed = changed or dvn.max() > enough
                 step = dvn / denom[g]
                 pushed[g] += step * push(g, scale_rows(normal[g], step))
         if not changed:
