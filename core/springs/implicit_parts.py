@@ -203,12 +203,15 @@ class StepMemory:
         warm_t: the step time [s] of ``warm[0]``.
         smooth: for each of them, whether its step pressed no vertex on a collider.
         end: ``(x, v, energy)`` at the end of the last step, when the Newton check computed it.
+        friction: the last friction solve's correction to the velocities (n, 3), or None: the
+            next one's first guess.
     """
 
     warm: list = field(default_factory=list)
     warm_t: float | None = None
     smooth: list = field(default_factory=list)
     end: tuple | None = None
+    friction: np.ndarray | None = None
 
 
 def positions_and_velocities(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
