@@ -22,7 +22,7 @@ import numpy as np
 
 from ..colouring import colour
 from ..forces.springs import scatter_add
-from ..transforms import divide_rows, dot_rows, norm_rows, scale_rows
+from ..transforms import divide_rows, dot_rows, norm_rows, row_any, row_max, scale_rows
 
 PASSES = 16  # position passes at most
 TOLERANCE = 0.05  # a pass leaving every pair within this fraction of the gap is the last
@@ -88,19 +88,20 @@ def _groups(pairs: PointPairs, rows: np.ndarray, inv_mass: np.ndarray,
     return colour(vertex, inv_mass > 0.0) if coloured else None
 
 
-def _apply(x: np.ndarray, vertex: np.ndarray, delta: np.ndarray, relax: bool):
-    """x[vertex] += delta ((c, k) points, (c, k, 3) moves). ``relax``: a Jacobi pass — each
-    pair's moves scaled by one over the most pairs moving any of its points, the same factor
-    for all its points, so a pair's equal and opposite impulses stay so (momentum kept) and
-    no point takes more than about one full push. Returns the share of each pair's move
-    applied ((c,) or 1.0)."""
+def _apply(x: np.ndarray, vertex: np.ndarray, share: np.ndarray, impulse: np.ndarray,
+           relax: bool):
+    """x[vertex] += share (x) impulse: each pair's points (c, k) moved by their shares (c, k)
+    of its impulse (c, 3). ``relax``: a Jacobi pass — each pair's impulse scaled by one over
+    the most pairs moving any of its points, the same factor for all its points, so a pair's
+    equal and opposite impulses stay so (momentum kept) and no point takes more than about
+    one full push. Returns the share of each pair's impulse applied ((c,) or 1.0)."""
     scale = 1.0
     if relax:
-        moves = np.any(delta != 0.0, axis=2)
+        moves = (share != 0.0) & row_any(impulse != 0.0)[:, None]
         count = np.bincount(vertex[moves], minlength=len(x))
-        scale = 1.0 / np.maximum(np.where(moves, count[vertex], 0).max(axis=1), 1)
-        delta = scale_rows(delta.reshape(len(delta), -1), scale).reshape(delta.shape)
-    scatter_add(x, vertex, delta)
+        scale = 1.0 / np.maximum(row_max(np.where(moves, count[vertex], 0)), 1)
+        impulse = scale_rows(impulse, scale)
+    scatter_add(x, vertex, _outer(share, impulse))
     return scale
 
 
@@ -138,10 +139,30 @@ def separate(pairs: PointPairs, x: np.ndarray, inv_mass: np.ndarray,
         for g in [np.arange(len(rows))] if relax else groups:
             g = rows[g]
             step = np.maximum(short(g), 0.0) / denom[g]
-            _apply(x, vertex[g], _outer(scale_rows(share[g], step), normal[g]), relax)
+            _apply(x, vertex[g], scale_rows(share[g], step), normal[g], relax)
         if short(rows).max() <= TOLERANCE * pairs.gap:
             break
     return np.unique(vertex[rows])
+
+
+class _Part(NamedTuple):
+    """Rows ``rows`` of a response's pairs and their arrays (points, weights, normals, the
+    anchors' velocities, shares, sums), gathered once for all its passes."""
+
+    rows: np.ndarray
+    vertex: np.ndarray
+    weight: np.ndarray
+    normal: np.ndarray
+    surface: np.ndarray
+    share: np.ndarray
+    denom: np.ndarray
+
+    @classmethod
+    def of(cls, rows: np.ndarray, *arrays: np.ndarray) -> _Part:
+        return cls(rows, *(a[rows] for a in arrays))
+
+    def take(self, mask: np.ndarray) -> _Part:
+        return _Part(*(a[mask] for a in self))
 
 
 def respond(pairs: PointPairs, v: np.ndarray, inv_mass: np.ndarray, normal: np.ndarray,
@@ -167,21 +188,24 @@ def respond(pairs: PointPairs, v: np.ndarray, inv_mass: np.ndarray, normal: np.n
     share, denom, rows = shares(pairs, inv_mass)
     groups = _groups(pairs, rows, inv_mass, coloured) if len(rows) else []
     relax = groups is None
-    groups = [rows] if relax else [rows[g] for g in groups]
+    # each group's rows of the pairs' arrays, gathered once for all the passes
+    parts = [_Part.of(g, vertex, weight, normal, surface, share, denom)
+             for g in ([rows] if relax else [rows[g] for g in groups])]
 
-    def normal_speed(g):
-        rel = np.einsum("ck,ckj->cj", weight[g], v[vertex[g]]) - surface[g]
-        return rel, dot_rows(rel, normal[g])
+    def normal_speed(p: _Part):
+        rel = np.einsum("ck,ckj->cj", p.weight, v[p.vertex]) - p.surface
+        return rel, dot_rows(rel, p.normal)
 
-    def push(g, impulse):  # impulse (per unit weight) (g, 3) on pairs g: the share applied
-        return _apply(v, vertex[g], _outer(share[g], impulse), relax)
+    def push(p: _Part, impulse):  # impulse (per unit weight) (g, 3) on p: the share applied
+        return _apply(v, p.vertex, p.share, impulse, relax)
 
-    _, vn = normal_speed(rows)
+    _, vn = normal_speed(_Part.of(rows, vertex, weight, normal, surface, share, denom))
     # what each pair's normal speed must reach: a bounce when approaching faster than the
     # rest speed, resting contact when slower, nothing for a separating pair
     e = restitution
     floor = np.full(len(vertex), -np.inf)
     floor[rows] = np.where(vn < 0.0, np.where(-e * vn > rest_speed, -e * vn, 0.0), -np.inf)
+    floors = [floor[p.rows] for p in parts]
     pushed = np.zeros(len(vertex))  # each pair's normal impulse so far
     held = np.zeros((len(vertex), 3))  # and its friction impulse
     still = SLIDE_TOLERANCE * rest_speed  # a friction change below this (m/s) changes nothing
@@ -190,19 +214,41 @@ def respond(pairs: PointPairs, v: np.ndarray, inv_mass: np.ndarray, normal: np.n
     passes = RELAXED_PASSES if relax else VELOCITY_PASSES
     for _ in range(passes):
         changed = False
-        for g in groups:
-            _, vn = normal_speed(g)
-            dvn = np.maximum(floor[g] - vn, 0.0)
+        for p, f in zip(parts, floors):
+            _, vn = normal_speed(p)
+            dvn = np.maximum(f - vn, 0.0)
             if dvn.any():
                 changed = changed or dvn.max() > enough
-                step = dvn / denom[g]
-                pushed[g] += step * push(g, scale_rows(normal[g], step))
+                step = dvn / p.denom
+                pushed[p.rows] += step * push(p, scale_rows(p.normal, step))
         if not changed:
             break
     if impulses is not None:
         impulses[:] = [pushed, held]
     if friction <= 0.0:
         return rows
+    parts = [p.take(pushed[p.rows] > 0.0) for p in parts]
+    for _ in range(passes):
+        changed = False
+        for p in parts:
+            if not len(p.rows):
+                continue
+            rel, vn = normal_speed(p)
+            slide = rel - scale_rows(p.normal, vn)
+            # the impulse that stops the slide, within the cone
+            was = held[p.rows]
+            want = within_cone(was - divide_rows(slide, p.denom), friction * pushed[p.rows])
+            delta = want - was
+            moved = norm_rows(delta) * p.denom > still
+            if moved.any():
+                changed = True
+                q, delta = p.take(moved), delta[moved]
+                applied = push(q, delta)
+                held[q.rows] += delta * applied if np.ndim(applied) == 0 else \
+                    scale_rows(delta, applied)
+        if not changed:
+            break
+    return rows
     groups = [g[pushed[g] > 0.0] for g in groups]
     for _ in range(passes):
         changed = False
