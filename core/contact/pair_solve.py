@@ -127,33 +127,35 @@ def separate(pairs: PointPairs, x: np.ndarray, inv_mass: np.ndarray,
     vertex, weight, normal = pairs.vertex, pairs.weight, pairs.normal
     share, denom, rows = shares(pairs, inv_mass)
 
-    def short(rows):
-        q = np.einsum("ck,ckj->cj", weight[rows], x[vertex[rows]])
-        return pairs.gap - dot_rows(q - pairs.anchor[rows], normal[rows])
+    def short(p: _Part):
+        q = np.einsum("ck,ckj->cj", p.weight, x[p.vertex])
+        return pairs.gap - dot_rows(q - p.still, p.normal)
 
-    if not len(rows) or short(rows).max() <= TOLERANCE * pairs.gap:
+    arrays = (vertex, weight, normal, pairs.anchor, share, denom)
+    every = _Part.of(rows, *arrays)
+    if not len(rows) or short(every).max() <= TOLERANCE * pairs.gap:
         return None
     groups = _groups(pairs, rows, inv_mass, coloured)
     relax = groups is None
+    parts = [every] if relax else [_Part.of(rows[g], *arrays) for g in groups]
     for _ in range(PASSES):
-        for g in [np.arange(len(rows))] if relax else groups:
-            g = rows[g]
-            step = np.maximum(short(g), 0.0) / denom[g]
-            _apply(x, vertex[g], scale_rows(share[g], step), normal[g], relax)
-        if short(rows).max() <= TOLERANCE * pairs.gap:
+        for p in parts:
+            step = np.maximum(short(p), 0.0) / p.denom
+            _apply(x, p.vertex, scale_rows(p.share, step), p.normal, relax)
+        if short(every).max() <= TOLERANCE * pairs.gap:
             break
     return np.unique(vertex[rows])
 
 
 class _Part(NamedTuple):
-    """Rows ``rows`` of a response's pairs and their arrays (points, weights, normals, the
-    anchors' velocities, shares, sums), gathered once for all its passes."""
+    """Rows ``rows`` of the pairs and their arrays (points, weights, normals, the still part —
+    the anchors, or their velocities —, shares, sums), gathered once for all the passes."""
 
     rows: np.ndarray
     vertex: np.ndarray
     weight: np.ndarray
     normal: np.ndarray
-    surface: np.ndarray
+    still: np.ndarray
     share: np.ndarray
     denom: np.ndarray
 
@@ -193,7 +195,7 @@ def respond(pairs: PointPairs, v: np.ndarray, inv_mass: np.ndarray, normal: np.n
              for g in ([rows] if relax else [rows[g] for g in groups])]
 
     def normal_speed(p: _Part):
-        rel = np.einsum("ck,ckj->cj", p.weight, v[p.vertex]) - p.surface
+        rel = np.einsum("ck,ckj->cj", p.weight, v[p.vertex]) - p.still
         return rel, dot_rows(rel, p.normal)
 
     def push(p: _Part, impulse):  # impulse (per unit weight) (g, 3) on p: the share applied
