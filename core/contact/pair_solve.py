@@ -198,8 +198,8 @@ def respond(pairs: PointPairs, v: np.ndarray, inv_mass: np.ndarray, normal: np.n
         rel = np.einsum("ck,ckj->cj", p.weight, v[p.vertex]) - p.still
         return rel, dot_rows(rel, p.normal)
 
-    def push(p: _Part, impulse):  # impulse (per unit weight) (g, 3) on p: the share applied
-        return _apply(v, p.vertex, p.share, impulse, relax)
+    def push(vertex, share, impulse):  # impulse (per unit weight) (g, 3) on pairs of these
+        return _apply(v, vertex, share, impulse, relax)  # points and shares: the share applied
 
     _, vn = normal_speed(_Part.of(rows, vertex, weight, normal, surface, share, denom))
     # what each pair's normal speed must reach: a bounce when approaching faster than the
@@ -222,7 +222,7 @@ def respond(pairs: PointPairs, v: np.ndarray, inv_mass: np.ndarray, normal: np.n
             if dvn.any():
                 changed = changed or dvn.max() > enough
                 step = dvn / p.denom
-                pushed[p.rows] += step * push(p, scale_rows(p.normal, step))
+                pushed[p.rows] += step * push(p.vertex, p.share, scale_rows(p.normal, step))
         if not changed:
             break
     if impulses is not None:
@@ -244,9 +244,9 @@ def respond(pairs: PointPairs, v: np.ndarray, inv_mass: np.ndarray, normal: np.n
             moved = norm_rows(delta) * p.denom > still
             if moved.any():
                 changed = True
-                q, delta = p.take(moved), delta[moved]
-                applied = push(q, delta)
-                held[q.rows] += delta * applied if np.ndim(applied) == 0 else \
+                delta = delta[moved]
+                applied = push(p.vertex[moved], p.share[moved], delta)
+                held[p.rows[moved]] += delta * applied if np.ndim(applied) == 0 else \
                     scale_rows(delta, applied)
         if not changed:
             break
