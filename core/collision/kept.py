@@ -34,23 +34,29 @@ class KeptPairs:
             the pairs (i < j) among one set of boxes; both sorted by i, then j.
         across: the search across two sets a partial search uses for a set of one
             (``within=True``; default :func:`~.crossing.box_pairs`).
+        exclude: ``exclude(i, j) -> (c,) bool``, the pairs never wanted (e.g. a mesh's
+            elements that share a vertex: neighbours' boxes always overlap, and they were
+            most of a cloth's candidates), dropped as they are found: the pairs are a fresh
+            search's without them. None: none.
     """
 
-    def __init__(self, find=None, within: bool = False, across=None):
+    def __init__(self, find=None, within: bool = False, across=None, exclude=None):
         self.find = box_pairs if find is None else find
         self.within = within
         self.across = box_pairs if across is None else across
+        self.exclude = exclude
         self._grown: tuple[np.ndarray, ...] | None = None
         self._pairs: tuple[np.ndarray, np.ndarray] | None = None
         self.searches = [0, 0]  # (whole, partial) searches made: for benchmarks and tests
 
     def __getstate__(self):
         return {"find": self.find, "within": self.within, "across": self.across,
-                "_grown": None, "_pairs": None, "searches": [0, 0]}
+                "exclude": self.exclude, "_grown": None, "_pairs": None, "searches": [0, 0]}
 
     def __setstate__(self, state: dict) -> None:
-        # (a checkpoint written before partial searches has neither of the first two)
-        self.__dict__.update({"across": box_pairs, "searches": [0, 0], **state})
+        # (a checkpoint written before partial searches has none of the first three)
+        self.__dict__.update({"across": box_pairs, "searches": [0, 0], "exclude": None,
+                              **state})
 
     def pairs(self, margin: float, lo_a: np.ndarray, hi_a: np.ndarray,
               lo_b: np.ndarray | None = None, hi_b: np.ndarray | None = None,
@@ -103,12 +109,18 @@ class KeptPairs:
             stay = ~(out_a[i] | out_b[j])
             new_i, new_j = self._across_of(np.flatnonzero(out_a), np.flatnonzero(out_b))
             n = len(out_b)
-        self._pairs = _merged(i[stay], j[stay], new_i, new_j, n)
+        self._pairs = _merged(i[stay], j[stay], *self._wanted(new_i, new_j), n)
 
     def _search(self, margin: float, boxes: tuple[np.ndarray, ...]) -> None:
         self.searches[0] += 1
         self._grown = tuple(b + (margin if k % 2 else -margin) for k, b in enumerate(boxes))
-        self._pairs = self.find(*self._grown)
+        self._pairs = self._wanted(*self.find(*self._grown))
+
+    def _wanted(self, i: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if self.exclude is None or not len(i):
+            return i, j
+        keep = np.flatnonzero(~self.exclude(i, j))
+        return i[keep], j[keep]
 
     def _within_of(self, moved: np.ndarray, out: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The grown pairs (i < j) of the boxes ``moved`` (indices; ``out`` the same as a mask)

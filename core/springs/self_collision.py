@@ -89,12 +89,16 @@ class SelfCollision:
         self.distance = float(distance)
         self.friction = float(friction)
         # the candidate pairs, kept between detections (the same pairs as a fresh search)
+        # (without the pairs that share a vertex: a triangle and its corners, edges meeting at a
+        # point — always near, never tested, and most of the candidates)
         limit = SEARCH_LIMIT * CROWD_LIMIT
         self._faces_points = KeptPairs(partial(box_pairs,
-                                               max_candidates=limit * len(faces.triangles)))
+                                               max_candidates=limit * len(faces.triangles)),
+                                       exclude=partial(_corner_of, faces.triangles))
         per_edges = limit * len(faces.edges)
         self._edges = KeptPairs(partial(_pairs_within, max_candidates=per_edges), within=True,
-                                across=partial(box_pairs, max_candidates=per_edges))
+                                across=partial(box_pairs, max_candidates=per_edges),
+                                exclude=partial(_edges_meet, faces.edges))
         self._tests = KeptTests()  # and their tests, for the pairs whose points did not move
         self._margin: float | None = None
         self.carried: Carried | None = None
@@ -238,8 +242,6 @@ class SelfCollision:
         if len(tris):
             i, j = self._search(self._faces_points, "triangle", x0, x1,
                                 *element_boxes(lo, hi, tris), lo, hi)
-            keep = ~row_any(tris[i] == j[:, None])
-            i, j = i[keep], j[keep]
             if len(i):
                 sep = self._tests.separations(
                     "faces", i * len(x0) + j, row_any(moved[tris[i]]) | moved[j],
@@ -254,19 +256,16 @@ class SelfCollision:
         if len(edges):
             i, j = self._search(self._edges, "edge", x0, x1, *element_boxes(lo, hi, edges))
             a, b = edges[i], edges[j]
-            keep = ~row_any(np.stack([a[:, 0] == b[:, 0], a[:, 0] == b[:, 1], a[:, 1] == b[:, 0],
-                                     a[:, 1] == b[:, 1]], axis=1))
-            a, b = a[keep], b[keep]
             if len(a):
                 sep = self._tests.separations(
-                    "edges", i[keep] * len(edges) + j[keep],
+                    "edges", i * len(edges) + j,
                     row_any(moved[a]) | row_any(moved[b]),
                     lambda r: segment_segment(x0[a[r, 0]], x0[a[r, 1]], x0[b[r, 0]], x0[b[r, 1]],
                                               x1[a[r, 0]], x1[a[r, 1]], x1[b[r, 0]],
                                               x1[b[r, 1]]))
                 near = sep.gap < d
                 if keys is not None:
-                    keys.append(len(tris) * len(x0) + (i[keep] * len(edges) + j[keep])[near])
+                    keys.append(len(tris) * len(x0) + (i * len(edges) + j)[near])
                 vertex.append(np.concatenate([a, b], axis=1)[near])
                 weight.append(np.concatenate([sep.weight, -sep.other], axis=1)[near])
                 normal.append(sep.normal[near])
@@ -312,3 +311,16 @@ def _pairs_within(lo: np.ndarray, hi: np.ndarray, max_candidates: int | None = N
     finds each twice and every box with itself, and took 4 x as long), which gives them so."""
     i, j = np.ascontiguousarray(UniformGrid(max_candidates=max_candidates).pairs(lo, hi).T)
     return i, j
+
+
+def _corner_of(tris: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """(c,) whether point j is a corner of triangle i."""
+    t = tris[i]
+    return (t[:, 0] == j) | (t[:, 1] == j) | (t[:, 2] == j)
+
+
+def _edges_meet(edges: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """(c,) whether edges i and j share a point."""
+    a, b = edges[i], edges[j]
+    return (a[:, 0] == b[:, 0]) | (a[:, 0] == b[:, 1]) | (a[:, 1] == b[:, 0]) | \
+        (a[:, 1] == b[:, 1])

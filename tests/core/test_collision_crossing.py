@@ -324,6 +324,10 @@ def _kept_matches_fresh(kept: KeptPairs, margin: float, lo, hi, split: int):
     else:
         got = kept.pairs(margin, lo[:split], hi[:split], lo[split:], hi[split:])
         want = box_pairs(lo[:split], hi[:split], lo[split:], hi[split:])
+    if kept.exclude is not None:  # a fresh search's pairs without the excluded ones
+        keep = ~kept.exclude(*want)
+        assert 0 < keep.sum() < len(keep)
+        want = want[0][keep], want[1][keep]
     assert len(want[0]) > 20
     np.testing.assert_array_equal(got[0], want[0])
     np.testing.assert_array_equal(got[1], want[1])
@@ -370,15 +374,23 @@ def test_kept_pairs_equal_a_fresh_search_as_the_boxes_move(within):
     assert restored._grown is None and restored._pairs is None and restored.within == within
 
 
+def _every_third(i: np.ndarray, j: np.ndarray) -> np.ndarray:
+    return (i + 2 * j) % 3 == 0
+
+
 @pytest.mark.parametrize("within", [False, True])
 @pytest.mark.parametrize("one_by_one", [True, False])
+@pytest.mark.parametrize("exclude", [None, _every_third])
 def test_kept_pairs_search_again_only_for_the_boxes_that_left_and_equal_a_fresh_search(
-        within, one_by_one, monkeypatch):
+        within, one_by_one, exclude, monkeypatch):
     # A few boxes moving past their margin (some far across the set, some next to each
     # other, some of B's too) are searched again alone — tried against every box, or through
     # the search when they are not few — and merged into the kept pairs: the result is a fresh
     # search's, pairs and order, at every step of a random walk; many leaving at once search
-    # everything again.
+    # everything again. With pairs excluded (as self-collision excludes elements that share
+    # a vertex): a fresh search's without them, through every path; pickled, it keeps the rule.
+    import pickle
+
     from physanim.core.collision import kept as kept_module
     from physanim.core.springs.self_collision import _pairs_within
 
@@ -389,7 +401,8 @@ def test_kept_pairs_search_again_only_for_the_boxes_that_left_and_equal_a_fresh_
     n = 700
     c = rng.uniform(0.0, 1.0, (n, 3))
     half = rng.uniform(0.005, 0.03, (n, 3))
-    kept = KeptPairs(_pairs_within, within=True) if within else KeptPairs()
+    kept = KeptPairs(_pairs_within, within=True, exclude=exclude) if within else \
+        KeptPairs(exclude=exclude)
     margin = 0.01
 
     def check(c):
@@ -417,6 +430,9 @@ def test_kept_pairs_search_again_only_for_the_boxes_that_left_and_equal_a_fresh_
             kept.pairs(margin, moved - half, moved + half)
         moved[5] = c[5]
         check(moved)
+    kept = pickle.loads(pickle.dumps(kept))
+    assert kept.exclude is exclude
+    check(c)
 
 
 def test_kept_pairs_pickled_before_they_moved_to_kept_load_and_search(monkeypatch):
