@@ -211,7 +211,7 @@ def respond(pairs: PointPairs, v: np.ndarray, inv_mass: np.ndarray, normal: np.n
     pushed = np.zeros(len(vertex))  # each pair's normal impulse so far
     held = np.zeros((len(vertex), 3))  # and its friction impulse
     still = SLIDE_TOLERANCE * rest_speed  # a friction change below this (m/s) changes nothing
-    # a relaxed pass leaving no approach faster than this is the last
+    # a relaxed pass finding no pair short of its target speed by more than this is the last
     enough = RELAXED_TOLERANCE * rest_speed if relax else 0.0
     passes = RELAXED_PASSES if relax else VELOCITY_PASSES
     for _ in range(passes):
@@ -247,27 +247,6 @@ def respond(pairs: PointPairs, v: np.ndarray, inv_mass: np.ndarray, normal: np.n
                 delta = delta[moved]
                 applied = push(p.vertex[moved], p.share[moved], delta)
                 held[p.rows[moved]] += delta * applied if np.ndim(applied) == 0 else \
-                    scale_rows(delta, applied)
-        if not changed:
-            break
-    return rows
-    groups = [g[pushed[g] > 0.0] for g in groups]
-    for _ in range(passes):
-        changed = False
-        for g in groups:
-            if not len(g):
-                continue
-            rel, vn = normal_speed(g)
-            slide = rel - scale_rows(normal[g], vn)
-            # the impulse that stops the slide, within the cone
-            want = within_cone(held[g] - divide_rows(slide, denom[g]), friction * pushed[g])
-            delta = want - held[g]
-            moved = norm_rows(delta) * denom[g] > still
-            if moved.any():
-                changed = True
-                g, delta = g[moved], delta[moved]
-                applied = push(g, delta)
-                held[g] += delta * applied if np.ndim(applied) == 0 else \
                     scale_rows(delta, applied)
         if not changed:
             break

@@ -359,9 +359,8 @@ class BaraffWitkin(Integrator):
         # while its friction, within the step's tolerance, took no CG iteration)
         scale = min(max(size, newton.scale, floor), self.FRICTION_SHARE * size / self.tolerance)
         linear = newton.last
-        start = self._memory.friction
-        if start is not None and start.shape != b.shape:
-            start = None
+        start = self._memory.friction  # (projected in place by CG: a copy)
+        start = start.copy() if start is not None and start.shape == b.shape else None
         delta, iterations, _ = projected_pcg(linear.apply_a, b, linear.precondition,
                                              constraints.project, self.tolerance,
                                              self.max_iterations, start, scale)

@@ -49,7 +49,8 @@ CARRY_KEEP = 0.9  # of a pair's carried force kept into the next sub-step (see C
 # Candidate pairs per triangle (vertices) or per edge (edges) beyond which a detection is
 # refused: a heap of folds has up to about 15; a mesh whose faces sweep across each other in
 # one sub-step (a closed mesh pushed flat out of deep inside a collider: over 300) would take
-# minutes per sub-step to test, and its motion is no cloth's
+# minutes per sub-step to test, and its motion is no cloth's. (Elements that share a vertex
+# are not candidates: a grid's triangle has 3 such points, its edge about 5 such edges.)
 CROWD_LIMIT = 100
 SEARCH_LIMIT = 10  # x CROWD_LIMIT: the candidate pairs per element a search may make before
 # testing their boxes (a refused search fails the same way, before filling memory)
@@ -89,20 +90,28 @@ class SelfCollision:
         self.distance = float(distance)
         self.friction = float(friction)
         # the candidate pairs, kept between detections (the same pairs as a fresh search)
-        # (without the pairs that share a vertex: a triangle and its corners, edges meeting at a
-        # point — always near, never tested, and most of the candidates)
         limit = SEARCH_LIMIT * CROWD_LIMIT
         self._faces_points = KeptPairs(partial(box_pairs,
-                                               max_candidates=limit * len(faces.triangles)),
-                                       exclude=partial(_corner_of, faces.triangles))
+                                               max_candidates=limit * len(faces.triangles)))
         per_edges = limit * len(faces.edges)
         self._edges = KeptPairs(partial(_pairs_within, max_candidates=per_edges), within=True,
-                                across=partial(box_pairs, max_candidates=per_edges),
-                                exclude=partial(_edges_meet, faces.edges))
+                                across=partial(box_pairs, max_candidates=per_edges))
+        self._leave_out_neighbours()
         self._tests = KeptTests()  # and their tests, for the pairs whose points did not move
         self._margin: float | None = None
         self.carried: Carried | None = None
         self._fresh = True  # the next update starts a sub-step's carried forces
+
+    def _leave_out_neighbours(self) -> None:
+        """The candidate pairs leave out the pairs that share a vertex (a triangle and its
+        corners, edges meeting at a point): always near, never tested, and most of the
+        candidates."""
+        self._faces_points.exclude = partial(_corner_of, self.faces.triangles)
+        self._edges.exclude = partial(_edges_meet, self.faces.edges)
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._leave_out_neighbours()  # (a checkpoint written before they were left out)
 
     def begin_substep(self) -> None:
         """The next :meth:`keep_apart` begins a sub-step: the carried forces it finds replace

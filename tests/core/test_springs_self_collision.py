@@ -267,6 +267,29 @@ def test_faces_sweeping_across_each_other_are_refused_before_the_search_fills_me
         solver.itself.keep_apart(x0, x1.copy(), np.zeros_like(x1), 0.1)
 
 
+def test_a_checkpoint_from_before_neighbours_were_left_out_still_leaves_them_out(monkeypatch):
+    """The candidate pairs leave out elements that share a vertex (a triangle and its own
+    corners, edges meeting at a point) as they are found. A checkpoint written before that
+    holds kept pairs without the rule (and the detection no longer filters them): loaded,
+    its self-collision leaves them out again, and a detection of two layers finds only pairs
+    of four different points."""
+    import pickle
+
+    from physanim.core.collision.kept import KeptPairs
+
+    model, x0, x1, _ = _two_layers(0.05, 0.004)
+    solver = SpringMeshSolver(model, "IMPLICIT", 1, frame_dt=DT, frame=1)
+    state = KeptPairs.__getstate__
+    monkeypatch.setattr(KeptPairs, "__getstate__", lambda self: {
+        k: v for k, v in state(self).items() if k != "exclude"})
+    old = pickle.loads(pickle.dumps(solver.itself))
+    monkeypatch.undo()
+    assert old._faces_points.exclude is not None and old._edges.exclude is not None
+    pairs = old._detect(x0, x1)
+    rows = np.sort(pairs.vertex, axis=1)
+    assert len(rows) > 20 and np.all(rows[:, 1:] != rows[:, :-1])
+
+
 def test_a_sheet_falling_on_edge_fast_is_not_crowded_by_its_own_fall():
     """The sweeps are taken relative to the mesh's mean motion: a 1 m sheet of 31 x 31
     vertices falling on edge at 40 m/s (0.8 m a sub-step, 25 rows of its own triangles)
