@@ -120,6 +120,26 @@ def within_cone(tangent: np.ndarray, bound: np.ndarray) -> np.ndarray:
                       out=tangent)
 
 
+class _Part(NamedTuple):
+    """Rows ``rows`` of the pairs and their arrays (points, weights, normals, the still part —
+    the anchors, or their velocities —, shares, sums), gathered once for all the passes."""
+
+    rows: np.ndarray
+    vertex: np.ndarray
+    weight: np.ndarray
+    normal: np.ndarray
+    still: np.ndarray
+    share: np.ndarray
+    denom: np.ndarray
+
+    @classmethod
+    def of(cls, rows: np.ndarray, *arrays: np.ndarray) -> _Part:
+        return cls(rows, *(a[rows] for a in arrays))
+
+    def take(self, mask: np.ndarray) -> _Part:
+        return _Part(*(a[mask] for a in self))
+
+
 def separate(pairs: PointPairs, x: np.ndarray, inv_mass: np.ndarray,
              coloured: bool | None = True) -> np.ndarray | None:
     """Restore the pairs' gaps in x (n, 3), in place (``coloured``: see :func:`_groups`).
@@ -147,26 +167,6 @@ def separate(pairs: PointPairs, x: np.ndarray, inv_mass: np.ndarray,
     return np.unique(vertex[rows])
 
 
-class _Part(NamedTuple):
-    """Rows ``rows`` of the pairs and their arrays (points, weights, normals, the still part —
-    the anchors, or their velocities —, shares, sums), gathered once for all the passes."""
-
-    rows: np.ndarray
-    vertex: np.ndarray
-    weight: np.ndarray
-    normal: np.ndarray
-    still: np.ndarray
-    share: np.ndarray
-    denom: np.ndarray
-
-    @classmethod
-    def of(cls, rows: np.ndarray, *arrays: np.ndarray) -> _Part:
-        return cls(rows, *(a[rows] for a in arrays))
-
-    def take(self, mask: np.ndarray) -> _Part:
-        return _Part(*(a[mask] for a in self))
-
-
 def respond(pairs: PointPairs, v: np.ndarray, inv_mass: np.ndarray, normal: np.ndarray,
             surface: np.ndarray, friction: float, restitution: float, rest_speed: float,
             coloured: bool | None = True, impulses: list | None = None) -> np.ndarray:
@@ -191,8 +191,9 @@ def respond(pairs: PointPairs, v: np.ndarray, inv_mass: np.ndarray, normal: np.n
     groups = _groups(pairs, rows, inv_mass, coloured) if len(rows) else []
     relax = groups is None
     # each group's rows of the pairs' arrays, gathered once for all the passes
-    parts = [_Part.of(g, vertex, weight, normal, surface, share, denom)
-             for g in ([rows] if relax else [rows[g] for g in groups])]
+    arrays = (vertex, weight, normal, surface, share, denom)
+    every = _Part.of(rows, *arrays)
+    parts = [every] if relax else [_Part.of(rows[g], *arrays) for g in groups]
 
     def normal_speed(p: _Part):
         rel = np.einsum("ck,ckj->cj", p.weight, v[p.vertex]) - p.still
@@ -201,7 +202,7 @@ def respond(pairs: PointPairs, v: np.ndarray, inv_mass: np.ndarray, normal: np.n
     def push(vertex, share, impulse):  # impulse (per unit weight) (g, 3) on pairs of these
         return _apply(v, vertex, share, impulse, relax)  # points and shares: the share applied
 
-    _, vn = normal_speed(_Part.of(rows, vertex, weight, normal, surface, share, denom))
+    _, vn = normal_speed(every)
     # what each pair's normal speed must reach: a bounce when approaching faster than the
     # rest speed, resting contact when slower, nothing for a separating pair
     e = restitution
