@@ -16,6 +16,7 @@ ESTIMATE_ROUNDS = 2  # detection rounds that estimate where the faces' vertices 
 # the lift is left to the features' pass after the step (a face sagging onto a corner it rests
 # on, a fraction of a millimetre each sub-step, would cost a whole solve each time)
 LAND_LIFT = 1e-3
+FLAT = ("HALF_SPACE", "PLANE")  # collider shapes on which a small hit is a touch (touches)
 
 
 def contacts(base: Contacts, hit: Contacts, x0: np.ndarray, h: float, free: np.ndarray,
@@ -45,19 +46,27 @@ def contacts(base: Contacts, hit: Contacts, x0: np.ndarray, h: float, free: np.n
 
 
 def touches(hit: Contacts, solved: np.ndarray, placed: np.ndarray, rest_speed: float,
-            bodies: np.ndarray) -> np.ndarray:
+            flat: np.ndarray) -> np.ndarray:
     """(k,) bool per hit: a touch, not a landing — the collision response moved the vertex
     less than LAND_LIFT from where the solve put it (``solved``; ``placed``: after the
     response, (n, 3) each) and changed its normal speed by less than ``rest_speed`` (what it
-    takes as contact, not a bounce), off a collider that is not a body stepped first
-    (``bodies``: their indices among the colliders; the solve's impulses are what they take
-    back). A step whose hits are all touches is not solved again: in a cloth resting on the
-    ground, vertices whose forces did not press them in at the step's start dip a fraction of
-    a millimetre under it, and each such dip cost a whole solve (90 of the 125 re-solves of
-    the self-collision bench), as the features' lifts under LAND_LIFT do not."""
+    takes as contact, not a bounce), on a collider that ``flat`` (bool per collider) marks:
+    a flat one (a half-space or plane) that is not a body stepped first (the solve's impulses
+    are what a body takes back).
+
+    A step whose hits are all touches is not solved again. In a cloth lying on the ground,
+    vertices whose forces did not press them in at the step's start dip a fraction of a
+    millimetre under it, and each such dip cost a whole solve (90 of the 125 re-solves of the
+    self-collision bench); on a flat surface the projection moves the vertex along the one
+    normal the landing would, so the re-solve only changed how its neighbours feel a
+    sub-millimetre stop. On a curved collider it also changes how a drape settles: with its
+    3 touches on Suzanne projected, the Suzanne drape buzzed at 3 cm/s (a vertex flipping on
+    and off a resting contact every sub-step) and never slept, 3 x the time."""
     moved = placed[hit.index] - solved[hit.index]
     small = np.einsum("ij,ij->i", moved, moved) < LAND_LIFT ** 2
-    return small & (np.abs(hit.impulse) < rest_speed) & ~np.isin(hit.collider, bodies)
+    on_flat = (hit.collider >= 0) & flat[np.maximum(hit.collider, 0)] if len(flat) else \
+        np.zeros(len(hit), bool)
+    return small & (np.abs(hit.impulse) < rest_speed) & on_flat
 
 
 def off_features(paths: list, faces: FaceSet, x0: np.ndarray, x: np.ndarray, v: np.ndarray,

@@ -6,8 +6,8 @@ virtual springs, drag, wind on faces, contact) -> integrate (any scene integrato
 Baraff-Witkin) -> pins (exactly on their animated targets) -> limit strain (optional, Provot)
 -> respond (continuous collisions, as particles) -> with IMPLICIT, when vertices hit a
 collider or faces must be lifted off its features, the sub-step again with them as landing
-constraints (up to LANDING_ROUNDS times; not for hits that only touch it: under LAND_LIFT,
-slower than the rest speed, :func:`.landing.touches`) -> keep the colliders' features off the faces and
+constraints (up to LANDING_ROUNDS times; not for hits that only touch a flat one: under
+LAND_LIFT, slower than the rest speed, :func:`.landing.touches`) -> keep the colliders' features off the faces and
 edges (:mod:`..contact.features`) -> keep the mesh off itself (optional,
 :mod:`.self_collision`) -> check (finite, not torn apart).
 """
@@ -392,6 +392,8 @@ class SpringMeshSolver:
 
         bodies = np.array([k for k, path in enumerate(paths)
                            if path.frame.name in step.inputs.bodies], np.int64)
+        flat = np.array([p.frame.shape in landing_.FLAT and p.frame.name not in step.inputs.bodies
+                         for p in paths], bool)
 
         def ode_with(constraints: Contacts) -> MeshOde:
             return MeshOde(state, self.model.vertex_mass, self.free, forces, pin_v, constraints,
@@ -423,7 +425,7 @@ class SpringMeshSolver:
             again = implicit and round_ < LANDING_ROUNDS
             base = landing if landing is not None else contact
             more = landing_.contacts(base, hit, x0, h, self.free, touch=landing_.touches(
-                hit, state.x, x, step.rest_speed, bodies)) if again else None
+                hit, state.x, x, step.rest_speed, flat)) if again else None
             # once no vertex lands anew, the faces the colliders' features reach: the first
             # round's projection of them is the safeguard's fallback
             placed, faced = (x, v), None

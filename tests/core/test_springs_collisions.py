@@ -171,10 +171,10 @@ def test_a_sub_step_whose_vertices_only_dip_under_the_ground_is_solved_once(monk
     assert state.x[:, 2].min() >= -1e-6 and state.v[:, 2].min() >= -1e-9
 
 
-def test_touches_are_small_slow_hits_off_colliders_that_are_not_bodies():
-    """What counts as a touch (not solved again): moved less than LAND_LIFT by the response and
-    slower than the rest speed; a hit on a body stepped first always lands (the solve's
-    impulses are what the body takes back)."""
+def test_touches_are_small_slow_hits_on_flat_colliders():
+    """What counts as a touch (not solved again): moved less than LAND_LIFT by the response,
+    slower than the rest speed, on a collider marked flat (the solver marks half-spaces and
+    planes that are not bodies stepped first: see landing.touches for why not curved ones)."""
     from physanim.core.contact import Contacts
     from physanim.core.springs import landing
 
@@ -186,8 +186,9 @@ def test_touches_are_small_slow_hits_off_colliders_that_are_not_bodies():
     solved = np.zeros((k, 3))
     placed = solved + up * np.array([[0.9 * landing.LAND_LIFT], [1.1 * landing.LAND_LIFT],
                                      [1e-4], [1e-4]])
-    assert landing.touches(hit, solved, placed, 0.41, np.array([1])).tolist() == \
+    assert landing.touches(hit, solved, placed, 0.41, np.array([True, False])).tolist() == \
         [True, False, False, False]
+    assert not landing.touches(hit, solved, placed, 0.41, np.zeros(0, bool)).any()
     # a landing with any vertex that is not a touch lands every new one; all touches: none
     base = Contacts.none()
     x0 = np.zeros((k, 3))
