@@ -1,7 +1,8 @@
 """Candidate pairs and continuous tests kept between detections: a spring mesh detects its
 pairs many times per sub-step (each separating round, each landing round), with its boxes and
 points barely moved between them; both keep what still holds and find again only the rest,
-and both give exactly what a fresh search or test gives."""
+and both give exactly what a fresh search or test gives (the tests: for every pair not shown
+apart by the caller's bound)."""
 from __future__ import annotations
 
 import numpy as np
@@ -191,7 +192,9 @@ class KeptTests:
     after each round of separating pushes, which move a few of the points, and a pair none of
     whose points (or features) moved since gives the same :class:`Separation`. Only the other
     pairs are tested again; each pair's test reads its own points only, so the result is a
-    fresh detection's to the bit. Nothing is kept when pickled.
+    fresh detection's to the bit — except for the pairs a caller's ``apart`` shows too far
+    apart to matter (:meth:`separations`), which keep a lower bound of their gap instead of
+    a test. Nothing is kept when pickled.
 
     A detection calls :meth:`begin` with its inputs, then :meth:`separations` per kind of
     pair; a kind the last detection did not test is tested afresh."""
@@ -227,16 +230,29 @@ class KeptTests:
         self._detection += 1
         return out
 
-    def separations(self, kind: str, keys: np.ndarray, stale: np.ndarray, test) -> Separation:
+    def separations(self, kind: str, keys: np.ndarray, stale: np.ndarray, test,
+                    apart=None) -> Separation:
         """The separations of the pairs ``keys`` (c,) (int64, one per pair of this ``kind``):
         the last detection's for pairs not ``stale`` (c,) (none of their points or features
         moved since) that it tested, ``test(rows)`` (rows: indices into keys) for the
-        others."""
+        others. ``apart(rows, gap) -> (far, bound)``: for the stale pairs the last detection
+        knew (``rows``, their last ``gap`` (r,)), which are shown apart without a test
+        (``far`` (r,) bool: their points moved too little since to have come near or met)
+        and a lower bound of their gap now (r,); those keep their last separation with that
+        bound as its gap, and are not tested (their ``crossed`` is False)."""
         last = self._kept.get(kind)
         reuse = np.zeros(len(keys), bool)
+        skipped, bound = np.zeros(0, np.int64), None
         if last is not None and last[0] == self._detection - 1 and len(last[1]) and len(keys):
             at = np.minimum(np.searchsorted(last[1], keys), len(last[1]) - 1)
-            reuse = ~stale & (last[1][at] == keys)
+            known = last[1][at] == keys
+            reuse = ~stale & known
+            if apart is not None:
+                rows = np.flatnonzero(stale & known)
+                if len(rows):
+                    far, bound = apart(rows, last[2].gap[at[rows]])
+                    skipped, bound = rows[far], bound[far]
+                    reuse[skipped] = True
         fresh = np.flatnonzero(~reuse)
         if len(fresh) == len(keys):
             out = test(fresh)
@@ -253,6 +269,9 @@ class KeptTests:
                 return out
 
             out = Separation(*(merged(f) for f in Separation._fields))
+            if len(skipped):
+                out.gap[skipped] = bound
+                out.crossed[skipped] = False
         if np.all(keys[1:] > keys[:-1]):
             self._kept[kind] = (self._detection, keys, out)
         else:

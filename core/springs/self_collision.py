@@ -10,7 +10,8 @@ Per sub-step, after the step and the colliders (positions x0 -> x1):
    :class:`~..collision.crossing.KeptPairs`), then those nearer than the distance at the end
    or that crossed during the step (continuous tests, :mod:`..collision.crossing`: the side
    each came from; a detection after a separating round tests again only the pairs with a
-   moved point, :class:`~..collision.crossing.KeptTests`);
+   moved point, :class:`~..collision.crossing.KeptTests`, and of those not the ones whose
+   last gap, less how far their points moved since, shows them still apart: :class:`_Apart`);
 2. separate: each pair's weighted points pushed apart along its normal, in proportion to
    their inverse masses (:mod:`..contact.pair_solve`: Gauss-Seidel over coloured pairs, or
    relaxed Jacobi passes where a heap crowds dozens of pairs on a point), then detect again,
@@ -35,13 +36,14 @@ from typing import NamedTuple
 import numpy as np
 
 from ..collision.broadphase_grid import TooManyCandidates, UniformGrid
-from ..collision.crossing import box_pairs, element_boxes, segment_segment, triangle_point
+from ..collision.crossing import (MEET, TINY, box_pairs, element_boxes, segment_segment,
+                                  triangle_point)
 from ..collision.kept import KeptPairs, KeptTests
 from ..contact.features import FaceSet
 from ..contact.pair_solve import PointPairs, respond, separate, shares, within_cone
 from ..errors import SimulationError
 from ..forces.springs import scatter_add
-from ..transforms import row_any
+from ..transforms import norm_rows, row_any, row_max
 
 ROUNDS = 8  # detections per sub-step
 GROUNDED_SHARE = 0.01  # of the inverse mass a point touching a collider keeps here
@@ -99,6 +101,7 @@ class SelfCollision:
         self._leave_out_neighbours()
         self._tests = KeptTests()  # and their tests, for the pairs whose points did not move
         self._margin: float | None = None
+        self._last_end: np.ndarray | None = None  # x1 of the last detection (see _Apart)
         self.carried: Carried | None = None
         self._fresh = True  # the next update starts a sub-step's carried forces
 
@@ -110,7 +113,7 @@ class SelfCollision:
         self._edges.exclude = partial(_edges_meet, self.faces.edges)
 
     def __setstate__(self, state: dict) -> None:
-        self.__dict__.update(state)
+        self.__dict__.update({"_last_end": None, **state})
         self._leave_out_neighbours()  # (a checkpoint written before they were left out)
 
     def begin_substep(self) -> None:
@@ -248,13 +251,16 @@ class SelfCollision:
             self._margin = self.faces.margin(x0)
         vertex, weight, normal, depth = [], [], [], []
         moved, = self._tests.begin((x0, x1))
+        far = _Apart(x0, x1, self._last_end, d)
+        self._last_end = x1.copy()
         if len(tris):
             i, j = self._search(self._faces_points, "triangle", x0, x1,
                                 *element_boxes(lo, hi, tris), lo, hi)
             if len(i):
                 sep = self._tests.separations(
                     "faces", i * len(x0) + j, row_any(moved[tris[i]]) | moved[j],
-                    lambda r: triangle_point(x0[tris[i[r]]], x1[tris[i[r]]], x0[j[r]], x1[j[r]]))
+                    lambda r: triangle_point(x0[tris[i[r]]], x1[tris[i[r]]], x0[j[r]], x1[j[r]]),
+                    lambda r, gap: far(gap, tris[i[r]], j[r, None]))
                 near = sep.gap < d
                 if keys is not None:
                     keys.append((i * len(x0) + j)[near])
@@ -271,7 +277,8 @@ class SelfCollision:
                     row_any(moved[a]) | row_any(moved[b]),
                     lambda r: segment_segment(x0[a[r, 0]], x0[a[r, 1]], x0[b[r, 0]], x0[b[r, 1]],
                                               x1[a[r, 0]], x1[a[r, 1]], x1[b[r, 0]],
-                                              x1[b[r, 1]]))
+                                              x1[b[r, 1]]),
+                    lambda r, gap: far(gap, a[r], b[r]))
                 near = sep.gap < d
                 if keys is not None:
                     keys.append(len(tris) * len(x0) + (i * len(edges) + j)[near])
@@ -311,6 +318,38 @@ class SelfCollision:
             f"{self.distance:g} m, so its faces swept across each other (as when a collider "
             "pushes a mesh out from deep inside it) — start the mesh outside the colliders, "
             "add substeps, or turn Self Collision off")
+
+
+class _Apart:
+    """Which pairs the last detection tested need no test now: a pair's gap changes by at
+    most its two elements' largest point moves (a point's distance to a triangle, a segment's
+    to a segment, is 1-Lipschitz in each one's points), so the last gap less what its points
+    moved since (``last_end`` to ``x1``) bounds the gap now from below; a pair whose bound
+    exceeds the distance and its points' motion over the sub-step (``x0`` to ``x1``; with
+    meeting's tolerance, as :func:`~..collision.crossing.triangle_point` skips its crossing
+    test) is neither near at the end nor can have met during it. Called per kind of pair with
+    the last gaps (r,) and each pair's points as two groups (r, k) and (r, l): (far (r,), the
+    bound (r,))."""
+
+    def __init__(self, x0: np.ndarray, x1: np.ndarray, last_end: np.ndarray | None,
+                 distance: float):
+        self.ok = last_end is not None and last_end.shape == x1.shape
+        if self.ok:
+            self.shift = norm_rows(x1 - last_end)
+            self.motion = norm_rows(x1 - x0)
+            # any element is smaller, at the start and at the end
+            size = float(np.linalg.norm(np.maximum(np.ptp(x0, axis=0), np.ptp(x1, axis=0))))
+            self.floor = 2.0 * MEET * size + 2.0 * TINY
+        self.distance = distance
+
+    def __call__(self, gap: np.ndarray, first: np.ndarray, second: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+        if not self.ok:
+            return np.zeros(len(gap), bool), gap
+        bound = gap - (row_max(self.shift[first]) + row_max(self.shift[second]))
+        motion = row_max(self.motion[first]) + row_max(self.motion[second])
+        far = (bound > self.distance) & (bound > (1.0 + 1e-6) * motion + self.floor)
+        return far, bound
 
 
 def _pairs_within(lo: np.ndarray, hi: np.ndarray, max_candidates: int | None = None
