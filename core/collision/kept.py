@@ -2,7 +2,7 @@
 pairs many times per sub-step (each separating round, each landing round), with its boxes and
 points barely moved between them; both keep what still holds and find again only the rest,
 and both give exactly what a fresh search or test gives (the tests: for every pair not shown
-apart by the caller's bound)."""
+apart by the caller's bound; of those, which are near is still exact)."""
 from __future__ import annotations
 
 import numpy as np
@@ -193,8 +193,9 @@ class KeptTests:
     whose points (or features) moved since gives the same :class:`Separation`. Only the other
     pairs are tested again; each pair's test reads its own points only, so the result is a
     fresh detection's to the bit — except for the pairs a caller's ``apart`` shows too far
-    apart to matter (:meth:`separations`), which keep a lower bound of their gap instead of
-    a test. Nothing is kept when pickled.
+    apart to matter (:meth:`separations`), which keep a lower bound of their gap and their
+    last weights and normal instead of a test (which pairs are near or crossed is still a
+    fresh detection's). Nothing is kept when pickled.
 
     A detection calls :meth:`begin` with its inputs, then :meth:`separations` per kind of
     pair; a kind the last detection did not test is tested afresh."""

@@ -33,7 +33,7 @@ def contacts(base: Contacts, hit: Contacts, x0: np.ndarray, h: float, free: np.n
     step stands). None when no vertex needs to land anew."""
     keep = free[hit.index] & ~np.isin(hit.index, base.index[base.held])
     if touch is not None and not np.any(keep & ~touch):
-        keep = keep & False
+        keep = np.zeros_like(keep)
     land = [hit.take(keep)]
     if faced is not None and len(faced):
         land.append(faced.take(free[faced.index]))

@@ -10,7 +10,7 @@ Per sub-step, after the step and the colliders (positions x0 -> x1):
    :class:`~..collision.crossing.KeptPairs`), then those nearer than the distance at the end
    or that crossed during the step (continuous tests, :mod:`..collision.crossing`: the side
    each came from; a detection after a separating round tests again only the pairs with a
-   moved point, :class:`~..collision.crossing.KeptTests`, and of those not the ones whose
+   moved point, :class:`~..collision.kept.KeptTests`, and of those not the ones whose
    last gap, less how far their points moved since, shows them still apart: :class:`_Apart`);
 2. separate: each pair's weighted points pushed apart along its normal, in proportion to
    their inverse masses (:mod:`..contact.pair_solve`: Gauss-Seidel over coloured pairs, or
@@ -111,6 +111,9 @@ class SelfCollision:
         candidates."""
         self._faces_points.exclude = partial(_corner_of, self.faces.triangles)
         self._edges.exclude = partial(_edges_meet, self.faces.edges)
+
+    def __getstate__(self):
+        return {**self.__dict__, "_last_end": None}  # (its kept tests are not kept either)
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update({"_last_end": None, **state})
@@ -321,10 +324,12 @@ class SelfCollision:
 
 
 class _Apart:
-    """Which pairs the last detection tested need no test now: a pair's gap changes by at
-    most its two elements' largest point moves (a point's distance to a triangle, a segment's
-    to a segment, is 1-Lipschitz in each one's points), so the last gap less what its points
-    moved since (``last_end`` to ``x1``) bounds the gap now from below; a pair whose bound
+    """Which pairs the last detection tested need no test now: a pair's distance changes by
+    at most its two elements' largest point moves (a point's distance to a triangle, a
+    segment's to a segment, is 1-Lipschitz in each one's points), and its kept gap is at most
+    its distance then (the distance along the normal, negative when crossed, or a bound kept
+    by this rule), so the last gap less what its points moved since (``last_end`` to ``x1``)
+    bounds the distance now from below; a pair whose bound
     exceeds the distance and its points' motion over the sub-step (``x0`` to ``x1``; with
     meeting's tolerance, as :func:`~..collision.crossing.triangle_point` skips its crossing
     test) is neither near at the end nor can have met during it. Called per kind of pair with
@@ -348,7 +353,9 @@ class _Apart:
             return np.zeros(len(gap), bool), gap
         bound = gap - (row_max(self.shift[first]) + row_max(self.shift[second]))
         motion = row_max(self.motion[first]) + row_max(self.motion[second])
-        far = (bound > self.distance) & (bound > (1.0 + 1e-6) * motion + self.floor)
+        # (with meeting's tolerance on both: two nearly parallel segments' gap can exceed
+        # their distance by about MEET of their length)
+        far = (bound > self.distance + self.floor) & (bound > (1.0 + 1e-6) * motion + self.floor)
         return far, bound
 
 

@@ -7,9 +7,9 @@ Baraff-Witkin) -> pins (exactly on their animated targets) -> limit strain (opti
 -> respond (continuous collisions, as particles) -> with IMPLICIT, when vertices hit a
 collider or faces must be lifted off its features, the sub-step again with them as landing
 constraints (up to LANDING_ROUNDS times; not for hits that only touch a flat one: under
-LAND_LIFT, slower than the rest speed, :func:`.landing.touches`) -> keep the colliders' features off the faces and
-edges (:mod:`..contact.features`) -> keep the mesh off itself (optional,
-:mod:`.self_collision`) -> check (finite, not torn apart).
+LAND_LIFT, slower than the rest speed, :func:`.landing.touches`) -> keep the colliders'
+features off the faces and edges (:mod:`..contact.features`) -> keep the mesh off itself
+(optional, :mod:`.self_collision`) -> check (finite, not torn apart).
 """
 from __future__ import annotations
 
@@ -392,8 +392,8 @@ class SpringMeshSolver:
 
         bodies = np.array([k for k, path in enumerate(paths)
                            if path.frame.name in step.inputs.bodies], np.int64)
-        flat = np.array([p.frame.shape in landing_.FLAT and p.frame.name not in step.inputs.bodies
-                         for p in paths], bool)
+        flat = np.array([p.frame.shape in landing_.FLAT and
+                         p.frame.name not in step.inputs.bodies for p in paths], bool)
 
         def ode_with(constraints: Contacts) -> MeshOde:
             return MeshOde(state, self.model.vertex_mass, self.free, forces, pin_v, constraints,
