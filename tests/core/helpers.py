@@ -71,3 +71,19 @@ def mesh_collider(name, verts, tris, m0=None, m1=None, verts1=None, **kw) -> Col
     m1 = m0 if m1 is None else m1
     return ColliderFrame(name, "MESH", m0, m1, vertices0=verts,
                          vertices1=verts if verts1 is None else verts1, triangles=tris, **kw)
+
+
+def implicit_step_times(monkeypatch) -> list:
+    """A list that receives the time t of every implicit (Baraff-Witkin) step taken from now
+    on in the test (a sub-step solved again appears once more)."""
+    from physanim.core.springs import implicit
+
+    times = []
+    step = implicit.BaraffWitkin._step_impl
+
+    def counted(self, system, t, y, h):
+        times.append(t)
+        return step(self, system, t, y, h)
+
+    monkeypatch.setattr(implicit.BaraffWitkin, "_step_impl", counted)
+    return times

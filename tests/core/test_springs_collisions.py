@@ -18,7 +18,7 @@ from physanim.core.collision.tritri import triangles_overlap
 from physanim.core.contact import ColliderFrame
 from physanim.core.springs import (SpringFrameInputs, SpringMeshBuilder, SpringMeshSettings,
                                    SpringMeshSolver)
-from physanim.tests.core.helpers import grid as _grid
+from physanim.tests.core.helpers import grid as _grid, implicit_step_times
 
 DT = 1.0 / 24.0
 G = 9.81
@@ -149,16 +149,7 @@ def test_a_sub_step_whose_vertices_only_dip_under_the_ground_is_solved_once(monk
     re-solves of the self-collision bench). At 0.5 m/s (1 cm under) the vertices land: it is
     solved again with them as landing constraints. Either way every vertex ends above the
     ground, not approaching it."""
-    from physanim.core.springs import implicit
-
-    calls = []
-    step = implicit.BaraffWitkin._step_impl
-
-    def counted(self, system, t, y, h):
-        calls.append(t)
-        return step(self, system, t, y, h)
-
-    monkeypatch.setattr(implicit.BaraffWitkin, "_step_impl", counted)
+    calls = implicit_step_times(monkeypatch)
     ground = ColliderFrame("Ground", "HALF_SPACE", np.eye(4), np.eye(4))
     model = _cloth("Lying", (0.0, 0.0, 1e-4))
     state = model.state()

@@ -18,7 +18,7 @@ from physanim.core.collision.tritri import triangles_overlap
 from physanim.core.contact import ColliderFrame
 from physanim.core.springs import (SpringFrameInputs, SpringMeshBuilder, SpringMeshSettings,
                                    SpringMeshSolver)
-from physanim.tests.core.helpers import grid
+from physanim.tests.core.helpers import grid, implicit_step_times
 
 DT = 1.0 / 24.0
 TOP = 0.6  # every collider's top [m]
@@ -185,16 +185,7 @@ def test_a_cloth_resting_on_a_cone_tip_is_solved_once_per_sub_step(monkeypatch):
     for a real hit) cost every resting sub-step a second solve, which the features' pass after
     the step makes unnecessary. The tip never gets inside (the first test above), and the cloth
     stays on it."""
-    from physanim.core.springs import implicit
-
-    solves = []
-    step = implicit.BaraffWitkin._step_impl
-
-    def counted(self, system, t, y, h):
-        solves.append(t)
-        return step(self, system, t, y, h)
-
-    monkeypatch.setattr(implicit.BaraffWitkin, "_step_impl", counted)
+    solves = implicit_step_times(monkeypatch)
     c = _collider("cone", friction=1.0)
     frames = [x for x, _ in _drop("cloth", c, 48)]
     times, count = np.unique(np.round(solves, 9), return_counts=True)
