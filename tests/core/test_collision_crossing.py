@@ -435,6 +435,33 @@ def test_kept_pairs_search_again_only_for_the_boxes_that_left_and_equal_a_fresh_
     check(c)
 
 
+@pytest.mark.parametrize("wide", [0, 1, 40])
+def test_a_few_boxes_against_all_find_every_overlapping_pair_once(wide):
+    """A partial search's few boxes against all (kept._few_with_all): through the slices of
+    the boxes sorted by low x, and, where one very wide box makes the slices hold most pairs,
+    trying every pair — each overlapping pair (closed boxes: touching counts) exactly once,
+    as a brute-force test finds them; none for no boxes."""
+    from physanim.core.collision.kept import _few_with_all
+
+    rng = np.random.default_rng(wide)
+    for trial in range(40):
+        n, k = int(rng.integers(0, 500)), int(rng.integers(0, 50))
+        c, half = rng.uniform(0.0, 1.0, (n, 3)), rng.uniform(0.0, 0.05, (n, 3))
+        half[:min(wide, n), 0] = 2.0  # boxes across the whole set in x
+        lo, hi = c - half, c + half
+        cf, hf = rng.uniform(0.0, 1.0, (k, 3)), rng.uniform(0.0, 0.05, (k, 3))
+        lo_f, hi_f = cf - hf, cf + hf
+        if n and k:  # few boxes whose low x touches a box's high x exactly
+            touch = rng.integers(0, n, k // 2)
+            lo_f[:k // 2, 0] = hi[touch, 0]
+        f, j = _few_with_all(lo_f, hi_f, lo, hi, None)
+        found = list(zip(f.tolist(), j.tolist()))
+        ff, jj = np.nonzero(np.all((lo_f[:, None] <= hi[None]) & (lo[None] <= hi_f[:, None]),
+                                   axis=2))
+        assert len(found) == len(set(found)), trial
+        assert set(found) == set(zip(ff.tolist(), jj.tolist())), trial
+
+
 def test_kept_pairs_pickled_before_they_moved_to_kept_load_and_search(monkeypatch):
     # a checkpoint written before KeptPairs moved to kept.py (and had partial searches) names
     # it in crossing.py, with none of the new attributes: it loads and searches as a new one
