@@ -45,6 +45,12 @@ def contacts(base: Contacts, hit: Contacts, x0: np.ndarray, h: float, free: np.n
     return base
 
 
+def flat(paths: list, bodies) -> np.ndarray:
+    """(c,) bool per collider path: flat (FLAT shapes) and not a body stepped first
+    (``bodies``: their names) — where a small hit is a touch (:func:`touches`)."""
+    return np.array([p.frame.shape in FLAT and p.frame.name not in bodies for p in paths], bool)
+
+
 def touches(hit: Contacts, solved: np.ndarray, placed: np.ndarray, rest_speed: float,
             flat: np.ndarray) -> np.ndarray:
     """(k,) bool per hit: a touch, not a landing — the collision response moved the vertex

@@ -392,8 +392,7 @@ class SpringMeshSolver:
 
         bodies = np.array([k for k, path in enumerate(paths)
                            if path.frame.name in step.inputs.bodies], np.int64)
-        flat = np.array([p.frame.shape in landing_.FLAT and
-                         p.frame.name not in step.inputs.bodies for p in paths], bool)
+        flat = landing_.flat(paths, step.inputs.bodies)
 
         def ode_with(constraints: Contacts) -> MeshOde:
             return MeshOde(state, self.model.vertex_mass, self.free, forces, pin_v, constraints,
