@@ -200,6 +200,65 @@ def test_crowded_velocity_passes_end_once_no_pair_approaches_faster_than_the_tol
     np.testing.assert_allclose((mass[:, None] * v).sum(axis=0), p0, atol=1e-12)
 
 
+@pytest.mark.parametrize("friction, along", [(0.2, 0.9), (1.0, 0.5), (3.0, 0.0)])
+def test_crowded_friction_passes_reach_coulombs_answer(friction, along):
+    """A point sliding at 1 m/s along a fixed fan of 16 triangles and falling onto it at
+    0.5 m/s: 16 pairs on the point, so the response's passes are relaxed. Coulomb's answer is
+    a closed form: the fall stops and the slide loses friction times 0.5 m/s (all of it when
+    that is more). Relaxed Jacobi passes moved each pair a sixteenth of the way to its cone in
+    each pass and ended their 32 passes 13 % of the friction short; the accelerated passes
+    reach it."""
+    k, rest_speed = 16, 0.1
+    ring = np.arange(1, k + 1)
+    tris = np.stack([np.zeros(k, int), ring, np.roll(ring, -1)], axis=1)
+    point = k + 1
+    vertex = np.concatenate([tris, np.full((k, 1), point)], axis=1)
+    weight = np.concatenate([np.full((k, 3), 1.0 / 3.0), -np.ones((k, 1))], axis=1)
+    normal = np.tile([0.0, 0.0, -1.0], (k, 1))  # (triangle - point) . n >= gap
+    pairs = pair_solve.PointPairs(vertex, weight, normal, np.zeros_like(normal),
+                                  np.full(k, 0.005), 0.01)
+    inv_mass = np.zeros(k + 2)
+    inv_mass[point] = 1.0 / 0.3
+    assert pair_solve._groups(pairs, np.arange(k), inv_mass, None) is None
+    v = np.zeros((k + 2, 3))
+    v[point] = (1.0, 0.0, -0.5)
+    pair_solve.respond(pairs, v, inv_mass, normal, np.zeros_like(normal), friction, 0.0,
+                       rest_speed, coloured=None)
+    assert abs(v[point, 2]) <= pair_solve.RELAXED_TOLERANCE * rest_speed
+    # the bound is friction times the normal impulse, which is within the tolerance above
+    slack = friction * pair_solve.RELAXED_TOLERANCE * rest_speed
+    assert v[point, 0] == pytest.approx(along, abs=slack + pair_solve.SLIDE_TOLERANCE * rest_speed)
+    assert v[point, 1] == 0.0 and v[:point].any() == 0.0
+
+
+def test_crowded_friction_keeps_momentum():
+    """The fan free to move, two points striking it sliding: every friction pass pushes a
+    pair's points by equal and opposite shares, so the momentum of the whole is kept."""
+    k = 8
+    rng = np.random.default_rng(5)
+    ring = np.arange(1, k + 1)
+    tris = np.stack([np.zeros(k, int), ring, np.roll(ring, -1)], axis=1)
+    upper = np.array([k + 1, k + 2])
+    point = np.tile(upper, k)
+    vertex = np.concatenate([np.repeat(tris, 2, axis=0), point[:, None]], axis=1)
+    weight = np.concatenate([rng.dirichlet([2, 2, 2], len(point)), -np.ones((len(point), 1))],
+                            axis=1)
+    normal = np.tile([0.0, 0.0, -1.0], (len(point), 1))
+    pairs = pair_solve.PointPairs(vertex, weight, normal, np.zeros_like(normal),
+                                  np.full(len(point), 0.005), 0.01)
+    mass = rng.uniform(0.5, 2.0, k + 3)
+    v = rng.normal(0.0, 0.05, (k + 3, 3))
+    v[upper] += (0.8, -0.3, -0.5)
+    p0 = (mass[:, None] * v).sum(axis=0)
+    impulses = []
+    pair_solve.respond(pairs, v, 1.0 / mass, normal, np.zeros_like(normal), 0.5, 0.0, 0.1,
+                       coloured=None, impulses=impulses)
+    pushed, held = impulses
+    assert np.abs(held).max() > 0.01  # friction acted
+    assert (np.linalg.norm(held, axis=1) <= 0.5 * pushed * (1 + 1e-12)).all()
+    np.testing.assert_allclose((mass[:, None] * v).sum(axis=0), p0, atol=1e-12)
+
+
 def test_the_ground_carries_the_weight_of_a_layer_resting_on_another():
     """A sheet lying flat on another on the ground, at rest. The implicit step holds the lower
     layer on the ground; the upper one rests on it through self-collision, which acts after the
