@@ -12,7 +12,8 @@ and a mesh against itself.
 * :func:`respond` does the same for velocities: the weighted sum's approach along n is
   cancelled (a bounce of restitution times it when faster than the rest speed); then Coulomb
   friction on its sliding, each pair's friction impulse within mu times the whole normal
-  impulse it took.
+  impulse it took (crowded pairs' friction by accelerated projected gradient passes:
+  :func:`_accelerated_friction`).
 """
 from __future__ import annotations
 
@@ -27,7 +28,7 @@ from ..transforms import divide_rows, dot_rows, norm_rows, row_any, row_max, sca
 PASSES = 16  # position passes at most
 TOLERANCE = 0.05  # a pass leaving every pair within this fraction of the gap is the last
 VELOCITY_PASSES = 4  # Gauss-Seidel velocity passes at most
-RELAXED_PASSES = 32  # relaxed Jacobi velocity passes at most
+RELAXED_PASSES = 32  # crowded pairs' velocity passes at most (relaxed Jacobi, accelerated friction)
 RELAXED_TOLERANCE = 1e-3  # of the rest speed: relaxed normal passes end once no pair approaches
 # faster (Gauss-Seidel's end once none approaches at all: each of its pairs is solved exactly)
 SLIDE_TOLERANCE = 1e-4  # of the rest speed: a friction pass changing no slide more is the last
@@ -183,7 +184,8 @@ def respond(pairs: PointPairs, v: np.ndarray, inv_mass: np.ndarray, normal: np.n
     speed: each gives a pair only a part of its push, so an approach never reaches exactly
     zero, and all RELAXED_PASSES ran, the last ones for approaches of 1e-9 m/s. (Gauss-Seidel
     passes end once none approaches at all; such a tolerance there left a cloth draped on
-    Suzanne creeping, never asleep.) ``impulses``: a list, given each row's normal impulse (c,)
+    Suzanne creeping, never asleep.) Crowded pairs' friction: :func:`_accelerated_friction`.
+    ``impulses``: a list, given each row's normal impulse (c,)
     and friction impulse (c, 3) (per unit weight: point k of a row took weight_k times them).
     Returns the pairs that can move (rows)."""
     vertex, weight = pairs.vertex, pairs.weight
