@@ -172,12 +172,17 @@ class SelfCollision:
             if h is not None and self._fresh:
                 self.carried, self._fresh = None, False
             return 0
-        pairs = PointPairs.joined(found)
+        # each pair once, as the latest detection found it (a pair found again after a
+        # separating round was the same constraint twice, which halved its relaxed passes' steps)
+        keys = np.concatenate(keys)
+        backwards = np.unique(keys[::-1], return_index=True)[1]
+        latest = np.sort(len(keys) - 1 - backwards)
+        pairs, keys = PointPairs.joined(found).take(latest), keys[latest]
         impulses = []
         respond(pairs, v, inv_mass, pairs.normal, np.zeros_like(pairs.normal), self.friction,
                 0.0, rest_speed, coloured=None, impulses=impulses)
         if h is not None and impulses:
-            self._carry(pairs, np.concatenate(keys), *impulses, h)
+            self._carry(pairs, keys, *impulses, h)
         if not settled:
             self.fail_safe(x0, x1, v)
         return len(shares(pairs, inv_mass)[2])

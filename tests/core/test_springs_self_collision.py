@@ -71,6 +71,48 @@ def test_a_sheet_dropped_on_edge_folds_onto_itself_without_ever_crossing(on):
     assert max(tops[24:]) > 2 * model.settings.self_distance
 
 
+def test_a_pair_found_again_after_a_separating_round_is_one_constraint(monkeypatch):
+    """A sub-step detects again after each separating round, and most near pairs are found
+    again. The velocity response takes each pair once (its key once), as the latest detection
+    found it: as two rows it was one constraint counted twice, and a crowded point's relaxed
+    passes each gave it half the step."""
+    from physanim.core.springs import self_collision as module
+    detected, responded, carried = [], [], []
+    detect, respond, carry = module.SelfCollision._detect, module.respond, \
+        module.SelfCollision._carry
+
+    def counting_detect(self, x0, x1, keys=None):
+        pairs = detect(self, x0, x1, keys)
+        detected[-1] += 0 if pairs is None else len(pairs.vertex)
+        return pairs
+
+    def recording_respond(pairs, *args, **kwargs):
+        responded.append((detected[-1], len(pairs.vertex)))
+        return respond(pairs, *args, **kwargs)
+
+    def recording_carry(self, pairs, keys, *args):
+        carried.append(keys.copy())
+        return carry(self, pairs, keys, *args)
+
+    keep_apart = module.SelfCollision.keep_apart
+
+    def sub_step(self, *args, **kwargs):
+        detected.append(0)
+        return keep_apart(self, *args, **kwargs)
+
+    monkeypatch.setattr(module.SelfCollision, "_detect", counting_detect)
+    monkeypatch.setattr(module.SelfCollision, "_carry", recording_carry)
+    monkeypatch.setattr(module.SelfCollision, "keep_apart", sub_step)
+    monkeypatch.setattr(module, "respond", recording_respond)
+    model, _ = _sheet_on_edge(self_collision=True)
+    for _ in _drop(model, 36, [GROUND]):
+        pass
+    assert len(responded) == len(carried) > 0
+    for (_, rows), keys in zip(responded, carried):
+        assert len(np.unique(keys)) == len(keys) == rows  # each pair once
+    assert sum(found for found, _ in responded) > sum(rows for _, rows in responded)
+
+
 @pytest.mark.parametrize("jitter", [0, 2, 5, 6])
 def test_layers_keep_their_distance(jitter):
     """In the heap, a vertex stays at least half the distance off any triangle it is not a
