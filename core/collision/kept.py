@@ -274,12 +274,13 @@ class KeptTests:
             out = test(fresh)
         else:
             new = test(fresh) if len(fresh) else None
-            old = at[reuse]
+            kept = np.flatnonzero(reuse)  # (indices: each field's assignment reads them once)
+            old = at[kept]
 
             def merged(field):
                 before = getattr(last[2], field)
                 out = np.empty((len(keys),) + before.shape[1:], before.dtype)
-                out[reuse] = before[old]
+                out[kept] = before[old]
                 if new is not None:
                     out[fresh] = getattr(new, field)
                 return out
