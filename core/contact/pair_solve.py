@@ -253,9 +253,8 @@ def respond(pairs: PointPairs, v: np.ndarray, inv_mass: np.ndarray, normal: np.n
             if moved.any():
                 changed = True
                 delta = delta[moved]
-                applied = push(p.vertex[moved], p.share[moved], delta)
-                held[p.rows[moved]] += delta * applied if np.ndim(applied) == 0 else \
-                    scale_rows(delta, applied)
+                push(p.vertex[moved], p.share[moved], delta)  # (whole: Gauss-Seidel's)
+                held[p.rows[moved]] += delta
         if not changed:
             break
     return rows
@@ -271,9 +270,10 @@ def _accelerated_friction(p: _Part, v: np.ndarray, bound: np.ndarray, still: flo
     pairs' coupling (Cauchy-Schwarz over each point's pairs), so the passes converge. Relaxed
     Jacobi passes (each pair a part of its move to the cone, the part one over those pairs)
     took a sliding pair that far towards its bound in each pass: after its 32 passes a
-    heap's slides were still 2-8 % of the rest speed from the answer, where these end
-    within ``still`` (m/s, a pair's largest step times its sum) in 2-21 passes. Every pass
-    moves a pair's points by equal and opposite shares of its impulse: momentum is kept."""
+    heap's slides were still 2-8 % of the rest speed from the answer, where these end once
+    no pair's impulse changes by more than ``still`` (m/s: the change over the pair's step,
+    a slide speed) in 2-21 passes. Every pass pushes a pair's points by their shares of its
+    impulse, as the other passes do (equal and opposite where its weights sum to zero)."""
     points, local = np.unique(p.vertex, return_inverse=True)
     local = local.reshape(p.vertex.shape)
     moves = p.share != 0.0
@@ -283,7 +283,7 @@ def _accelerated_friction(p: _Part, v: np.ndarray, bound: np.ndarray, still: flo
     ahead, u_ahead = np.zeros((len(p.rows), 3)), u  # and at the point extrapolated to
     held, theta = ahead, 1.0
     for _ in range(passes):
-        rel = np.einsum("ck,ckj->cj", p.weight, u_ahead[local])
+        rel = np.einsum("ck,ckj->cj", p.weight, u_ahead[local]) - p.still
         slide = rel - scale_rows(p.normal, dot_rows(rel, p.normal))
         new = within_cone(ahead - scale_rows(slide, step), bound)
         change = new - ahead

@@ -270,7 +270,28 @@ def test_crowded_friction_passes_reach_coulombs_answer(friction, along):
     # the bound is friction times the normal impulse, which is within the tolerance above
     slack = friction * pair_solve.RELAXED_TOLERANCE * rest_speed
     assert v[point, 0] == pytest.approx(along, abs=slack + pair_solve.SLIDE_TOLERANCE * rest_speed)
-    assert v[point, 1] == 0.0 and v[:point].any() == 0.0
+    assert v[point, 1] == 0.0 and not v[:point].any()  # (the fan is fixed)
+
+
+def test_crowded_friction_acts_on_the_slide_relative_to_the_still_part():
+    """The fan of the test before, its pairs' still part (a collider's, for pairs against one)
+    moving with the point's slide: there is no slide to stop, and friction changes nothing
+    (the accelerated passes once read the point's own velocity as its slide)."""
+    k = 16
+    ring = np.arange(1, k + 1)
+    tris = np.stack([np.zeros(k, int), ring, np.roll(ring, -1)], axis=1)
+    vertex = np.concatenate([tris, np.full((k, 1), k + 1)], axis=1)
+    weight = np.concatenate([np.full((k, 3), 1.0 / 3.0), -np.ones((k, 1))], axis=1)
+    normal = np.tile([0.0, 0.0, -1.0], (k, 1))
+    pairs = pair_solve.PointPairs(vertex, weight, normal, np.zeros_like(normal),
+                                  np.full(k, 0.005), 0.01)
+    inv_mass = np.zeros(k + 2)
+    inv_mass[k + 1] = 1.0 / 0.3
+    v = np.zeros((k + 2, 3))
+    v[k + 1] = (1.0, 0.0, -0.5)
+    still = np.tile([-1.0, 0.0, 0.0], (k, 1))  # the weighted sum's own slide (-1 x the point's)
+    pair_solve.respond(pairs, v, inv_mass, normal, still, 1.0, 0.0, 0.1, coloured=None)
+    assert v[k + 1, 0] == pytest.approx(1.0, abs=1e-12)
 
 
 def test_crowded_friction_keeps_momentum():
