@@ -206,16 +206,10 @@ def test_a_layer_landing_on_another_while_sliding_is_stopped_by_friction(frictio
         assert slide > 0.095
 
 
-def test_crowded_velocity_passes_end_once_no_pair_approaches_faster_than_the_tolerance(
-        monkeypatch):
-    """Two points falling at 0.5 m/s onto a fan of 8 triangles: 16 pairs on the fan's centre,
-    more than a point takes Gauss-Seidel passes for, so the response's passes are relaxed.
-    Each gives a pair a sixteenth of its push, so the approaches shrink and never quite end:
-    all 32 passes ran, the last ones for approaches of 1e-9 m/s. They now end once none is
-    faster than RELAXED_TOLERANCE of the rest speed (19 passes here); the pushes stay equal
-    and opposite."""
-    k, rest_speed = 8, 0.1
-    rng = np.random.default_rng(3)
+def _fan_under_two_points(k: int, rng):
+    """A fan of k triangles about point 0 and two points above it (k + 1, k + 2), each
+    against every triangle at random barycentric weights: 2 k pairs, k on each point and
+    2 k on the fan's centre. Returns (pairs, the two points, k + 3 random masses)."""
     ring = np.arange(1, k + 1)
     tris = np.stack([np.zeros(k, int), ring, np.roll(ring, -1)], axis=1)
     upper = np.array([k + 1, k + 2])
@@ -226,11 +220,25 @@ def test_crowded_velocity_passes_end_once_no_pair_approaches_faster_than_the_tol
     normal = np.tile([0.0, 0.0, -1.0], (len(point), 1))  # (triangle - point) . n >= gap
     pairs = pair_solve.PointPairs(vertex, weight, normal, np.zeros_like(normal),
                                   np.full(len(point), 0.005), 0.01)
-    mass = rng.uniform(0.5, 2.0, k + 3)
+    return pairs, upper, rng.uniform(0.5, 2.0, k + 3)
+
+
+def test_crowded_velocity_passes_end_once_no_pair_approaches_faster_than_the_tolerance(
+        monkeypatch):
+    """Two points falling at 0.5 m/s onto a fan of 8 triangles: 16 pairs on the fan's centre,
+    more than a point takes Gauss-Seidel passes for, so the response's passes are relaxed.
+    Each gives a pair a sixteenth of its push, so the approaches shrink and never quite end:
+    all 32 passes ran, the last ones for approaches of 1e-9 m/s. They now end once none is
+    faster than RELAXED_TOLERANCE of the rest speed (19 passes here); the pushes stay equal
+    and opposite."""
+    k, rest_speed = 8, 0.1
+    rng = np.random.default_rng(3)
+    pairs, upper, mass = _fan_under_two_points(k, rng)
+    vertex, weight, normal = pairs.vertex, pairs.weight, pairs.normal
     v = np.zeros((k + 3, 3))
     v[upper] = (0.0, 0.0, -0.5) + rng.normal(0.0, 0.05, (2, 3))
     p0 = (mass[:, None] * v).sum(axis=0)
-    assert pair_solve._groups(pairs, np.arange(len(point)), 1.0 / mass, None) is None
+    assert pair_solve._groups(pairs, np.arange(len(vertex)), 1.0 / mass, None) is None
     passes = []
     apply = pair_solve._apply
     monkeypatch.setattr(pair_solve, "_apply", lambda *a: passes.append(1) or apply(*a))
@@ -299,17 +307,8 @@ def test_crowded_friction_keeps_momentum():
     pair's points by equal and opposite shares, so the momentum of the whole is kept."""
     k = 8
     rng = np.random.default_rng(5)
-    ring = np.arange(1, k + 1)
-    tris = np.stack([np.zeros(k, int), ring, np.roll(ring, -1)], axis=1)
-    upper = np.array([k + 1, k + 2])
-    point = np.tile(upper, k)
-    vertex = np.concatenate([np.repeat(tris, 2, axis=0), point[:, None]], axis=1)
-    weight = np.concatenate([rng.dirichlet([2, 2, 2], len(point)), -np.ones((len(point), 1))],
-                            axis=1)
-    normal = np.tile([0.0, 0.0, -1.0], (len(point), 1))
-    pairs = pair_solve.PointPairs(vertex, weight, normal, np.zeros_like(normal),
-                                  np.full(len(point), 0.005), 0.01)
-    mass = rng.uniform(0.5, 2.0, k + 3)
+    pairs, upper, mass = _fan_under_two_points(k, rng)
+    normal = pairs.normal
     v = rng.normal(0.0, 0.05, (k + 3, 3))
     v[upper] += (0.8, -0.3, -0.5)
     p0 = (mass[:, None] * v).sum(axis=0)
