@@ -189,17 +189,12 @@ class SelfCollision:
 
     def _carry(self, pairs: PointPairs, keys: np.ndarray, pushed: np.ndarray,
                held: np.ndarray, h: float) -> None:
-        """This sub-step's impulses of each pair, as forces, added to what its pair carried
-        (CARRY_KEEP of it at a sub-step's start), the friction within the cone."""
-        unique, inverse = np.unique(keys, return_inverse=True)
-        m = len(unique)
-        last = np.empty(m, np.int64)
-        last[inverse] = np.arange(len(keys))  # each pair's latest row: its geometry
-        normal = pairs.normal[last]
-        fn = np.bincount(inverse, pushed, m) / h
-        ft = np.zeros((m, 3))
-        scatter_add(ft, inverse, held)
-        ft /= h
+        """This sub-step's impulses of each pair (``keys``: one row each), as forces, added
+        to what its pair carried (CARRY_KEEP of it at a sub-step's start), the friction within
+        the cone."""
+        order = np.argsort(keys)
+        unique, normal = keys[order], pairs.normal[order]
+        fn, ft = pushed[order] / h, held[order] / h
         base, keep = self.carried, CARRY_KEEP if self._fresh else 1.0
         self._fresh = False
         if base is not None and len(base.key):
@@ -211,7 +206,7 @@ class SelfCollision:
             ft = ft + keep * old
         fn = np.maximum(fn, 0.0)
         within_cone(ft, self.friction * fn)
-        self.carried = Carried(unique, pairs.vertex[last], pairs.weight[last], normal, fn, ft)
+        self.carried = Carried(unique, pairs.vertex[order], pairs.weight[order], normal, fn, ft)
 
     def fail_safe(self, x0, x1, v) -> None:
         """Step 4 of the module docstring: the points of pairs that crossed between x0 (a

@@ -250,15 +250,10 @@ def test_crowded_velocity_passes_end_once_no_pair_approaches_faster_than_the_tol
     np.testing.assert_allclose((mass[:, None] * v).sum(axis=0), p0, atol=1e-12)
 
 
-@pytest.mark.parametrize("friction, along", [(0.2, 0.9), (1.0, 0.5), (3.0, 0.0)])
-def test_crowded_friction_passes_reach_coulombs_answer(friction, along):
-    """A point sliding at 1 m/s along a fixed fan of 16 triangles and falling onto it at
-    0.5 m/s: 16 pairs on the point, so the response's passes are relaxed. Coulomb's answer is
-    a closed form: the fall stops and the slide loses friction times 0.5 m/s (all of it when
-    that is more). Relaxed Jacobi passes moved each pair a sixteenth of the way to its cone in
-    each pass and ended their 32 passes 13 % of the friction short; the accelerated passes
-    reach it."""
-    k, rest_speed = 16, 0.1
+def _point_on_fixed_fan(k: int):
+    """A fan of k triangles about point 0, all fixed, and a 0.3 kg point k + 1 against each of
+    them (at their centroids) sliding at 1 m/s and falling onto them at 0.5 m/s. Returns
+    (pairs, the point, inverse masses, velocities)."""
     ring = np.arange(1, k + 1)
     tris = np.stack([np.zeros(k, int), ring, np.roll(ring, -1)], axis=1)
     point = k + 1
@@ -269,9 +264,23 @@ def test_crowded_friction_passes_reach_coulombs_answer(friction, along):
                                   np.full(k, 0.005), 0.01)
     inv_mass = np.zeros(k + 2)
     inv_mass[point] = 1.0 / 0.3
-    assert pair_solve._groups(pairs, np.arange(k), inv_mass, None) is None
     v = np.zeros((k + 2, 3))
     v[point] = (1.0, 0.0, -0.5)
+    return pairs, point, inv_mass, v
+
+
+@pytest.mark.parametrize("friction, along", [(0.2, 0.9), (1.0, 0.5), (3.0, 0.0)])
+def test_crowded_friction_passes_reach_coulombs_answer(friction, along):
+    """A point sliding at 1 m/s along a fixed fan of 16 triangles and falling onto it at
+    0.5 m/s: 16 pairs on the point, so the response's passes are relaxed. Coulomb's answer is
+    a closed form: the fall stops and the slide loses friction times 0.5 m/s (all of it when
+    that is more). Relaxed Jacobi passes moved each pair a sixteenth of the way to its cone in
+    each pass and ended their 32 passes 13 % of the friction short; the accelerated passes
+    reach it."""
+    k, rest_speed = 16, 0.1
+    pairs, point, inv_mass, v = _point_on_fixed_fan(k)
+    normal = pairs.normal
+    assert pair_solve._groups(pairs, np.arange(k), inv_mass, None) is None
     pair_solve.respond(pairs, v, inv_mass, normal, np.zeros_like(normal), friction, 0.0,
                        rest_speed, coloured=None)
     assert abs(v[point, 2]) <= pair_solve.RELAXED_TOLERANCE * rest_speed
@@ -286,20 +295,10 @@ def test_crowded_friction_acts_on_the_slide_relative_to_the_still_part():
     moving with the point's slide: there is no slide to stop, and friction changes nothing
     (the accelerated passes once read the point's own velocity as its slide)."""
     k = 16
-    ring = np.arange(1, k + 1)
-    tris = np.stack([np.zeros(k, int), ring, np.roll(ring, -1)], axis=1)
-    vertex = np.concatenate([tris, np.full((k, 1), k + 1)], axis=1)
-    weight = np.concatenate([np.full((k, 3), 1.0 / 3.0), -np.ones((k, 1))], axis=1)
-    normal = np.tile([0.0, 0.0, -1.0], (k, 1))
-    pairs = pair_solve.PointPairs(vertex, weight, normal, np.zeros_like(normal),
-                                  np.full(k, 0.005), 0.01)
-    inv_mass = np.zeros(k + 2)
-    inv_mass[k + 1] = 1.0 / 0.3
-    v = np.zeros((k + 2, 3))
-    v[k + 1] = (1.0, 0.0, -0.5)
+    pairs, point, inv_mass, v = _point_on_fixed_fan(k)
     still = np.tile([-1.0, 0.0, 0.0], (k, 1))  # the weighted sum's own slide (-1 x the point's)
-    pair_solve.respond(pairs, v, inv_mass, normal, still, 1.0, 0.0, 0.1, coloured=None)
-    assert v[k + 1, 0] == pytest.approx(1.0, abs=1e-12)
+    pair_solve.respond(pairs, v, inv_mass, pairs.normal, still, 1.0, 0.0, 0.1, coloured=None)
+    assert v[point, 0] == pytest.approx(1.0, abs=1e-12)
 
 
 def test_crowded_friction_keeps_momentum():
