@@ -33,6 +33,9 @@ class Contacts:
             not only while forces press the point into the surface.
         collider: (k,) int: which of the system's collider paths each point touches (-1:
             not known) — a collider that is another system's body takes the push back.
+        wedged: (k,) bool: the point's faces rest on several of a collider's corners and
+            creases facing ways no one normal stands for (:func:`~.features.resting_on_features`):
+            an implicit step holds it whole, as static friction would.
         axis: ``(a, sign)`` when every normal is ``sign`` times the world axis ``a`` and every
             surface is still (resting on a ground that is not turned): the contact force is
             then computed by columns, to the same values; None: any normals.
@@ -49,6 +52,7 @@ class Contacts:
     normal_speed: np.ndarray
     held: np.ndarray
     collider: np.ndarray
+    wedged: np.ndarray
     axis: tuple[int, float] | None = None
 
     @classmethod
@@ -65,9 +69,10 @@ class Contacts:
     @classmethod
     def of(cls, index, point, normal, surface_velocity, friction, restitution, depth=None,
            impulse=None, normal_speed=None, held=None, collider=None,
-           axis=None) -> Contacts:
+           axis=None, wedged=None) -> Contacts:
         """Contacts from the arrays that always differ; the rest default to a resting contact
-        (depth 0, no impulse, the surface's own normal speed, not held). Sorts by index."""
+        (depth 0, no impulse, the surface's own normal speed, not held, not wedged). Sorts by
+        index."""
         k = len(index)
         if normal_speed is None:
             normal_speed = (np.zeros(k) if axis is not None else
@@ -78,7 +83,8 @@ class Contacts:
                    np.zeros(k) if impulse is None else impulse, normal_speed,
                    np.zeros(k, bool) if held is None else held,
                    np.full(k, -1, np.int64) if collider is None
-                   else np.asarray(collider, np.int64), axis)
+                   else np.asarray(collider, np.int64),
+                   np.zeros(k, bool) if wedged is None else np.asarray(wedged, bool), axis)
         if k > 1 and np.any(made.index[1:] < made.index[:-1]):
             return made.take(np.argsort(made.index, kind="stable"))
         return made

@@ -28,7 +28,7 @@ from ..integrators.krylov import projected_pcg
 from ..transforms import inverse3, scale_rows
 from .implicit_parts import (BaraffWitkinSystem, BlockJacobi, Linearisation, MatrixFree,
                              NewtonResult, SolvePattern, StepMemory, VelocityFilter,
-                             diagonal_filter, filtered_diagonal, filtered_one_normal,
+                             diagonal_filter, filtered_diagonal, filtered_one_normal, loosened,
                              positions_and_velocities)
 from .multigrid import AggregationHierarchy
 from .sparse import BlockMatrix, BlockPattern, MatrixBuilder
@@ -120,7 +120,8 @@ class BaraffWitkin(Integrator):
             slipping, leaving = np.union1d(slipping, more[0]), np.union1d(leaving, more[1])
             constraints = self._constraints(system, t, h, v0, f0, slipping, leaving)
             spent = newton.iterations
-            newton = self._newton(system, t, h, x0, v0, f0, constraints, floor, newton.first)
+            first = loosened(newton.first, constraints, np.union1d(*more))
+            newton = self._newton(system, t, h, x0, v0, f0, constraints, floor, first)
             newton.iterations += spent
         v1, iterations = v0 + newton.dv, newton.iterations
         residual = newton.residual
@@ -193,6 +194,7 @@ class BaraffWitkin(Integrator):
                 (np.einsum("ij,ij->i", slide, slide) <= cls.STICK_SPEED ** 2)
             if slipping is not None:
                 stuck &= ~np.isin(pressed, slipping)
+            stuck |= contact.wedged[keep]
             given[pressed[stuck]] -= slide[stuck]
             free[pressed[stuck]] = False
         sliding = slice(None) if stuck is None else ~stuck
@@ -205,15 +207,15 @@ class BaraffWitkin(Integrator):
         """The pressed vertices the step's contact impulses (``reaction`` (n, 3) [N s], the
         solve's constraint impulses) cannot hold: ``(slipping, leaving)``. Slipping: stuck
         ones whose holding impulse leaves the friction cone, its tangential part above mu
-        times its normal part. Leaving: those pressed on ``bodies`` (colliders, as in
+        times its normal part (not wedged ones: no one way to slide). Leaving: those pressed on ``bodies`` (colliders, as in
         ``contact.collider``) that the contact pulls (more than PULL_SHARE of the largest
         push)."""
         pressed, normal = constraints.pressed, constraints.normal
         rn = np.einsum("ij,ij->i", reaction[pressed], normal)
         pulls = rn < -cls.PULL_SHARE * np.abs(rn).max(initial=0.0)
         pulls &= np.isin(constraints.contact.collider[constraints.rows], bodies)
-        held = np.flatnonzero(constraints.stuck & ~pulls) if constraints.stuck is not None \
-            else np.zeros(0, np.int64)
+        held = np.zeros(0, np.int64) if constraints.stuck is None else np.flatnonzero(
+            constraints.stuck & ~pulls & ~constraints.contact.wedged[constraints.rows])
         rt = reaction[pressed[held]] - rn[held, None] * normal[held]
         mu = constraints.contact.friction[constraints.rows[held]]
         out = np.einsum("ij,ij->i", rt, rt) > (mu * np.maximum(rn[held], 0.0)) ** 2
@@ -307,10 +309,10 @@ class BaraffWitkin(Integrator):
         matrix enough that the first one's preconditioner would cost hundreds of iterations in
         the later Newton iterations. ``precondition``: the preconditioner of this matrix
         filtered with tighter constraints (a step solved again with vertices let slide or
-        leave): an SPD operator on all of the space, so CG projected onto the looser filter's
-        directions converges with it as well — a few more iterations for the let-go
-        vertices (about 10 % on a cloth draping Suzanne), none of the filtering and
-        multigrid set-up (a quarter of such a re-solve's time)."""
+        leave), its finest blocks at those vertices made the looser filter's
+        (:func:`~.implicit_parts.loosened`): an SPD operator on all of the space, so CG
+        projected onto the looser filter's directions converges with it as well, none of the
+        filtering and multigrid set-up (a quarter of such a re-solve's time)."""
         sliding, free = constraints.sliding, constraints.free
         if not free.any():  # every vertex pinned or stuck: dv is given, only products remain
             # (and the filter leaves nothing to precondition)

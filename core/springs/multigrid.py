@@ -17,6 +17,8 @@ symmetric positive definite, so the whole is a valid CG preconditioner.
 """
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 
 from ..transforms import inverse3, transform_vectors
@@ -114,6 +116,14 @@ class VCycle:
 
     def __call__(self, r: np.ndarray) -> np.ndarray:
         return self._cycle(0, r)
+
+    def with_fine(self, vertices: np.ndarray, inverse: np.ndarray) -> VCycle:
+        """A copy whose finest block-Jacobi inverses at ``vertices`` (k,) are ``inverse``
+        (k, 3, 3) (the coarse levels shared)."""
+        out = copy.copy(self)
+        out.inverses = [self.inverses[0].copy(), *self.inverses[1:]]
+        out.inverses[0][vertices] = inverse
+        return out
 
     @staticmethod
     def _restrict(level: _Level, r: np.ndarray) -> np.ndarray:

@@ -221,8 +221,9 @@ class BlockMatrix:
         # einsum: a quarter faster than matmul on these many small rows (n of 3 x 3 width)
         return np.einsum("nik,nk->ni", self.data, self._gathered)
 
-    def diagonal(self) -> np.ndarray:
-        """(n, 3, 3) diagonal blocks."""
+    def diagonal(self, vertices: np.ndarray | None = None) -> np.ndarray:
+        """(n, 3, 3) diagonal blocks, or (k, 3, 3) those of ``vertices`` (k,)."""
         p = self.pattern
-        column = p.diagonal_slot % p.width
-        return self.data.reshape(p.n, 3, p.width, 3)[np.arange(p.n), :, column, :]
+        rows = np.arange(p.n) if vertices is None else np.asarray(vertices, np.int64)
+        column = p.diagonal_slot[rows] % p.width
+        return self.data.reshape(p.n, 3, p.width, 3)[rows, :, column, :]

@@ -2,6 +2,8 @@
 route, value for value; and which surfaces take the column route."""
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -34,10 +36,7 @@ def _forces(axis, sign, rows):
 def test_the_column_route_gives_the_general_routes_forces(axis, sign, every):
     rows = np.arange(400) if every else np.sort(np.random.default_rng(1).choice(400, 150, False))
     p, f, general = _forces(axis, sign, rows)
-    along = Contacts(*(getattr(general, k) for k in
-                       ("index", "point", "normal", "depth", "surface_velocity", "friction",
-                        "restitution", "impulse", "normal_speed", "held", "collider")),
-                     (axis, sign))
+    along = dataclasses.replace(general, axis=(axis, sign))
     expected, got = f.copy(), f.copy()
     ContactForce(general, 0.01).constrain(p, expected)
     ContactForce(along, 0.01).constrain(p, got)
