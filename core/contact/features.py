@@ -357,9 +357,9 @@ def _per_point(pairs: PointPairs, share: np.ndarray, surface: np.ndarray, count:
     """Contacts of the points that world-space ``pairs`` move: each with the mean of its
     pairs' normals weighted by its share of them (the nearest pair's point and surface
     velocity; its own position when ``at`` is given), wedged where that mean is shorter than
-    WEDGED (its pairs face ways more than about 35 degrees apart: no one normal keeps them
-    all, and a point held along the mean slid into the others, was pushed back out of them
-    and slid in again every sub-step — a cloth on Suzanne's brow buzzing at 4 cm/s)."""
+    WEDGED times their weight (two equal pairs more than 74 degrees apart: no one normal
+    keeps them all, and a point held along the mean slid into the others, was pushed back out
+    of them and slid in again every sub-step — a cloth on Suzanne's brow buzzing at 4 cm/s)."""
     rows = np.nonzero(share > 0.0)
     index, first = np.unique(pairs.vertex[rows], return_index=True)
     pair = rows[0][first]
@@ -367,8 +367,7 @@ def _per_point(pairs: PointPairs, share: np.ndarray, surface: np.ndarray, count:
     scatter_add(summed, pairs.vertex[rows], pairs.weight[rows][:, None] * pairs.normal[rows[0]])
     normal = summed[index]
     length = norm_rows(normal)
-    weights = np.zeros(count)
-    np.add.at(weights, pairs.vertex[rows], pairs.weight[rows])
+    weights = np.bincount(pairs.vertex[rows], weights=pairs.weight[rows], minlength=count)
     wedged = length < WEDGED * weights[index]
     normal = np.where((length > 0.5)[:, None], normal / np.maximum(length, 1e-300)[:, None],
                       pairs.normal[pair])

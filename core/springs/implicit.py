@@ -207,9 +207,9 @@ class BaraffWitkin(Integrator):
         """The pressed vertices the step's contact impulses (``reaction`` (n, 3) [N s], the
         solve's constraint impulses) cannot hold: ``(slipping, leaving)``. Slipping: stuck
         ones whose holding impulse leaves the friction cone, its tangential part above mu
-        times its normal part (not wedged ones: no one way to slide). Leaving: those pressed on ``bodies`` (colliders, as in
-        ``contact.collider``) that the contact pulls (more than PULL_SHARE of the largest
-        push)."""
+        times its normal part (not wedged ones: no one way to slide). Leaving: those pressed
+        on ``bodies`` (colliders, as in ``contact.collider``) that the contact pulls (more
+        than PULL_SHARE of the largest push)."""
         pressed, normal = constraints.pressed, constraints.normal
         rn = np.einsum("ij,ij->i", reaction[pressed], normal)
         pulls = rn < -cls.PULL_SHARE * np.abs(rn).max(initial=0.0)
