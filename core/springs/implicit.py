@@ -28,7 +28,8 @@ from ..integrators.krylov import projected_pcg
 from ..transforms import inverse3, scale_rows
 from .implicit_parts import (BaraffWitkinSystem, BlockJacobi, Linearisation, MatrixFree,
                              NewtonResult, SolvePattern, StepMemory, VelocityFilter,
-                             diagonal_filter, filtered_diagonal, filtered_one_normal, loosened,
+                             diagonal_filter, filter_blocks, filtered_diagonal, filtered_one_normal,
+                             loosened,
                              positions_and_velocities)
 from .multigrid import AggregationHierarchy
 from .sparse import BlockMatrix, BlockPattern, MatrixBuilder
@@ -457,9 +458,7 @@ class BaraffWitkin(Integrator):
             return filtered_one_normal(matrix, free, pressed,
                                        normal[0] if len(pressed) else np.zeros(3), constrained)
         p = matrix.pattern
-        s = np.where(free[:, None, None], np.eye(3), 0.0)
-        if len(pressed):
-            s[pressed] -= normal[:, :, None] * normal[:, None, :]
+        s = filter_blocks(free, pressed, normal)
         # only blocks in a constrained vertex's row or column change
         row, col = np.nonzero(constrained[:, None] | constrained[p.neighbours])
         data = matrix.data.copy()

@@ -303,6 +303,15 @@ def filtered_one_normal(matrix, free, pressed, n, constrained):
     return BlockMatrix(p, data)
 
 
+def filter_blocks(free: np.ndarray, pressed: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """The filter S per vertex (n, 3, 3): I on a free vertex, 0 on a pinned or stuck one,
+    I - n n^T on one pressed (``pressed`` (k,), ``normal`` (k, 3)) and free to slide."""
+    s = np.where(free[:, None, None], np.eye(3), 0.0)
+    if len(pressed):
+        s[pressed] -= normal[:, :, None] * normal[:, None, :]
+    return s
+
+
 def loosened(first: tuple, constraints: VelocityFilter, released: np.ndarray) -> tuple:
     """A step's first linearisation (:attr:`NewtonResult.first`) for solving it again with the
     vertices ``released`` let slide or leave (``constraints``, looser than the filter its
@@ -314,12 +323,8 @@ def loosened(first: tuple, constraints: VelocityFilter, released: np.ndarray) ->
     blocks, rhs, matrix, precondition = first
     if matrix is None or precondition is None or not len(released):
         return first
-    s = np.where(constraints.free[released][:, None, None], np.eye(3), 0.0)
     sliding = constraints.sliding
-    row = np.full(len(constraints.free), -1)
-    row[constraints.pressed[sliding]] = np.arange(int(sliding.sum()))
-    at = row[released]
-    normal = constraints.normal[sliding][at[at >= 0]]
-    s[at >= 0] -= normal[:, :, None] * normal[:, None, :]
+    s = filter_blocks(constraints.free, constraints.pressed[sliding],
+                      constraints.normal[sliding])[released]
     block = s @ matrix.diagonal(released) @ s + (np.eye(3) - s)
     return blocks, rhs, matrix, precondition.with_fine(released, inverse3(block))
