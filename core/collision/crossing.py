@@ -143,6 +143,30 @@ def _first_crossing(times: np.ndarray, signs: np.ndarray, valid: np.ndarray, k):
     return ever, np.where(side != 0.0, side, 1.0)
 
 
+def relative_motion(first: list, second: list) -> np.ndarray:
+    """(c,) how far the distance between two groups of points' hulls can change when their
+    points move by ``first`` and ``second`` (lists of (c, 3) [m] moves, one per point), each
+    along a line: each group's largest point move, summed — seen from the still frame or from
+    one moving with the pair's mean move, whichever is less. (The distance is the same seen
+    from any frame moving along a line, and changes by at most each hull's largest point
+    move; seen from the mean move's frame, a pair falling or swept along as a whole barely
+    moves: two layers of a cloth falling at 2 m/s no longer each move by their whole fall.)"""
+    moves = [*first, *second]
+    mean = moves[0].copy()
+    for move in moves[1:]:
+        mean += move
+    mean /= len(moves)
+    still, carried = [], []
+    for group in (first, second):
+        most, most_carried = norm_rows(group[0]), norm_rows(group[0] - mean)
+        for move in group[1:]:
+            np.maximum(most, norm_rows(move), out=most)
+            np.maximum(most_carried, norm_rows(move - mean), out=most_carried)
+        still.append(most)
+        carried.append(most_carried)
+    return np.minimum(still[0] + still[1], carried[0] + carried[1])
+
+
 def _may_have_met(apart: np.ndarray, motion: np.ndarray, size: np.ndarray) -> np.ndarray:
     """Rows of pairs ``apart`` [m] at the step's end that may have met during it: their
     distance changed by at most ``motion`` (their points' largest relative motion), and
@@ -158,9 +182,7 @@ def triangle_point(t0: np.ndarray, t1: np.ndarray, p0: np.ndarray,
     normal, apart = _unit(q - p1)  # (as _direction's where apart > TINY: every row not met)
     # as for segments (:func:`segment_segment`): a point further from the triangle at the end
     # than their relative motion over the step (and meeting's tolerance) cannot have met it
-    motion = norm_rows(p1 - p0) + np.maximum(
-        np.maximum(norm_rows(t1[:, 0] - t0[:, 0]), norm_rows(t1[:, 1] - t0[:, 1])),
-        norm_rows(t1[:, 2] - t0[:, 2]))
+    motion = relative_motion([t1[:, k] - t0[:, k] for k in range(3)], [p1 - p0])
     size = np.sqrt(np.maximum(row_max(np.einsum("ckj,ckj->ck", t0 - t0[:, :1], t0 - t0[:, :1])),
                               row_max(np.einsum("ckj,ckj->ck", t1 - t1[:, :1], t1 - t1[:, :1]))))
     met = _may_have_met(apart, motion, size)
@@ -238,8 +260,7 @@ def segment_segment(a0, b0, c0, d0, a1, b1, c1, d1) -> Separation:
     # motion: pairs further apart at the end than that (and than meeting's tolerance, with a
     # margin for rounding) cannot have met, and need no crossing test (most of a mesh resting
     # near another's edges: the same result, for a few of the operations)
-    motion = np.maximum(norm_rows(a1 - a0), norm_rows(b1 - b0)) + \
-        np.maximum(norm_rows(c1 - c0), norm_rows(d1 - d0))
+    motion = relative_motion([a1 - a0, b1 - b0], [c1 - c0, d1 - d0])
     longest = np.maximum(np.maximum(norm_rows(b0 - a0), norm_rows(b1 - a1)),
                          np.maximum(norm_rows(d0 - c0), norm_rows(d1 - c1)))
     met = _may_have_met(apart, motion, longest)

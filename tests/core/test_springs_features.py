@@ -198,8 +198,11 @@ def test_a_cloth_resting_on_a_cone_tip_is_solved_once_per_sub_step(monkeypatch):
 
 def test_a_cloth_dropped_on_a_pyramids_tip_comes_to_rest():
     """A 16 x 16 cloth dropped onto the tip of a pyramid (a mesh collider, friction at its
-    default) drapes over it and comes to rest: over the third second no vertex moves faster
-    than 2 cm/s, half of them slower than 2 mm/s. Its vertices around the tip and along the
+    default) drapes over it and comes to rest: over the fifth second no vertex moves faster
+    than 2 cm/s, half of them slower than 2 mm/s. (When its hanging corners stop swinging
+    depends on the drop's path, which rounding on another processor changes: on one machine
+    they were still by the third second, on another they swung at up to 19 cm/s in it and
+    were still in the fourth.) Its vertices around the tip and along the
     ridges rest through their faces on creases facing ways no one normal stands for; held
     along their pairs' mean normal, each slid into the other creases within the step, was
     pushed back out, and slid in again, every sub-step (the mesh buzzed at 4-10 cm/s and
@@ -215,10 +218,10 @@ def test_a_cloth_dropped_on_a_pyramids_tip_comes_to_rest():
     solver = SpringMeshSolver(model, "IMPLICIT", 2, frame_dt=DT, frame=1)
     state = model.state()
     travel, speeds = [], []
-    for frame in range(1, 73):
+    for frame in range(1, 121):
         before = state.x.copy()
         solver.advance(state, SpringFrameInputs(frame, frame * DT, DT, colliders=[pyramid]))
-        if frame > 48:
+        if frame > 96:
             travel.append(np.linalg.norm(state.x - before, axis=1).max() / DT)
             speeds.append(np.median(np.linalg.norm(state.v, axis=1)))
     assert max(travel) < 0.02 and max(speeds) < 2e-3, (max(travel), max(speeds))
