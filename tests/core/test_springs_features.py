@@ -295,3 +295,35 @@ def test_detections_through_kept_candidate_pairs_equal_fresh_ones(collider):
     assert all(moved[k] != first[k] for k in searched)
     wider = both(down + (0.05, 0.0, 0.0), reach=0.2)
     assert all(wider[k] != moved[k] for k in searched)
+
+
+def test_pairs_at_the_edge_of_the_resting_reach_barely_turn_their_points_normal():
+    """A point resting on a collider's features takes its pairs' mean normal; pairs found at
+    the far edge of the resting reach (in one sub-step, not the next) turn it by little, so it
+    does not swing from one sub-step to the next. Six pairs of a cloth edge and the creases
+    meeting at one of Suzanne's corners, 0.97 mm away (of a 1 mm reach), 43 degrees from the
+    one touching pair: the normal stays within 3 degrees of the touching pair's. At full
+    weight (no reach given) they turn it by over 25 degrees — the drape on Suzanne swung by
+    that every sub-step and never came to rest."""
+    from types import SimpleNamespace
+
+    from physanim.core.contact.features import _per_point
+    from physanim.core.contact.pair_solve import PointPairs
+
+    touching = np.array([0.198, 0.149, 0.969]) / np.linalg.norm([0.198, 0.149, 0.969])
+    far = np.array([0.95, 0.026, 0.311]) / np.linalg.norm([0.95, 0.026, 0.311])
+    gap, reach, k = 5e-5, 1e-3, 6
+    pairs = PointPairs(np.array([[0, 1, 2]] + [[1, 2, 1]] * k),
+                       np.array([[0.03, 0.12, 0.85]] + [[0.15, 0.85, 0.0]] * k),
+                       np.array([touching] + [far] * k), np.zeros((k + 1, 3)),
+                       np.array([gap] + [gap + 0.97 * reach] * k), gap)
+    frame = SimpleNamespace(friction=0.3, restitution=0.0)
+
+    def normal_of_point_2(reach):
+        contacts = _per_point(pairs, pairs.weight.copy(), np.zeros((k + 1, 3)), 3, frame, 0,
+                              None, reach)
+        n = contacts.normal[np.flatnonzero(contacts.index == 2)[0]]
+        return np.degrees(np.arccos(np.clip(n @ touching, -1.0, 1.0)))
+
+    assert normal_of_point_2(reach) < 3.0
+    assert normal_of_point_2(None) > 25.0  # (the weighting before)
