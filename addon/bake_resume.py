@@ -177,6 +177,12 @@ class Resumable:
 
 
 def _numbered_within(name: str, last: int) -> bool:
-    """Whether the last number in a frame file's name is at most ``last``."""
-    numbers = re.findall(r"-?\d+", os.path.basename(name))
-    return bool(numbers) and int(numbers[-1]) <= last
+    """Whether ``name`` is a frame file (its number right before a frame file's extension: not
+    a writer's temporary file, as USD leaves one named ``points_000021.8ZnMNG`` when the
+    process saving the layer is killed) whose number is at most ``last``."""
+    numbered = _FRAME_FILE.search(os.path.basename(name))
+    return numbered is not None and int(numbered.group(1)) <= last
+
+
+# the number and extension a frame file's name ends with (npz frames, USD layers)
+_FRAME_FILE = re.compile(r"(-?\d+)\.(?:npz|usdc|usda)$")

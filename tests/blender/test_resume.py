@@ -103,6 +103,26 @@ def test_a_cancelled_bake_resumes_bit_identical(physanim_ext, tmp_path):
     assert panels.bake_status(scene)[1] == 'CHECKMARK'
 
 
+def test_a_resumed_bake_leaves_a_killed_writers_temporary_files_behind(physanim_ext, tmp_path):
+    """A process killed while USD saved a layer leaves its temporary file beside the frames
+    (``points_000005.8ZnMNG``: the name's last number is not the frame's). The resumed bake
+    takes the frames up to its checkpoint and nothing else: its files are an uninterrupted
+    bake's, none of the temporary ones among them."""
+    path = _shot(tmp_path / "shot")
+    bake = _module(physanim_ext, "bake")
+    cache = path.parent / "physanim_cache"
+    reference = _reference(bake, cache)
+    _cut_off(bake, 9)
+    layers = [p.parent for p in cache.rglob("points_*") if ".partial-" in str(p)]
+    assert layers
+    for folder in set(layers):
+        for stray in ("points_000005.8ZnMNG", "points_000005.AbCdEf", "frame_000004.npz.tmp"):
+            (folder / stray).write_bytes(b"")
+    info, failed = bake.run(bpy.context, resume=True)
+    assert failed is None and "frames 1-24" in info
+    assert _tree(cache) == reference
+
+
 @pytest.mark.parametrize("scale", [0.4, 1.7])
 def test_a_retimed_bake_resumes_bit_identical(physanim_ext, tmp_path, scale):
     """Under a Time Scale a step is a simulation frame showing several frames (or none): a bake
