@@ -12,6 +12,9 @@ from . import inputs_hash, native_points, springs
 from . import resume as checkpoint
 from .roles import gather
 
+# the number and extension a frame file's name ends with (npz frames, USD layers)
+_FRAME_FILE = re.compile(r"(-?\d+)\.(?:npz|usdc|usda)$")
+
 #: What each system's bake wrapper carries from frame to frame, saved in a checkpoint (the core
 #: objects among them are shared with the world and pickled together with it).
 _RESUMED = {"particles": ("model", "solver", "system", "births", "first_frame", "trackers"),
@@ -183,6 +186,3 @@ def _numbered_within(name: str, last: int) -> bool:
     numbered = _FRAME_FILE.search(os.path.basename(name))
     return numbered is not None and int(numbered.group(1)) <= last
 
-
-# the number and extension a frame file's name ends with (npz frames, USD layers)
-_FRAME_FILE = re.compile(r"(-?\d+)\.(?:npz|usdc|usda)$")

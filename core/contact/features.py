@@ -357,7 +357,7 @@ def _per_point(pairs: PointPairs, share: np.ndarray, surface: np.ndarray, count:
                which: int, at: np.ndarray | None = None, reach: float | None = None
                ) -> Contacts:
     """Contacts of the points that world-space ``pairs`` move: each with the mean of its
-    pairs' normals weighted by its share of them (the nearest pair's point and surface
+    pairs' normals weighted by its share of them (its first pair's point and surface
     velocity; its own position when ``at`` is given), wedged where that mean is shorter than
     WEDGED times their weight (two equal pairs more than 74 degrees apart: no one normal
     keeps them all, and a point held along the mean slid into the others, was pushed back out
@@ -382,7 +382,7 @@ def _per_point(pairs: PointPairs, share: np.ndarray, surface: np.ndarray, count:
     length = norm_rows(normal)
     weights = np.bincount(pairs.vertex[rows], weights=weight, minlength=count)[index]
     wedged = length < WEDGED * weights
-    # (a mean of normals that nearly cancel: the nearest pair's)
+    # (a mean of normals that nearly cancel: its first pair's)
     meant = length > (0.5 if reach is None else 0.5 * np.minimum(weights, 1.0))
     normal = np.where(meant[:, None], normal / np.maximum(length, 1e-300)[:, None],
                       pairs.normal[pair])

@@ -29,8 +29,7 @@ from ..transforms import inverse3, scale_rows
 from .implicit_parts import (BaraffWitkinSystem, BlockJacobi, Linearisation, MatrixFree,
                              NewtonResult, SolvePattern, StepMemory, VelocityFilter,
                              diagonal_filter, filter_blocks, filtered_diagonal, filtered_one_normal,
-                             loosened,
-                             positions_and_velocities)
+                             loosened, positions_and_velocities)
 from .multigrid import AggregationHierarchy
 from .sparse import BlockMatrix, BlockPattern, MatrixBuilder
 
