@@ -206,9 +206,11 @@ def body_settings(ob, depsgraph, frame: int, shapes: dict | None = None) -> Rigi
 LIMITED = {"HINGE": "angle", "CONE_TWIST": "angle", "SLIDER": "distance"}
 
 
-def joint_settings(ob, index: dict, frame: int) -> JointSettings:
+def joint_settings(ob, index: dict, frame: int, placed: bool = True) -> JointSettings:
     """Core settings of a constraint object (its origin and axes place the joint) joining the
-    rigid bodies ``index`` (name -> body index)."""
+    rigid bodies ``index`` (name -> body index). ``placed``: read the object's world matrix
+    too; the frames after the first read only the keyable values (the joint stays where the
+    first frame placed it: :meth:`~physanim.core.rigid.joints.JointModel.with_values`)."""
     p = ob.physanim.constraint
 
     def fail(message: str):
@@ -226,7 +228,8 @@ def joint_settings(ob, index: dict, frame: int) -> JointSettings:
     try:
         return JointSettings(
             ob.name, p.type, index[p.object1.name], body_b,
-            world_matrix(ob, frame, "constraint"), use_limits=p.use_limits and limits is not None,
+            world_matrix(ob, frame, "constraint") if placed else np.eye(4),
+            use_limits=p.use_limits and limits is not None,
             lower=getattr(p, f"{limits}_lower") if limits else 0.0,
             upper=getattr(p, f"{limits}_upper") if limits else 0.0, cone=p.cone_angle,
             use_motor=p.use_motor, motor_velocity=p.motor_velocity, motor_max=p.motor_max,
@@ -307,7 +310,8 @@ class RigidBake:
         self.simulated |= set(range(len(self.objects))) - set(self.kinematic)
         self._last = {**now, **self.kinematic_matrices(frame)}
         # the constraints' keyable values read now steer the next interval
-        self.joint_values = [joint_settings(ob, self.index, frame) for ob in self.constraints]
+        self.joint_values = [joint_settings(ob, self.index, frame, placed=False)
+                             for ob in self.constraints]
         return RigidPaths(paths, joints, values if self.constraints else None)
 
     def record_breaks(self) -> list[str]:
