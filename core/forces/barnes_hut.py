@@ -25,7 +25,10 @@ from ..collision.broadphase_octree import _morton
 LEAF_SIZE = 16
 MAX_LEVEL = 21  # 21 bits per axis in a 63-bit Morton code
 EXACT_BELOW = 1024  # fewer points: the exact sum is cheaper than a tree
-BATCH = 2_000_000  # point-pair interactions evaluated at once
+BATCH = 2_000_000  # point pairs of the exact sum evaluated at once
+BLOCK = 1 << 17  # (point, source) pairs of one dense block, padding included (cache-sized)
+PAD_AWAY = 1e30  # [m] where the empty source that pads the blocks sits (it has no mass)
+PAD_TO = 32  # a group's sources are padded to a multiple of this
 GROUP_CHUNK = 8192  # groups traversed together (their interaction lists held at once)
 FRONTIER_LIMIT = 4_000_000  # (group, node) pairs a traversal may hold at once (about 100 MB);
 # more, and fewer groups are traversed together
@@ -164,14 +167,16 @@ class Octree:
         nearly every node for every group). Raises :class:`TooManyInteractions` as soon as
         the interactions so far, scaled to every group, exceed :func:`interaction_limit`."""
         a = np.zeros((len(self.x), 3))
-        table_x = np.concatenate([self.node_com, self.x])
-        table_m = np.concatenate([self.node_mass, self.m])
+        # every source as a row (x, y, z, mass): the nodes' monopoles, then the points, then an
+        # empty one (no mass, far away) that pads the dense blocks (:func:`_pull_groups`)
+        where = np.concatenate([self.node_com, self.x, np.full((1, 3), PAD_AWAY)])
+        mass = np.concatenate([self.node_mass, self.m, [0.0]])
+        tables = np.concatenate([where, mass[:, None]], axis=1)
         total, done, size, groups = 0, 0, GROUP_CHUNK, len(self.groups)
         while done < groups:
             chunk = np.arange(done, min(done + size, groups))
             try:
-                total = self._accelerate(a, chunk, table_x, table_m, G, eps, theta, total,
-                                         groups)
+                total = self._accelerate(a, chunk, tables, G, eps, theta, total, groups)
             except _FrontierFull:
                 if size == 1:
                     raise
@@ -182,8 +187,8 @@ class Octree:
         out[self.order] = a
         return out
 
-    def _accelerate(self, a: np.ndarray, chunk: np.ndarray, table_x: np.ndarray,
-                    table_m: np.ndarray, G: float, eps: float, theta: float, total: int = 0,
+    def _accelerate(self, a: np.ndarray, chunk: np.ndarray, tables: np.ndarray, G: float,
+                    eps: float, theta: float, total: int = 0,
                     groups_in_all: int | None = None) -> int:
         """The accelerations of the points of the groups ``chunk`` (consecutive indices, the
         first ``chunk[0]`` done with ``total`` interactions). Returns the interactions so far
@@ -205,24 +210,13 @@ class Octree:
         source = source[np.argsort(key, kind="stable")]
         groups = self.groups[chunk]
         per_group = np.bincount(key, minlength=len(groups))
-        src_start = np.cumsum(per_group) - per_group
         count = self.node_count[groups]
-        rows = count * per_group  # interactions of each group: its points times its sources
-        total += int(rows.sum())
+        total += int((count * per_group).sum())  # interactions: points times sources
         scale = (groups_in_all or len(self.groups)) / (chunk[-1] + 1)
         if total * scale > interaction_limit(len(self.x)):
             raise TooManyInteractions(int(total * scale))
-        for lo, hi in _batches(rows, BATCH):
-            g = np.arange(lo, hi)
-            g = g[rows[lo:hi] > 0]
-            if not len(g):
-                continue
-            # point-major: each target point's sources are one contiguous run
-            point = _ranges(self.node_start[groups[g]], count[g])
-            width = np.repeat(per_group[g], count[g])
-            src = source[_ranges(np.repeat(src_start[g], count[g]), width)]
-            a[point] = _pull_runs(self.x, np.repeat(point, width), table_x[src], table_m[src],
-                                  G, eps, np.cumsum(width) - width)
+        _pull_groups(a, self.x, self.node_start[groups], count, tables, source, per_group,
+                     G, eps)
         return total
 
     def interactions(self, theta: float, groups: np.ndarray | None = None
@@ -265,34 +259,55 @@ def _ranges(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
     return np.repeat(starts - (np.cumsum(counts) - counts), counts) + np.arange(total)
 
 
-def _pull_runs(x: np.ndarray, target: np.ndarray, src_x: np.ndarray, src_m: np.ndarray,
-               G: float, eps: float, run_start: np.ndarray) -> np.ndarray:
-    """Sum over each run of sources of G m d / (|d|^2 + eps^2)^(3/2), d = source - target
-    (a source at the target itself adds nothing)."""
-    xt = x[target]
-    r2 = np.full(len(target), eps * eps)
-    d = []
-    for k in range(3):
-        dk = src_x[:, k] - xt[:, k]
-        r2 += dk * dk
-        d.append(dk)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        w = np.where(r2 > 0.0, G * src_m / (r2 * np.sqrt(r2)), 0.0)
-    return np.stack([np.add.reduceat(dk * w, run_start) for dk in d], axis=1)
-
-
-def _batches(block: np.ndarray, limit: int):
-    """Ranges of pairs whose blocks sum to about ``limit`` interactions each."""
-    if not len(block):
+def _pull_groups(a: np.ndarray, x: np.ndarray, start: np.ndarray, count: np.ndarray,
+                 tables: np.ndarray, source: np.ndarray, per_group: np.ndarray, G: float,
+                 eps: float) -> None:
+    """The accelerations of groups of points (runs ``start``, ``count`` of ``x``) by their
+    sources (``source``: rows of ``tables``, (x, y, z, mass) per source, grouped in order,
+    ``per_group`` each): G sum m d / (|d|^2 + eps^2)^(3/2), d = source - point (a source at the
+    point itself adds nothing), into ``a``. Group-major: a group's sources are gathered once
+    and met by all its points in a dense block — the points of a bucket share their
+    interaction list, which point by point was gathered once per point (up to LEAF_SIZE times
+    each). A block holds groups whose source counts round up to the same multiple of
+    PAD_TO, padded to it with the empty last source: each group's sums are then the same
+    whichever groups share its block (a traversal taken in parts gives the same bits)."""
+    if not len(per_group):
         return
-    ends = np.cumsum(block)
-    lo = 0
-    while lo < len(block):
-        base = ends[lo - 1] if lo else 0
-        hi = int(np.searchsorted(ends, base + limit, side="right"))
-        hi = max(hi, lo + 1)
-        yield lo, hi
+    pad = len(tables) - 1
+    src_start = np.cumsum(per_group) - per_group
+    padded = -(-per_group // PAD_TO) * PAD_TO
+    order = np.argsort(padded, kind="stable")
+    width = padded[order]
+    lo, n = 0, len(order)
+    while lo < n:
+        hi = _block_end(width, count[order], lo)
+        g = order[lo:hi]
+        w, p = int(width[lo]), int(count[g].max())
+        at = np.arange(w)
+        rows = np.where(at < per_group[g, None],
+                        source[np.minimum(src_start[g, None] + at, max(len(source) - 1, 0))],
+                        pad) if len(source) else np.full((len(g), w), pad)
+        points = start[g, None] + np.minimum(np.arange(p), count[g, None] - 1)  # (last repeats)
+        src = np.take(tables, rows, axis=0)  # (g, s, 4): one gather of each source's row
+        at_x = np.take(x, points, axis=0)
+        d = [src[:, None, :, k] - at_x[:, :, None, k] for k in range(3)]
+        r2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2] + eps * eps
+        with np.errstate(divide="ignore", invalid="ignore"):
+            pull = np.where(r2 > 0.0, (G * src[:, :, 3])[:, None, :] / (r2 * np.sqrt(r2)),
+                            0.0)
+        acc = np.stack([np.einsum("gps,gps->gp", dk, pull) for dk in d], axis=2)
+        real = np.arange(p) < count[g, None]
+        a[points[real]] = acc[real]
         lo = hi
+
+
+def _block_end(width: np.ndarray, points: np.ndarray, lo: int) -> int:
+    """The end of the run of groups from ``lo`` (sorted by ``width``, their padded source
+    counts) of ``lo``'s width whose dense block (groups x most points x width) holds about
+    BLOCK pairs (at least one group)."""
+    same = int(np.searchsorted(width, width[lo], side="right"))
+    most = int(points[lo:min(same, lo + 4096)].max())
+    return min(same, lo + max(1, BLOCK // max(1, most * int(width[lo]))))
 
 
 def accelerations(x: np.ndarray, m: np.ndarray, G: float, eps: float,

@@ -176,6 +176,39 @@ def test_a_crowded_traversal_takes_fewer_groups_at_once_to_the_same_acceleration
     assert np.array_equal(parts, whole)
 
 
+def test_dense_blocks_of_any_size_give_the_same_accelerations(monkeypatch):
+    """Each bucket's points meet its sources in dense blocks of buckets with like source
+    counts: however few or many buckets a block holds, every point's acceleration is the same
+    to the bit, and it is the sum over its sources computed pair by pair (to rounding) — the
+    tree's own far nodes and near points, each source once. Points stacked on one place with
+    no softening pull each other along no axis (no NaN)."""
+    rng = np.random.default_rng(5)
+    x = rng.normal(size=(3000, 3))
+    x[100:140] = x[100]  # forty points at one place
+    m = rng.uniform(0.5, 1.5, len(x))
+    tree = bh.Octree(x, m)
+    big = tree.accelerations(1.0, 0.0, 0.5)
+    monkeypatch.setattr(bh, "BLOCK", 64)  # one bucket per block
+    small = bh.Octree(x, m).accelerations(1.0, 0.0, 0.5)
+    assert np.isfinite(big).all()
+    assert np.array_equal(small, big)
+    # the same sources pair by pair: each bucket's far nodes' monopoles and near points
+    (far_g, far_n), (near_g, near_l) = tree.interactions(0.5)
+    expected = np.zeros_like(x)
+    for g in range(len(tree.groups)):
+        s, c = tree.node_start[tree.groups[g]], tree.node_count[tree.groups[g]]
+        near = [np.arange(tree.node_start[k], tree.node_start[k] + tree.node_count[k])
+                for k in near_l[near_g == g]]
+        sx = np.concatenate([tree.node_com[far_n[far_g == g]], *(tree.x[i] for i in near)])
+        sm = np.concatenate([tree.node_mass[far_n[far_g == g]], *(tree.m[i] for i in near)])
+        d = sx[None] - tree.x[s:s + c, None]
+        r2 = (d * d).sum(axis=2)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            w = np.where(r2 > 0.0, sm / (r2 * np.sqrt(r2)), 0.0)
+        expected[tree.order[s:s + c]] = (d * w[..., None]).sum(axis=1)
+    assert big == pytest.approx(expected, rel=1e-12, abs=1e-9)
+
+
 def test_an_opening_angle_too_small_for_the_point_count_is_refused_naming_the_force(
         monkeypatch):
     """Nearly the exact sum over many points (a tiny opening angle) would take days a step at
