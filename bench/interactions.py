@@ -47,7 +47,9 @@ def _interactions(bh, tree, theta: float) -> int:
         chunk = np.arange(done, min(done + size, len(tree.groups)))
         try:
             (far_g, _), (near_g, near_l) = tree.interactions(theta, chunk)
-        except bh.TooManyInteractions:  # (its frontier's limit: fewer groups at once)
+        except bh._FrontierFull:  # (its frontier's limit: fewer groups at once)
+            if size == 1:
+                raise
             size = max(1, size // 8)
             continue
         work += int(count[far_g].sum() + (count[near_g] * tree.node_count[near_l]).sum())

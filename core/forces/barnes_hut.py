@@ -9,11 +9,13 @@ finite at any distance (two stars passing through each other do not fling apart)
 
 The tree is a linear octree: points sorted along the Morton (Z-order) curve of their cells, a
 node at level L being a run of points sharing the code's first 3 L bits; a node of at most
-:data:`LEAF_SIZE` points is a leaf (a *bucket*). Traversal is vectorised over buckets: a
-frontier of (bucket, node) pairs, level by level; a node is far from a bucket when its cell's
-side s and the distance d from its centre of mass to the bucket's bounding box satisfy
-s < theta d, and then every point of the bucket takes the node's monopole; a leaf that is not far
-is summed point by point; other nodes open into their children. theta = 0 is the exact sum.
+:data:`LEAF_SIZE` points is a leaf (a *bucket*; at :data:`MAX_LEVEL` a leaf holds however many
+points share its cell). Traversal is vectorised over buckets: a frontier of (bucket, node)
+pairs, level by level; a node is far from a bucket when its cell's side s and the distance d
+from its centre of mass to the bucket's bounding box satisfy s < theta d, and then every point
+of the bucket takes the node's monopole; a leaf that is not far gives its points one by one;
+other nodes open into their children. Each bucket's sources (far monopoles and near points) are
+then met by all its points at once (:func:`_pull_groups`). theta = 0 is the exact sum.
 Error against theta is measured in the tests and printed by the benchmark.
 """
 from __future__ import annotations
@@ -39,8 +41,8 @@ GROUP_CHUNK = 1024
 FRONTIER_LIMIT = 4_000_000  # (group, node) pairs a traversal may hold at once (about 100 MB);
 # more, and fewer groups are traversed together
 MAX_INTERACTIONS = 200_000_000  # point-source interactions of one evaluation that are always
-PER_BODY = 10_000  # allowed, or this many per point if more (theta 0.5 takes about 2,000 at a
-# million points, 107 s); beyond, an evaluation is refused: a tiny opening angle over many
+PER_BODY = 10_000  # allowed, or this many per point if more (theta 0.5 takes about 2,700 at a
+# million points, 55 s); beyond, an evaluation is refused: a tiny opening angle over many
 # points is nearly the exact sum (240,000 points: 6e10 interactions, days a step)
 
 
@@ -160,7 +162,8 @@ class Octree:
             self.node_mass > 0.0, self.node_mass, 1.0)[:, None]
         self.node_size = side / (1 << self.node_level).astype(np.float64)
         self.leaves = np.flatnonzero(~has)
-        # the targets: the leaves (buckets of at most leaf_size points), with their boxes
+        # the targets: the leaves (buckets of at most leaf_size points, but at MAX_LEVEL),
+        # with their boxes
         self.groups = self.leaves[np.argsort(self.node_start[self.leaves])]
         gs = self.node_start[self.groups]
         self.group_lo = np.minimum.reduceat(xs, gs)
@@ -275,45 +278,51 @@ def _pull_groups(a: np.ndarray, x: np.ndarray, start: np.ndarray, count: np.ndar
     and met by all its points in a dense block — the points of a bucket share their
     interaction list, which point by point was gathered once per point (up to LEAF_SIZE times
     each). A block holds groups whose source counts round up to the same multiple of
-    PAD_TO, padded to it with the empty last source: each group's sums are then the same
-    whichever groups share its block (a traversal taken in parts gives the same bits)."""
+    PAD_TO (padded to it with the empty last source) and, among those, like point counts; a
+    bucket too big for one block (many points in one MAX_LEVEL cell) gives its points a slice
+    at a time. Each point's sum runs along its own row alone, so it is the same whichever
+    groups share its block (a traversal taken in parts gives the same bits)."""
     if not len(per_group):
         return
     pad = len(tables) - 1
     src_start = np.cumsum(per_group) - per_group
     padded = -(-per_group // PAD_TO) * PAD_TO
-    order = np.argsort(padded, kind="stable")
-    width = padded[order]
+    order = np.lexsort((count, padded))  # by padded width, then by points: little padding
+    width, points = padded[order], count[order]
     lo, n = 0, len(order)
     while lo < n:
-        hi = _block_end(width, count[order], lo)
+        hi = _block_end(width, points, lo)
         g = order[lo:hi]
-        w, p = int(width[lo]), int(count[g].max())
+        w, most = int(width[lo]), int(points[hi - 1])
         at = np.arange(w)
         rows = np.where(at < per_group[g, None],
                         source[np.minimum(src_start[g, None] + at, max(len(source) - 1, 0))],
                         pad) if len(source) else np.full((len(g), w), pad)
-        points = start[g, None] + np.minimum(np.arange(p), count[g, None] - 1)  # (last repeats)
         src = np.take(tables, rows, axis=0)  # (g, s, 4): one gather of each source's row
-        at_x = np.take(x, points, axis=0)
-        d = [src[:, None, :, k] - at_x[:, :, None, k] for k in range(3)]
-        r2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2] + eps * eps
-        with np.errstate(divide="ignore", invalid="ignore"):
-            pull = np.where(r2 > 0.0, (G * src[:, :, 3])[:, None, :] / (r2 * np.sqrt(r2)),
-                            0.0)
-        acc = np.stack([np.einsum("gps,gps->gp", dk, pull) for dk in d], axis=2)
-        real = np.arange(p) < count[g, None]
-        a[points[real]] = acc[real]
+        mass = (G * src[:, :, 3])[:, None, :]
+        step = max(1, BLOCK // max(1, len(g) * w))
+        for first in range(0, most, step):
+            k = np.arange(first, min(first + step, most))
+            points_at = start[g, None] + np.minimum(k, count[g, None] - 1)  # (last repeats)
+            at_x = np.take(x, points_at, axis=0)
+            d = [src[:, None, :, c] - at_x[:, :, None, c] for c in range(3)]
+            r2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2] + eps * eps
+            with np.errstate(divide="ignore", invalid="ignore"):
+                pull = np.where(r2 > 0.0, mass / (r2 * np.sqrt(r2)), 0.0)
+            # (a sum along each row: einsum's changes with the block's shape past 8,192)
+            acc = np.stack([np.multiply(dc, pull, out=dc).sum(axis=2) for dc in d], axis=2)
+            real = k < count[g, None]
+            a[points_at[real]] = acc[real]
         lo = hi
 
 
 def _block_end(width: np.ndarray, points: np.ndarray, lo: int) -> int:
     """The end of the run of groups from ``lo`` (sorted by ``width``, their padded source
-    counts) of ``lo``'s width whose dense block (groups x most points x width) holds about
-    BLOCK pairs (at least one group)."""
+    counts, then by ``points``) of ``lo``'s width whose dense block (groups x most points x
+    width) holds at most BLOCK pairs (at least one group)."""
     same = int(np.searchsorted(width, width[lo], side="right"))
-    most = int(points[lo:min(same, lo + 4096)].max())
-    return min(same, lo + max(1, BLOCK // max(1, most * int(width[lo]))))
+    take = np.arange(1, same - lo + 1) * points[lo:same] * int(width[lo]) <= BLOCK
+    return lo + max(1, int(np.count_nonzero(take)))  # (the products grow along the run)
 
 
 def accelerations(x: np.ndarray, m: np.ndarray, G: float, eps: float,

@@ -184,9 +184,10 @@ def test_dense_blocks_of_any_size_give_the_same_accelerations(monkeypatch):
     no softening pull each other along no axis (no NaN)."""
     rng = np.random.default_rng(5)
     x = rng.normal(size=(3000, 3))
-    x[100:140] = x[100]  # forty points at one place
+    x[100:100 + bh.LEAF_SIZE + 8] = x[100]  # more points at one place than a bucket holds
     m = rng.uniform(0.5, 1.5, len(x))
     tree = bh.Octree(x, m)
+    assert tree.node_count[tree.groups].max() > bh.LEAF_SIZE  # (their cell's bucket)
     big = tree.accelerations(1.0, 0.0, 0.5)
     monkeypatch.setattr(bh, "BLOCK", 64)  # one bucket per block
     small = bh.Octree(x, m).accelerations(1.0, 0.0, 0.5)
@@ -207,6 +208,28 @@ def test_dense_blocks_of_any_size_give_the_same_accelerations(monkeypatch):
             w = np.where(r2 > 0.0, sm / (r2 * np.sqrt(r2)), 0.0)
         expected[tree.order[s:s + c]] = (d * w[..., None]).sum(axis=1)
     assert big == pytest.approx(expected, rel=1e-12, abs=1e-9)
+
+
+def test_a_bucket_s_sums_do_not_depend_on_its_block(monkeypatch):
+    """A bucket of three points with 9,000 sources (more than numpy's einsum sums alike in
+    every shape): met in one block, or a point at a time (a bucket bigger than a block), each
+    point's acceleration is the same to the bit."""
+    rng = np.random.default_rng(8)
+    x = rng.normal(size=(3, 3))
+    sources = np.concatenate([rng.normal(size=(9000, 3)) * 10.0, rng.uniform(0.5, 1.5, (9000, 1))],
+                             axis=1)
+    tables = np.concatenate([sources, [[bh.PAD_AWAY] * 3 + [0.0]]])
+    args = (x, np.array([0]), np.array([3]), tables, np.arange(9000), np.array([9000]), 1.0,
+            0.01)
+    whole, sliced = np.zeros((3, 3)), np.zeros((3, 3))
+    bh._pull_groups(whole, *args)
+    monkeypatch.setattr(bh, "BLOCK", 100)  # a block too small for even one point's sources
+    bh._pull_groups(sliced, *args)
+    assert np.array_equal(whole, sliced)
+    d = sources[None, :, :3] - x[:, None]
+    r2 = (d * d).sum(axis=2) + 0.01 ** 2
+    assert whole == pytest.approx((d * (sources[:, 3] / r2 ** 1.5)[..., None]).sum(axis=1),
+                                  rel=1e-12)
 
 
 def test_an_opening_angle_too_small_for_the_point_count_is_refused_naming_the_force(
