@@ -210,7 +210,8 @@ def joint_settings(ob, index: dict, frame: int, placed: bool = True) -> JointSet
     """Core settings of a constraint object (its origin and axes place the joint) joining the
     rigid bodies ``index`` (name -> body index). ``placed``: read the object's world matrix
     too; the frames after the first read only the keyable values (the joint stays where the
-    first frame placed it: :meth:`~physanim.core.rigid.joints.JointModel.with_values`)."""
+    first frame placed it: :meth:`~physanim.core.rigid.joints.JointModel.with_values`), and
+    their settings carry the identity instead, which must not place a joint."""
     p = ob.physanim.constraint
 
     def fail(message: str):
