@@ -90,12 +90,16 @@ class PointGrid:
             raise ValueError(f"{count:,} point pairs lie within {self.radius:g} m of each other "
                              f"(at most {limit:,} are searched)")
         out_i, out_j = [], []
+        # the candidates as places in the cell order (each cell's points side by side: the
+        # positions read are near each other in memory), back to the points' own indices only
+        # for the pairs kept
+        xs = self.x[self.order]
         for a, b in self._cell_pairs():
             i, j = self._expand_batched(a, b)
-            d = self.x[i] - self.x[j]
+            d = xs[i] - xs[j]
             near = np.einsum("ij,ij->i", d, d) <= self.radius * self.radius
-            out_i.append(i[near])
-            out_j.append(j[near])
+            out_i.append(self.order[i[near]])
+            out_j.append(self.order[j[near]])
         if not out_i:
             return np.zeros(0, np.int64), np.zeros(0, np.int64)
         return np.concatenate(out_i), np.concatenate(out_j)
@@ -134,7 +138,7 @@ class PointGrid:
 
     def _expand_batched(self, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`_expand`, a cell pair bigger than BATCH alone taken a few of its rows at a
-        time (a crowded cell)."""
+        time (a crowded cell). Places in the cell order (``order`` maps them to points)."""
         big = self.cell_count[a] * self.cell_count[b] > BATCH
         if not big.any():
             return self._expand(a, b)
@@ -147,16 +151,18 @@ class PointGrid:
         return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
 
     def _expand_rows(self, a: int, b: int, r0: int, r1: int) -> tuple[np.ndarray, np.ndarray]:
-        """The point pairs of rows r0..r1 of cell a against cell b (a == b: each pair once)."""
+        """The point pairs of rows r0..r1 of cell a against cell b (a == b: each pair once), as
+        places in the cell order."""
         p = np.repeat(np.arange(r0, r1), self.cell_count[b])
         q = np.tile(np.arange(self.cell_count[b]), r1 - r0)
         if a == b:
             keep = p < q
             p, q = p[keep], q[keep]
-        return (self.order[self.cell_start[a] + p], self.order[self.cell_start[b] + q])
+        return self.cell_start[a] + p, self.cell_start[b] + q
 
     def _expand(self, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The point pairs of the cell pairs (a, b); within one cell (a == b) each pair once."""
+        """The point pairs of the cell pairs (a, b), as places in the cell order; within one cell
+        (a == b) each pair once."""
         ca, cb = self.cell_count[a], self.cell_count[b]
         block = ca * cb
         total = int(block.sum())
@@ -164,12 +170,10 @@ class PointGrid:
             return np.zeros(0, np.int64), np.zeros(0, np.int64)
         k = np.repeat(np.arange(len(a)), block)
         local = np.arange(total) - np.repeat(np.cumsum(block) - block, block)
-        p = local // cb[k]
-        q = local % cb[k]
-        same = a[k] == b[k]
-        keep = ~same | (p < q)
-        i = self.order[self.cell_start[a[k]] + p][keep]
-        j = self.order[self.cell_start[b[k]] + q][keep]
+        p, q = np.divmod(local, cb[k])
+        keep = (a[k] != b[k]) | (p < q)
+        i = (self.cell_start[a[k]] + p)[keep]
+        j = (self.cell_start[b[k]] + q)[keep]
         return i, j
 
 
