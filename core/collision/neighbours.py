@@ -23,6 +23,8 @@ HALF_SHELL = np.array([(0, 0, 0)] + [(dx, dy, dz) for dx in (-1, 0, 1) for dy in
                       dtype=np.int64)
 #: candidate pairs held at once (about 24 bytes each, a few arrays of them)
 BATCH = 4_000_000
+#: candidates of one dense block of cell pairs (:meth:`PointGrid._dense`), padding included
+BLOCK = 1 << 15
 #: candidate pairs one search may test (a minute or so of numpy): beyond, points are crowded
 #: within the radius and the search would be all pairs of them
 MAX_CANDIDATES = 500_000_000
@@ -93,15 +95,76 @@ class PointGrid:
         # the candidates as places in the cell order (each cell's points side by side: the
         # positions read are near each other in memory), back to the points' own indices only
         # for the pairs kept
-        xs = self.x[self.order]
+        xs = np.ascontiguousarray(self.x[self.order].T)  # (3, n): by component
         for a, b in self._cell_pairs():
-            i, j = self._expand_batched(a, b)
-            d = xs[i] - xs[j]
-            near = np.einsum("ij,ij->i", d, d) <= self.radius * self.radius
-            out_i.append(self.order[i[near]])
-            out_j.append(self.order[j[near]])
+            big = self.cell_count[a] * self.cell_count[b] > BATCH
+            for i, j in (self._dense(xs, a[~big], b[~big]), self._crowded(xs, a[big], b[big])):
+                out_i.append(self.order[i])
+                out_j.append(self.order[j])
         if not out_i:
             return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        return np.concatenate(out_i), np.concatenate(out_j)
+
+    def _dense(self, xs: np.ndarray, a: np.ndarray, b: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """The pairs within the radius of the cell pairs (a, b), as places in the cell order:
+        cell pairs of like sizes side by side in dense blocks (each cell's points against the
+        other's, padded to the block's largest; about BLOCK candidates a block), so a candidate
+        costs no index arithmetic of its own; within one cell (a == b) each pair once. In the
+        order of the cell pairs given, each one's row by row (the order the forces sum the
+        pairs in: a sum's rounding follows it)."""
+        out_i, out_j = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
+        if not len(a):
+            return out_i[0], out_j[0]
+        keys = [np.zeros(0, np.int64)]
+        width = int(self.cell_count[np.concatenate([a, b])].max())
+        ca, cb = self.cell_count[a], self.cell_count[b]
+        order = np.lexsort((cb, ca))
+        ca, cb, sa, sb = ca[order], cb[order], self.cell_start[a[order]], \
+            self.cell_start[b[order]]
+        same = (a == b)[order]
+        last = len(xs[0]) - 1
+        r2 = self.radius * self.radius
+        lo = 0
+        while lo < len(ca):
+            pa = int(ca[lo])
+            run = int(np.searchsorted(ca, pa, side="right"))  # (this many points on side a)
+            grow = np.maximum.accumulate(cb[lo:run])
+            fits = np.arange(1, run - lo + 1) * pa * grow <= BLOCK
+            hi = lo + max(1, int(np.count_nonzero(fits)))
+            pb = int(grow[hi - lo - 1])
+            rows = sa[lo:hi, None] + np.arange(pa)  # (g, pa): every row real (sizes sorted)
+            cols = sb[lo:hi, None] + np.arange(pb)
+            real = np.arange(pb) < cb[lo:hi, None]
+            cols = np.minimum(cols, last)
+            dist = np.zeros((hi - lo, pa, pb))
+            for k in range(3):
+                d = xs[k][rows][:, :, None] - xs[k][cols][:, None, :]
+                dist += d * d
+            near = (dist <= r2) & real[:, None, :]
+            if same[lo:hi].any():  # a cell with itself: each pair once
+                near &= ~same[lo:hi, None, None] | (np.arange(pa)[:, None] < np.arange(pb))
+            g, p, q = np.nonzero(near)
+            out_i.append(rows[g, p])
+            out_j.append(cols[g, q])
+            keys.append((order[lo + g] * width + p) * width + q)
+            lo = hi
+        back = np.argsort(np.concatenate(keys), kind="stable")
+        return np.concatenate(out_i)[back], np.concatenate(out_j)[back]
+
+    def _crowded(self, xs: np.ndarray, a: np.ndarray, b: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+        """The pairs within the radius of cell pairs bigger than BATCH alone (a crowded cell),
+        a few of their rows at a time, as places in the cell order."""
+        out_i, out_j = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
+        for ca, cb in zip(a.tolist(), b.tolist()):
+            rows = max(1, BATCH // int(self.cell_count[cb]))
+            for r0 in range(0, int(self.cell_count[ca]), rows):
+                i, j = self._expand_rows(ca, cb, r0, min(r0 + rows, int(self.cell_count[ca])))
+                near = sum((xs[k][i] - xs[k][j]) ** 2 for k in range(3)) <= \
+                    self.radius * self.radius
+                out_i.append(i[near])
+                out_j.append(j[near])
         return np.concatenate(out_i), np.concatenate(out_j)
 
     def _cell_pairs(self):
@@ -136,20 +199,6 @@ class PointGrid:
         dx, dy, dz = (int(d) for d in self._dims)
         return dx * dy * dz >= 1 << 62
 
-    def _expand_batched(self, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`_expand`, a cell pair bigger than BATCH alone taken a few of its rows at a
-        time (a crowded cell). Places in the cell order (``order`` maps them to points)."""
-        big = self.cell_count[a] * self.cell_count[b] > BATCH
-        if not big.any():
-            return self._expand(a, b)
-        parts = [self._expand(a[~big], b[~big])]
-        for ca, cb in zip(a[big], b[big]):
-            rows = max(1, BATCH // int(self.cell_count[cb]))
-            for r0 in range(0, int(self.cell_count[ca]), rows):
-                parts.append(self._expand_rows(ca, cb, r0, min(r0 + rows,
-                                                               int(self.cell_count[ca]))))
-        return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
-
     def _expand_rows(self, a: int, b: int, r0: int, r1: int) -> tuple[np.ndarray, np.ndarray]:
         """The point pairs of rows r0..r1 of cell a against cell b (a == b: each pair once), as
         places in the cell order."""
@@ -159,22 +208,6 @@ class PointGrid:
             keep = p < q
             p, q = p[keep], q[keep]
         return self.cell_start[a] + p, self.cell_start[b] + q
-
-    def _expand(self, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The point pairs of the cell pairs (a, b), as places in the cell order; within one cell
-        (a == b) each pair once."""
-        ca, cb = self.cell_count[a], self.cell_count[b]
-        block = ca * cb
-        total = int(block.sum())
-        if total == 0:
-            return np.zeros(0, np.int64), np.zeros(0, np.int64)
-        k = np.repeat(np.arange(len(a)), block)
-        local = np.arange(total) - np.repeat(np.cumsum(block) - block, block)
-        p, q = np.divmod(local, cb[k])
-        keep = (a[k] != b[k]) | (p < q)
-        i = (self.cell_start[a[k]] + p)[keep]
-        j = (self.cell_start[b[k]] + q)[keep]
-        return i, j
 
 
 def neighbour_pairs(x: np.ndarray, radius: float,
