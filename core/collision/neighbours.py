@@ -3,9 +3,11 @@ radius, so every pair closer than it lies in the same or adjacent cells.
 
 Points are sorted by cell; each occupied cell meets itself and 13 of its 26 neighbours (one of
 each opposite pair: the half shell), so a pair of cells is visited once and a pair of points
-comes out once, with i < j in the sorted order. Every (cell, neighbour cell) block of point
-pairs is expanded vectorised (repeat / arange over the block sizes), a few offsets at a time so
-the candidate arrays stay bounded, and kept when the points are within the radius.
+comes out once, with i < j in the sorted order. The cell pairs are taken a few offsets at a
+time (the candidate arrays stay bounded); those of like sizes meet side by side in dense
+blocks, each cell's points against the other's (padded to the block's largest), and a pair is
+kept when its points are within the radius; a cell pair too big for a batch alone (a crowded
+cell) is taken a few rows at a time.
 
 Cell keys are linear cell indices when the grid's cell count fits in int64, else a 64-bit hash
 of the cell coordinates (two cells sharing a hash only add candidates, which the distance test
