@@ -23,10 +23,15 @@ from .broadphase_grid import _HASH
 HALF_SHELL = np.array([(0, 0, 0)] + [(dx, dy, dz) for dx in (-1, 0, 1) for dy in (-1, 0, 1)
                                      for dz in (-1, 0, 1) if (dx, dy, dz) > (0, 0, 0)],
                       dtype=np.int64)
-#: candidate pairs held at once (about 24 bytes each, a few arrays of them)
+#: candidate pairs held at once (a few arrays of them; a single cell pair above it is taken a
+#: few rows at a time)
 BATCH = 4_000_000
-#: candidates of one dense block of cell pairs (:meth:`PointGrid._dense`), padding included
+#: candidates of one dense block of cell pairs (:meth:`PointGrid._dense`), padding included (a
+#: single cell pair bigger than this, up to BATCH, is a block alone)
 BLOCK = 1 << 15
+#: squared distances within this relative margin of the radius's are tested again as a pair
+#: of points' own (:func:`_within`): a sum of three squares rounds by its order
+MARGIN = 8.0 * np.finfo(np.float64).eps
 #: candidate pairs one search may test (a minute or so of numpy): beyond, points are crowded
 #: within the radius and the search would be all pairs of them
 MAX_CANDIDATES = 500_000_000
@@ -75,6 +80,8 @@ class PointGrid:
     def candidate_count(self) -> int:
         """Point pairs the search will test: the pairs within each cell and with its half
         shell (what :meth:`pairs` costs)."""
+        if not len(self.key):
+            return 0
         total = 0
         for a, b in self._cell_pairs():
             block = self.cell_count[a] * self.cell_count[b]
@@ -89,6 +96,8 @@ class PointGrid:
             ValueError: more than ``limit`` candidate pairs (points crowded within the radius:
                 the search would be all pairs of them), with their number.
         """
+        if not len(self.key):
+            return np.zeros(0, np.int64), np.zeros(0, np.int64)
         count = self.candidate_count()
         if count > limit:
             raise ValueError(f"{count:,} point pairs lie within {self.radius:g} m of each other "
@@ -131,6 +140,7 @@ class PointGrid:
         while lo < len(ca):
             pa = int(ca[lo])
             run = int(np.searchsorted(ca, pa, side="right"))  # (this many points on side a)
+            run = min(run, lo + max(1, BLOCK // pa))  # (no block takes more of them)
             grow = np.maximum.accumulate(cb[lo:run])
             fits = np.arange(1, run - lo + 1) * pa * grow <= BLOCK
             hi = lo + max(1, int(np.count_nonzero(fits)))
@@ -143,10 +153,15 @@ class PointGrid:
             for k in range(3):
                 d = xs[k][rows][:, :, None] - xs[k][cols][:, None, :]
                 dist += d * d
-            near = (dist <= r2) & real[:, None, :]
+            near = (dist <= r2 * (1.0 + MARGIN)) & real[:, None, :]
             if same[lo:hi].any():  # a cell with itself: each pair once
                 near &= ~same[lo:hi, None, None] | (np.arange(pa)[:, None] < np.arange(pb))
             g, p, q = np.nonzero(near)
+            edge = np.flatnonzero(dist[g, p, q] > r2 * (1.0 - MARGIN))
+            if len(edge):  # at the radius: as a pair's own test rounds it
+                keep = np.ones(len(g), bool)
+                keep[edge] = _within(xs, rows[g[edge], p[edge]], cols[g[edge], q[edge]], r2)
+                g, p, q = g[keep], p[keep], q[keep]
             out_i.append(rows[g, p])
             out_j.append(cols[g, q])
             keys.append((order[lo + g] * width + p) * width + q)
@@ -163,8 +178,7 @@ class PointGrid:
             rows = max(1, BATCH // int(self.cell_count[cb]))
             for r0 in range(0, int(self.cell_count[ca]), rows):
                 i, j = self._expand_rows(ca, cb, r0, min(r0 + rows, int(self.cell_count[ca])))
-                near = sum((xs[k][i] - xs[k][j]) ** 2 for k in range(3)) <= \
-                    self.radius * self.radius
+                near = _within(xs, i, j, self.radius * self.radius)
                 out_i.append(i[near])
                 out_j.append(j[near])
         return np.concatenate(out_i), np.concatenate(out_j)
@@ -210,6 +224,15 @@ class PointGrid:
             keep = p < q
             p, q = p[keep], q[keep]
         return self.cell_start[a] + p, self.cell_start[b] + q
+
+
+def _within(xs: np.ndarray, i: np.ndarray, j: np.ndarray, r2: float) -> np.ndarray:
+    """(m,) whether the points at places i and j (of ``xs``, (3, n) by component) lie within
+    the radius (squared ``r2``), each pair's squared distance summed as a row's own (einsum
+    over its three differences), as every caller has always had it: which pairs at the radius
+    are in does not change with how the search is laid out."""
+    d = np.stack([xs[k][i] - xs[k][j] for k in range(3)], axis=1)
+    return np.einsum("ij,ij->i", d, d) <= r2
 
 
 def neighbour_pairs(x: np.ndarray, radius: float,

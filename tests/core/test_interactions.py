@@ -48,6 +48,26 @@ def test_neighbour_grid_finds_exactly_the_pairs_within_the_radius(scale):
     assert len(found) == len(i)  # each pair once
 
 
+@pytest.mark.parametrize("offset", [(-0.82269028759918, -0.1819861337355423, -0.5385737997878917),
+                                    (0.5073918867149162, -0.1955161964323342, -0.8392418544308373)])
+def test_a_pair_at_the_radius_is_in_as_its_own_squared_distance_rounds(offset):
+    """Two points about the radius apart, whose squared distance rounds to either side of
+    it by the order its three squares are summed in: the search decides as the pair's own
+    row sum (einsum over its differences) does, however it lays out its candidates; and
+    nothing, not an error, for no points at all."""
+    x = np.array([[0.0, 0.0, 0.0], offset])
+    d = x[1:] - x[:1]
+    inside = bool(np.einsum("ij,ij->i", d, d)[0] <= 1.0)
+    i, j = neighbour_pairs(x, 1.0)
+    assert len(i) == int(inside)
+    # (the same pair among many others: the dense blocks' sums take another order)
+    rng = np.random.default_rng(6)
+    cloud = np.concatenate([x, rng.uniform(5.0, 9.0, (400, 3))])
+    i, j = neighbour_pairs(cloud, 1.0)
+    assert (((i == 0) & (j == 1)) | ((i == 1) & (j == 0))).sum() == int(inside)
+    assert len(neighbour_pairs(np.zeros((0, 3)), 1.0)[0]) == 0
+
+
 def test_a_crowded_cell_is_searched_in_parts_and_too_many_pairs_are_refused():
     """3,000 points in one cell (4.5 million pairs, more than one batch): every pair comes out
     once; past the limit the search refuses with the number of pairs."""
