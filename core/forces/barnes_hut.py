@@ -295,9 +295,9 @@ def _pull_groups(a: np.ndarray, x: np.ndarray, start: np.ndarray, count: np.ndar
         g = order[lo:hi]
         w, most = int(width[lo]), int(points[hi - 1])
         at = np.arange(w)
+        # (every bucket has sources: its own leaf is never far from its own box)
         rows = np.where(at < per_group[g, None],
-                        source[np.minimum(src_start[g, None] + at, max(len(source) - 1, 0))],
-                        pad) if len(source) else np.full((len(g), w), pad)
+                        source[np.minimum(src_start[g, None] + at, len(source) - 1)], pad)
         src = np.take(tables, rows, axis=0)  # (g, s, 4): one gather of each source's row
         mass = (G * src[:, :, 3])[:, None, :]
         step = max(1, BLOCK // max(1, len(g) * w))
