@@ -297,32 +297,75 @@ def test_the_sleep_speed_is_a_share_of_the_mesh_size_up_to_a_limit():
     assert sleep.Sleep.for_mesh(10.0 * x).speed == sleep.SLEEP_SPEED
 
 
-def _frame(keeper, now, speed):
-    """One frame interval in which every vertex moved at ``speed``; whether it fell asleep."""
-    x0 = np.zeros((4, 3))
-    v = np.tile([speed, 0.0, 0.0], (4, 1))
-    return keeper.settle(now, np.ones(4, bool), x0, x0 + DT * v, v, DT)
+class _Path:
+    """Four vertices moving together along x(t) (a function of the time [s]), frame by frame
+    into a :class:`sleep.Sleep`."""
+
+    def __init__(self, keeper, where):
+        self.keeper, self.where, self.t = keeper, where, 0.0
+
+    def frame(self, now, where=None) -> bool:
+        """One frame interval under ``now``; whether the mesh fell asleep at its end."""
+        where = where or self.where
+        x0, x1 = where(self.t), where(self.t + DT)
+        v1 = (where(self.t + DT + 1e-6) - x1) / 1e-6
+        self.t += DT
+        tile = lambda a: np.tile([a, 0.0, 0.0], (4, 1))  # noqa: E731
+        return self.keeper.settle(now, np.ones(4, bool), tile(x0), tile(x1), tile(v1), DT)
+
+
+def _conditions():
+    model = _sheet()
+    solver = SpringMeshSolver(model, "IMPLICIT", 2, frame_dt=DT, frame=1)
+    solver.advance(model.state(), _inputs(1))
+    other = sleep.conditions("IMPLICIT", 0.5 * DT, _inputs(2, gravity=(0.0, 0.0, -9.0)),
+                             [], np.zeros(81, bool), model.rest_x, model.rest_x, False)
+    now = solver._sleep.conditions
+    assert now is not None and other is not None and not now.same_as(other)
+    return now, other
 
 
 def test_sleep_takes_half_a_second_of_slow_frames_under_the_same_conditions():
-    """Slow frames (below the sleep speed, at their end and on average) count up to
-    SLEEP_TIME; a faster frame, or a frame under other conditions, starts the count again;
-    the sleeper wakes under other conditions."""
-    model = _sheet()
-    solver = SpringMeshSolver(model, "IMPLICIT", 2, frame_dt=DT, frame=1)
-    state = model.state()
-    solver.advance(state, _inputs(1))
+    """A creep at 0.9 x the sleep speed sleeps after SLEEP_TIME of frames (twelve of 1/24 s):
+    it strays less than the sleep speed times SLEEP_TIME from where they began; a frame faster
+    than SWAY x the sleep speed, or under other conditions, starts the count again; the sleeper
+    wakes under other conditions."""
+    now, other = _conditions()
     keeper = sleep.Sleep(1e-3)
-    now = solver._sleep.conditions
-    other = sleep.conditions("IMPLICIT", 0.5 * DT, _inputs(2, gravity=(0.0, 0.0, -9.0)),
-                             [], np.zeros(81, bool), model.rest_x, model.rest_x, False)
-    assert now is not None and other is not None and not now.same_as(other)
-    assert not any(_frame(keeper, now, 0.9e-3) for _ in range(11))
-    assert not _frame(keeper, now, 1.1e-3)  # one fast frame: the count starts again
-    assert not any(_frame(keeper, now, 0.5e-3) for _ in range(11))
-    assert not _frame(keeper, other, 0.5e-3)  # other conditions: again
-    assert not any(_frame(keeper, now, 0.5e-3) for _ in range(11))
-    assert _frame(keeper, now, 0.5e-3)  # twelve slow frames of 1/24 s in a row
+    creep = _Path(keeper, lambda t: 0.9e-3 * t)
+    assert not any(creep.frame(now) for _ in range(11))
+    jump = creep.t
+    assert not creep.frame(now, lambda t: 0.9e-3 * t + (SWAY_SPEED * (t - jump) if t > jump
+                                                         else 0.0))  # one fast frame
+    creep.where = lambda t: 0.9e-3 * t + SWAY_SPEED * DT
+    assert not any(creep.frame(now) for _ in range(11))
+    assert not creep.frame(other)  # other conditions: again
+    assert not any(creep.frame(now) for _ in range(11))
+    assert creep.frame(now)  # twelve slow frames of 1/24 s in a row
     assert keeper.sleeps(now) and keeper.asleep
     assert not keeper.sleeps(other) and not keeper.asleep
     assert not keeper.sleeps(now)  # woken: it must be slow for half a second again
+
+
+SWAY_SPEED = 1.01 * sleep.SWAY * 1e-3  # just faster than a sway (for a sleep speed of 1 mm/s)
+
+
+@pytest.mark.parametrize("speed", [1.1e-3, 2.0e-3])
+def test_a_creep_faster_than_the_sleep_speed_never_sleeps(speed):
+    """Every frame slower than SWAY x the sleep speed, but the vertices stray further than
+    the sleep speed times SLEEP_TIME within every half second: awake for 10 s."""
+    now, _ = _conditions()
+    creep = _Path(sleep.Sleep(1e-3), lambda t: speed * t)
+    assert not any(creep.frame(now) for _ in range(240))
+
+
+def test_a_sway_about_where_the_mesh_lies_sleeps_and_a_fast_buzz_does_not():
+    """A 2 Hz sway of 0.2 mm (peaks of 2.5 mm/s: faster than the sleep speed, 1 mm/s, at
+    every pass) stays within 0.5 mm of where it began: asleep after half a second. A buzz of
+    0.01 mm at 70 Hz (4.4 mm/s: faster than SWAY x the sleep speed) never sleeps, though it
+    strays less."""
+    now, _ = _conditions()
+    sway = _Path(sleep.Sleep(1e-3), lambda t: 2e-4 * np.sin(2.0 * np.pi * 2.0 * t))
+    assert [sway.frame(now) for _ in range(12)] == [False] * 11 + [True]
+    buzz = _Path(sleep.Sleep(1e-3), lambda t: 1e-5 * np.sin(2.0 * np.pi * 70.0 * t))
+    assert not any(buzz.frame(now) for _ in range(240))
