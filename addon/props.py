@@ -377,11 +377,12 @@ class PHYSANIM_PG_spring_mesh(bpy.types.PropertyGroup):
                                  options=STATIC, description="Coulomb friction between the "
                                  "mesh's layers")
     sleep: BoolProperty(name="Sleep When Still", default=True, options=STATIC,
-                        description="Stop simulating the mesh once it has come to rest (no "
-                                    "vertex faster than 2 mm/s, or a thousandth of the mesh's "
-                                    "size per second, for half a second) while nothing around "
-                                    "it changes; a moving collider or pin, a force keyed or "
-                                    "gusting or a change of gravity wakes it")
+                        description="Stop simulating the mesh once it has come to rest (for "
+                                    "half a second no vertex further than 1 mm from where it "
+                                    "was, or a thousandth of a small mesh's size, nor faster "
+                                    "than 8 mm/s) while nothing around it changes; a moving "
+                                    "collider or pin, a force keyed or gusting or a change of "
+                                    "gravity wakes it")
     pin_group: StringProperty(name="Pin Group", description="Vertex group: weight 1 pins a "
                               "vertex to its animated position, less holds it with a spring")
     pin_stiffness: FloatProperty(name="Pin Stiffness", min=0.0, max=1.0e9, soft_max=1.0e5,

@@ -11,8 +11,8 @@ falls asleep: its velocities become zero and its vertices stay where they are, a
 sub-step returns at once. A slow creep sleeps as it did when every frame had to be slower
 than the sleep speed; a sway that dies out about where the mesh lies (a corner of a drape
 swinging back and forth by a few tenths of a millimetre, its speed rising above the sleep
-speed at each pass) no longer keeps the mesh awake until its peaks fall below it; a fast
-buzz, however small, still does.
+speed at each pass) no longer keeps the mesh awake until its peaks fall below it; a buzz
+faster than SWAY times the sleep speed at the frames' ends, however small, still does.
 
 The conditions are what a sub-step is a function of, apart from the mesh's own state
 (:func:`conditions`): the integrator and the sub-step length, gravity, the colliders (each still
@@ -132,15 +132,17 @@ class Sleep:
         """After a frame interval under ``now`` that took the free vertices from ``x0`` to
         ``x1`` with velocities ``v1`` at its end: whether the mesh falls asleep now (the
         caller then zeroes its velocities). The frame is slow when no free vertex is further
-        than the sleep speed times SLEEP_TIME from where it was when the slow frames began
-        (``x0`` of the first), and none moved faster than SWAY times the sleep speed over the
-        frame or at its end."""
+        from where it was when the slow frames began (``x0`` of the first) than the sleep
+        speed times the time they take, SLEEP_TIME or, at a frame rate that does not divide
+        it, the whole frames that reach it (13 of 1/25 s: a creep just slower than the sleep
+        speed sleeps at any frame rate), and none moved faster than SWAY times the sleep speed
+        over the frame or at its end."""
         same = now is not None and now.same_as(self.conditions)
         if not same or self.anchor is None or self.anchor.shape != x0.shape:
             self.slow, self.anchor = 0.0, x0.copy()
         fast = now is None or self.speed <= 0.0 or _faster(free, x0, x1, v1, frame_dt,
                                                            SWAY * self.speed) or \
-            _strayed(free, self.anchor, x1, self.speed * SLEEP_TIME)
+            _strayed(free, self.anchor, x1, self.speed * max(SLEEP_TIME, self.slow + frame_dt))
         if fast:  # the slow frames, if any, begin at this frame's end
             self.slow, self.anchor = 0.0, x1.copy()
         else:

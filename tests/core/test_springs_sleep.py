@@ -301,17 +301,17 @@ class _Path:
     """Four vertices moving together along x(t) (a function of the time [s]), frame by frame
     into a :class:`sleep.Sleep`."""
 
-    def __init__(self, keeper, where):
-        self.keeper, self.where, self.t = keeper, where, 0.0
+    def __init__(self, keeper, where, dt: float = DT):
+        self.keeper, self.where, self.t, self.dt = keeper, where, 0.0, dt
 
     def frame(self, now, where=None) -> bool:
         """One frame interval under ``now``; whether the mesh fell asleep at its end."""
         where = where or self.where
-        x0, x1 = where(self.t), where(self.t + DT)
-        v1 = (where(self.t + DT + 1e-6) - x1) / 1e-6
-        self.t += DT
+        x0, x1 = where(self.t), where(self.t + self.dt)
+        v1 = (where(self.t + self.dt + 1e-6) - x1) / 1e-6
+        self.t += self.dt
         tile = lambda a: np.tile([a, 0.0, 0.0], (4, 1))  # noqa: E731
-        return self.keeper.settle(now, np.ones(4, bool), tile(x0), tile(x1), tile(v1), DT)
+        return self.keeper.settle(now, np.ones(4, bool), tile(x0), tile(x1), tile(v1), self.dt)
 
 
 def _conditions():
@@ -325,29 +325,38 @@ def _conditions():
     return now, other
 
 
+SWAY_SPEED = 1.01 * sleep.SWAY * 1e-3  # just faster than a sway (for a sleep speed of 1 mm/s)
+
+
 def test_sleep_takes_half_a_second_of_slow_frames_under_the_same_conditions():
-    """A creep at 0.9 x the sleep speed sleeps after SLEEP_TIME of frames (twelve of 1/24 s):
+    """A creep at half the sleep speed sleeps after SLEEP_TIME of frames (twelve of 1/24 s):
     it strays less than the sleep speed times SLEEP_TIME from where they began; a frame faster
-    than SWAY x the sleep speed, or under other conditions, starts the count again; the sleeper
-    wakes under other conditions."""
+    than SWAY x the sleep speed (within that distance), or under other conditions, starts the
+    count again; the sleeper wakes under other conditions."""
     now, other = _conditions()
     keeper = sleep.Sleep(1e-3)
-    creep = _Path(keeper, lambda t: 0.9e-3 * t)
+    creep = _Path(keeper, lambda t: 0.5e-3 * t)
     assert not any(creep.frame(now) for _ in range(11))
     jump = creep.t
-    assert not creep.frame(now, lambda t: 0.9e-3 * t + (SWAY_SPEED * (t - jump) if t > jump
+    assert not creep.frame(now, lambda t: 0.5e-3 * t + (SWAY_SPEED * (t - jump) if t > jump
                                                          else 0.0))  # one fast frame
-    creep.where = lambda t: 0.9e-3 * t + SWAY_SPEED * DT
-    assert not any(creep.frame(now) for _ in range(11))
-    assert not creep.frame(other)  # other conditions: again
-    assert not any(creep.frame(now) for _ in range(11))
-    assert creep.frame(now)  # twelve slow frames of 1/24 s in a row
+    creep.where = lambda t: 0.5e-3 * t + SWAY_SPEED * DT
+    assert [creep.frame(now) for _ in range(12)] == [False] * 11 + [True]
     assert keeper.sleeps(now) and keeper.asleep
     assert not keeper.sleeps(other) and not keeper.asleep
     assert not keeper.sleeps(now)  # woken: it must be slow for half a second again
+    assert not creep.frame(other)  # other conditions: again
+    assert [creep.frame(now) for _ in range(12)] == [False] * 11 + [True]
 
 
-SWAY_SPEED = 1.01 * sleep.SWAY * 1e-3  # just faster than a sway (for a sleep speed of 1 mm/s)
+@pytest.mark.parametrize("fps", [24.0, 25.0, 29.97, 7.0])
+def test_a_creep_just_slower_than_the_sleep_speed_sleeps_at_any_frame_rate(fps):
+    """At 0.99 x the sleep speed a creep strays 0.99 x the sleep speed times the time its slow
+    frames take: asleep after the whole frames that reach SLEEP_TIME (13 at 25 fps, 0.52 s)."""
+    now, _ = _conditions()
+    frames = int(np.ceil(sleep.SLEEP_TIME * fps - 1e-9))
+    creep = _Path(sleep.Sleep(1e-3), lambda t: 0.99e-3 * t, 1.0 / fps)
+    assert [creep.frame(now) for _ in range(frames)] == [False] * (frames - 1) + [True]
 
 
 @pytest.mark.parametrize("speed", [1.1e-3, 2.0e-3])
