@@ -47,9 +47,9 @@ from __future__ import annotations
 
 import argparse
 import sys
-from functools import partial
 import tempfile
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -365,8 +365,8 @@ def main(argv: list[str]) -> int:
             for run in blenders + ours:
                 problems += run[2]
             middle = (len(ratios) - 1) // 2
-            b_time, b_x, b_problems = blenders[middle]
-            p_time, p_x, p_problems, settings, asleep = ours[middle]
+            b_time, b_x, _ = blenders[middle]
+            p_time, p_x, _, settings, asleep = ours[middle]
             a_time, a_x, a_problems, _, _ = run_physanim_dropped(
                 args.grid, args.frames, folder, suzanne, sleep=False)
             d_time, d_x, d_problems, d_settings, _ = run_physanim_dropped(
