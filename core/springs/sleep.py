@@ -170,14 +170,14 @@ def _faster(free: np.ndarray, x0: np.ndarray, x1: np.ndarray, v1: np.ndarray,
             frame_dt: float, speed: float) -> bool:
     """Whether any free vertex moved faster than ``speed`` over the interval (on average) or
     is faster at its end."""
-    d = (x1 - x0)[free]
-    v = v1[free]
-    limit = speed * speed
-    return bool(np.einsum("ij,ij->i", v, v).max(initial=0.0) > limit or
-                np.einsum("ij,ij->i", d, d).max(initial=0.0) > limit * frame_dt * frame_dt)
+    return _longer(v1[free], speed) or _strayed(free, x0, x1, speed * frame_dt)
 
 
 def _strayed(free: np.ndarray, anchor: np.ndarray, x1: np.ndarray, distance: float) -> bool:
     """Whether any free vertex is further than ``distance`` from its ``anchor``."""
-    d = (x1 - anchor)[free]
-    return bool(np.einsum("ij,ij->i", d, d).max(initial=0.0) > distance * distance)
+    return _longer((x1 - anchor)[free], distance)
+
+
+def _longer(rows: np.ndarray, length: float) -> bool:
+    """Whether any of the vectors ``rows`` (k, 3) is longer than ``length``."""
+    return bool(np.einsum("ij,ij->i", rows, rows).max(initial=0.0) > length * length)
