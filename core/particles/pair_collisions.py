@@ -159,7 +159,8 @@ class ParticleCollisions:
         rubbed *= _within(norm_rows(rubbed), self.friction * taken)[:, None]
         _move(vm, i, j, normal * taken[:, None] + rubbed, share[0])
         _hold(vm, np.flatnonzero(floor.held), floor)
-        groups = colour(np.stack([i, j], axis=1), np.ones(len(members), bool))
+        groups = [_Group.of(g, i, j, floor)
+                  for g in colour(np.stack([i, j], axis=1), np.ones(len(members), bool))]
         _Solve(i, j, normal, share, floor, self.friction, groups, taken, rubbed).sweeps(
             vm, lower, self.iterations)
         new = _apart(xm + h * (vm - start_v), vm, w, i, j, reach, floor, x0m,
@@ -172,8 +173,8 @@ class ParticleCollisions:
 
 class _Solve(NamedTuple):
     """Sequential impulses over the pairs (i, j) with their normals, shares (:func:`_share`),
-    the colliders under the particles, friction, the colour groups and the accumulated normal
-    (c,) and friction (c, 3) impulses (updated in place)."""
+    the colliders under the particles, friction, the colour groups (:class:`_Group`) and the
+    accumulated normal (c,) and friction (c, 3) impulses (updated in place)."""
 
     i: np.ndarray
     j: np.ndarray
@@ -191,8 +192,9 @@ class _Solve(NamedTuple):
         groups in turn forwards and backwards (no order favoured: a heap does not walk)."""
         taken, rubbed = self.taken, self.rubbed
         for sweep in range(count):
-            for g in self.groups if sweep % 2 == 0 else self.groups[::-1]:
-                a, b, n = self.i[g], self.j[g], self.normal[g]
+            for group in self.groups if sweep % 2 == 0 else self.groups[::-1]:
+                g, a, b = group.g, group.a, group.b
+                n = self.normal[g]
                 rel = v[a] - v[b]
                 along = dot_rows(rel, n)
                 step = np.maximum(taken[g] + lower[g] - along, 0.0) - taken[g]
@@ -201,7 +203,7 @@ class _Solve(NamedTuple):
                 total *= _within(norm_rows(total), self.friction * taken[g])[:, None]
                 change = step[:, None] * n + total - rubbed[g]
                 rubbed[g] = total
-                _push(v, a, b, change, (self.share[0][g], self.share[1][g]), self.floor)
+                _push(v, group, change, (self.share[0][g], self.share[1][g]), self.floor)
 
 
 def _apart(x: np.ndarray, v: np.ndarray, w: np.ndarray, i: np.ndarray, j: np.ndarray,
@@ -213,37 +215,71 @@ def _apart(x: np.ndarray, v: np.ndarray, w: np.ndarray, i: np.ndarray, j: np.nda
     Friction acts on a push as on an impulse of its depth over h: the pair's sliding since the
     sub-step's ``start`` is taken back, and so is its sliding velocity v, each up to mu times
     the depth (over h). A particle the push presses into its collider moves along it only.
-    Under gravity (``up``) the lower particle of a pair takes less of the push (STACK)."""
+    Under gravity (``up``) the lower particle of a pair takes less of the push (STACK).
+
+    Each group's pairs are pushed all at once, those not overlapping by nothing (their depth,
+    and with it their friction, zero): what does not change within the passes is taken once."""
     if _excess(x, i, j, reach).max() <= 0.5 * SLOP * reach.min():
         return x
     height = None if up is None else x @ up
+    lift = None
+    if height is not None:  # i's weight over j's: e^(STACK (h_i - h_j) / radius)
+        lift = np.exp(STACK * np.clip((height[i] - height[j]) / (0.5 * reach), -4.0, 4.0))
+    fixed = []  # per group: what does not change within the passes
+    for p in groups:
+        # (the lift scales i's inverse mass: a position push only, the pair's momentum is
+        # not in question)
+        wi, wj = (w[p.a], w[p.b]) if lift is None else (w[p.a] * lift[p.g], w[p.b])
+        share = _free_shares(wi, wj) if p.on is None else None  # (else it turns with n)
+        under = None if p.on is None else (floor.normal[p.a], floor.normal[p.b])
+        fixed.append((p, reach[p.g] * (1.0 - SLOP), wi, wj, share, under, start[p.a],
+                      start[p.b]))
     for sweep in range(passes):
-        for g in groups if sweep % 2 == 0 else groups[::-1]:
-            a, b = i[g], j[g]
-            d = x[a] - x[b]
+        for p, inner, wi, wj, share, under, start_a, start_b in (
+                fixed if sweep % 2 == 0 else fixed[::-1]):
+            xa, xb = x[p.a], x[p.b]
+            d = xa - xb
             dist = norm_rows(d)
-            depth = BETA * (reach[g] * (1.0 - SLOP) - dist)
-            over = depth > 0.0
-            if not over.any():
+            depth = BETA * (inner - dist)
+            if not depth.max() > 0.0:
                 continue
-            a, b, d, dist, depth = a[over], b[over], d[over], dist[over], depth[over]
+            depth = np.maximum(depth, 0.0)
             n = np.where(dist[:, None] > 1e-12, d / np.maximum(dist, 1e-300)[:, None],
                          np.array([0.0, 0.0, 1.0]))  # two centres at one place: any axis
             grip = friction * depth
-            lift = None
-            if height is not None:  # i's weight over j's: e^(STACK (h_i - h_j) / radius)
-                rise = np.clip((height[a] - height[b]) / (0.5 * reach[g][over]), -4.0, 4.0)
-                lift = np.exp(STACK * rise)
-            share = _share(w, a, b, n, floor, lift)
-            slid = _across((x[a] - start[a]) - (x[b] - start[b]), n)
+            pushes = share if share is not None else _shares(wi, wj, n, *under)
+            slid = _across((xa - start_a) - (xb - start_b), n)
             slid *= _within(norm_rows(slid), grip)[:, None]
-            _push(x, a, b, depth[:, None] * n - slid, share, floor, hold=False)
-            slip = _across(v[a] - v[b], n)
+            slip = _across(v[p.a] - v[p.b], n)
             slip *= _within(norm_rows(slip), grip / h)[:, None]
-            _push(v, a, b, -slip, share, floor)
+            _push(x, p, depth[:, None] * n - slid, pushes, floor, hold=False)
+            _push(v, p, -slip, pushes, floor)
         if _excess(x, i, j, reach).max() <= 0.5 * SLOP * reach.min():
             break
     return x
+
+
+class _Group(NamedTuple):
+    """One colour group's pairs: their indices ``g`` among the pairs, their particles ``a``
+    and ``b`` and both as ``points`` (a then b; no particle twice), which of those rest on a
+    collider (``on``; None: none does) and that collider's normal and friction."""
+
+    g: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    points: np.ndarray
+    on: np.ndarray | None = None
+    normal: np.ndarray | None = None
+    friction: np.ndarray | None = None
+
+    @classmethod
+    def of(cls, g: np.ndarray, i: np.ndarray, j: np.ndarray, floor: _Floor) -> _Group:
+        a, b = i[g], j[g]
+        points = np.concatenate([a, b])
+        on = floor.held[points]
+        if not on.any():
+            return cls(g, a, b, points)
+        return cls(g, a, b, points, on, floor.normal[points], floor.friction[points])
 
 
 def _excess(x: np.ndarray, i: np.ndarray, j: np.ndarray, reach: np.ndarray) -> np.ndarray:
@@ -285,20 +321,31 @@ def _swept_pairs(x0: np.ndarray, x1: np.ndarray, r: np.ndarray, name: str
     return pairs[:, 0], pairs[:, 1]
 
 
-def _share(w: np.ndarray, i: np.ndarray, j: np.ndarray, n: np.ndarray, floor: _Floor,
-           lift: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def _share(w: np.ndarray, i: np.ndarray, j: np.ndarray, n: np.ndarray, floor: _Floor
+           ) -> tuple[np.ndarray, np.ndarray]:
     """Of a change of a pair's relative motion along n (i away from j, equal and opposite
     pushes) the parts i and j take, (c, 2), in inverse proportion to the masses (they sum to
     one); and which of them the pair presses into the collider under it, (c, 2) bool: such a
     particle moves only along the collider (:func:`_push`), so it takes a larger part for the
     pair to part by the same amount: w over w_i a_i + w_j a_j, a = 1 - (n . its collider's
-    normal)^2 (1 for the others). ``lift``: (c,) factors on i's inverse mass (a position push
-    only: the pair's momentum is not in question)."""
-    wi, wj = (w[i], w[j]) if lift is None else (w[i] * lift, w[j])
+    normal)^2 (1 for the others)."""
+    wi, wj = w[i], w[j]
     if not (floor.held[i].any() or floor.held[j].any()):  # no collider under any of them
-        share = np.stack([wi, wj], axis=1) / (wi + wj)[:, None]
-        return share, np.zeros(share.shape, bool)
-    ci, cj = dot_rows(n, floor.normal[i]), dot_rows(n, floor.normal[j])
+        return _free_shares(wi, wj)
+    return _shares(wi, wj, n, floor.normal[i], floor.normal[j])
+
+
+def _free_shares(wi: np.ndarray, wj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_share` for pairs with no collider under them (inverse masses wi, wj (c,))."""
+    share = np.stack([wi, wj], axis=1) / (wi + wj)[:, None]
+    return share, np.zeros(share.shape, bool)
+
+
+def _shares(wi: np.ndarray, wj: np.ndarray, n: np.ndarray, fi: np.ndarray, fj: np.ndarray
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_share` given the pairs' inverse masses wi, wj (c,) and the normals fi, fj (c, 3)
+    of the colliders under i and j (zero: none)."""
+    ci, cj = dot_rows(n, fi), dot_rows(n, fj)
     block = np.stack([ci < 0.0, cj > 0.0], axis=1)  # i is pushed along +n, j along -n
     ai = np.where(block[:, 0], 1.0 - ci * ci, 1.0)
     aj = np.where(block[:, 1], 1.0 - cj * cj, 1.0)
@@ -308,7 +355,7 @@ def _share(w: np.ndarray, i: np.ndarray, j: np.ndarray, n: np.ndarray, floor: _F
     return np.stack([wi, wj], axis=1) / denom[:, None], block & ~free[:, None]
 
 
-def _push(v: np.ndarray, i: np.ndarray, j: np.ndarray, change: np.ndarray,
+def _push(v: np.ndarray, group: _Group, change: np.ndarray,
           share: tuple[np.ndarray, np.ndarray], floor: _Floor, hold: bool = True) -> None:
     """One group's pairs (no particle twice): v[i] += share_i * change, v[j] -= share_j *
     change (:func:`_share`: away from colliders, mass-weighted, so the pair's momentum is
@@ -317,26 +364,29 @@ def _push(v: np.ndarray, i: np.ndarray, j: np.ndarray, change: np.ndarray,
     others, whatever points into a collider under them is taken out (:func:`_hold`; not with
     ``hold`` False: v is positions, and the colliders see the moves afterwards)."""
     part, block = share
-    points = np.concatenate([i, j])
+    points = group.points
     d = np.concatenate([part[:, :1] * change, -part[:, 1:] * change])
+    if group.on is None:  # (no collider under any of them)
+        v[points] += d
+        return
     held = np.concatenate([block[:, 0], block[:, 1]])
     if held.any():
-        f = floor.normal[points[held]]
+        f = group.normal[held]
         pressed = dot_rows(d[held], f)
         along = d[held] - pressed[:, None] * f
-        grip = floor.friction[points[held]] * np.abs(pressed)
+        grip = group.friction[held] * np.abs(pressed)
         d[held] = along * (1.0 - _within(norm_rows(along), grip))[:, None]
+    loose = ~held & group.on  # on a collider, not pressed into it by the pair
     if not hold:  # positions: no particle on a collider is moved into it (a pair's friction
         # taking back a neighbour's fall along it would drag it down, and the colliders'
         # response after the pass would then carry it back along its path, undoing the push
         # that parted the pair: two grains left 1.6 % of a radius inside each other)
-        k = np.flatnonzero(~held & floor.held[points])
-        if len(k):
-            f = floor.normal[points[k]]
-            d[k] -= np.minimum(dot_rows(d[k], f), 0.0)[:, None] * f
+        if loose.any():
+            f = group.normal[loose]
+            d[loose] -= np.minimum(dot_rows(d[loose], f), 0.0)[:, None] * f
     v[points] += d
     if hold:
-        k = points[~held & floor.held[points]]
+        k = points[loose]
         if len(k):
             _hold(v, k, floor)
 
