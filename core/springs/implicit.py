@@ -72,7 +72,8 @@ class BaraffWitkin(Integrator):
     # on the mesh's faces, the mesh's own layers on each other) press there too, so the solve's
     # impulse alone does not tell a pull (let go, a cloth slid off a faceted sphere).
     PULL_SHARE = 0.05
-    RELEASE_ROUNDS = 3  # re-solves a step may take for that (the first also for slipping ones)
+    RELEASE_ROUNDS = 3  # re-solves a step may take for that (the first also for slipping ones;
+    # slips alone are let go in the friction pass, _step_impl)
     FRICTION_SHARE = 0.1  # the friction solve's residual at most this share of its impulses
 
     PRECONDITIONERS = ("MULTIGRID", "JACOBI")
@@ -108,6 +109,7 @@ class BaraffWitkin(Integrator):
         floor = h * float(system.weight_norm())
         newton = self._newton(system, t, h, x0, v0, f0, constraints, floor)
         slipping, leaving = np.zeros(0, np.int64), np.zeros(0, np.int64)
+        beyond = None  # the holding impulses static friction cannot give (see below)
         for round_ in range(self.RELEASE_ROUNDS):
             if not len(constraints.pressed):
                 break
@@ -115,6 +117,16 @@ class BaraffWitkin(Integrator):
             if round_:  # static friction is checked once (each check that finds slips costs
                 more = (more[0][:0], more[1])  # a solve, and on a curved mesh some always do)
             if not (len(more[0]) or len(more[1])):
+                break
+            if not len(more[1]):
+                # only slips: their holding impulses are cut back to the friction cone's edge
+                # (what they keep is kinetic friction, against the way the rest pushes them)
+                # and the rest let go in the friction pass, one solve for both, with them free
+                # to slide. (A second solve for them, then the friction pass, took a tenth of
+                # a cloth's drape over Suzanne, where some vertex slips in half the steps.)
+                beyond = self._beyond_cone(constraints, newton.reaction, more[0])
+                constraints = self._constraints(system, t, h, v0, f0, more[0])
+                newton.last = self._loosened(system, h, newton, constraints, more[0])
                 break
             # solved again: they slide, or leave the body (which may load others)
             slipping, leaving = np.union1d(slipping, more[0]), np.union1d(leaving, more[1])
@@ -126,7 +138,8 @@ class BaraffWitkin(Integrator):
         v1, iterations = v0 + newton.dv, newton.iterations
         residual = newton.residual
         if len(constraints.pressed):
-            v1, more, friction = self._apply_friction(system, v1, constraints, newton, floor)
+            v1, more, friction = self._apply_friction(system, v1, constraints, newton, floor,
+                                                      beyond)
             iterations += more
             residual = residual + friction
         self.last_iterations = iterations
@@ -220,6 +233,23 @@ class BaraffWitkin(Integrator):
         mu = constraints.contact.friction[constraints.rows[held]]
         out = np.einsum("ij,ij->i", rt, rt) > (mu * np.maximum(rn[held], 0.0)) ** 2
         return pressed[held[out]], pressed[pulls]
+
+    @staticmethod
+    def _beyond_cone(constraints: VelocityFilter, reaction: np.ndarray,
+                     slipping: np.ndarray) -> np.ndarray:
+        """(n, 3) [N s] the part of the holding impulses (``reaction``) on the ``slipping``
+        vertices (stuck in ``constraints``) beyond the friction cone: their tangential part
+        less mu times their normal part along it (zero on every other vertex)."""
+        rows = np.flatnonzero(np.isin(constraints.pressed, slipping))
+        vertex, normal = constraints.pressed[rows], constraints.normal[rows]
+        rn = np.einsum("ij,ij->i", reaction[vertex], normal)
+        rt = reaction[vertex] - rn[:, None] * normal
+        size = np.sqrt(np.einsum("ij,ij->i", rt, rt))
+        mu = constraints.contact.friction[constraints.rows[rows]]
+        keep = mu * np.maximum(rn, 0.0) / np.where(size > 0.0, size, 1.0)
+        out = np.zeros_like(reaction)
+        out[vertex] = (1.0 - np.minimum(keep, 1.0))[:, None] * rt
+        return out
 
     def _newton(self, system: BaraffWitkinSystem, t: float, h: float, x0: np.ndarray,
                 v0: np.ndarray, f0: np.ndarray, constraints: VelocityFilter,
@@ -326,6 +356,19 @@ class BaraffWitkin(Integrator):
         return Linearisation(rhs, matrix.__matmul__, self._preconditioner(filtered, free),
                              matrix)
 
+    def _loosened(self, system: BaraffWitkinSystem, h: float, newton: NewtonResult,
+                  constraints: VelocityFilter, released: np.ndarray) -> Linearisation:
+        """The step's last linearisation for the looser ``constraints`` that let the vertices
+        ``released`` slide: its preconditioner's blocks there made theirs (:func:`loosened`),
+        or, when the solve held every vertex (nothing to precondition, no matrix), the first
+        linearisation's matrix and a preconditioner built for them."""
+        last = newton.last
+        if last.matrix is None:
+            blocks, rhs = newton.first[:2]
+            return self._linear_system(system, h, blocks, rhs, constraints)
+        kept = loosened((None, last.rhs, last.matrix, last.precondition), constraints, released)
+        return Linearisation(last.rhs, last.apply_a, kept[3], last.matrix)
+
     def _solve(self, linear: Linearisation, known: np.ndarray, constraints: VelocityFilter,
                start: np.ndarray | None, floor: float):
         """The correction to dv that solves ``linear`` given its ``known`` part (n, 3):
@@ -337,8 +380,8 @@ class BaraffWitkin(Integrator):
                                self.tolerance, self.max_iterations, start, scale), scale)
 
     def _apply_friction(self, system: BaraffWitkinSystem, v1: np.ndarray,
-                        constraints: VelocityFilter, newton: NewtonResult,
-                        floor: float) -> tuple[np.ndarray, int]:
+                        constraints: VelocityFilter, newton: NewtonResult, floor: float,
+                        beyond: np.ndarray | None = None) -> tuple[np.ndarray, int]:
         """Coulomb friction is an impulse on the pressed vertices; the mesh takes it as a whole
         (one more filtered solve, with the last linearisation), so a vertex that friction slows
         drags its neighbours along instead of stretching the springs to them. The correction is
@@ -346,6 +389,8 @@ class BaraffWitkin(Integrator):
         to a thousandth of itself: the step is only as exact as its main solve, and friction's
         small impulses solved that finely took a quarter of a draped cloth's iterations; but
         never coarser than FRICTION_SHARE of its own impulses, or it would be dropped whole.
+        ``beyond``: (n, 3) [N s] holding impulses static friction was found not to give (on
+        vertices ``constraints`` let slide, stuck in the solve), let go in the same solve.
         Returns the new velocities (n, 3) [m/s], the CG iterations spent and the impulses
         (n, 3) [N s] the step's residual gains (friction's on the pressed vertices)."""
         mass = system.mass[:, None]
@@ -353,9 +398,10 @@ class BaraffWitkin(Integrator):
         stop = self._friction(v1, constraints.pressed[sliding], constraints.normal[sliding],
                               constraints.contact, constraints.rows[sliding], newton.reaction,
                               mass)
-        if not np.any(stop):
+        if not np.any(stop) and beyond is None:
             return v1, 0, 0.0
-        b = constraints.project(mass * stop)
+        b = mass * stop if beyond is None else mass * stop - beyond
+        b = constraints.project(b)
         size = float(np.sqrt(np.vdot(b, b)))
         # (a towel lying in folds, its springs' forces large, slid across the floor at 10 cm/s
         # while its friction, within the step's tolerance, took no CG iteration)
