@@ -114,17 +114,19 @@ class BaraffWitkin(Integrator):
             if not len(constraints.pressed):
                 break
             more = self._released(constraints, newton.reaction, system.bodies)
-            if round_:  # static friction is checked once (each check that finds slips costs
-                more = (more[0][:0], more[1])  # a solve, and on a curved mesh some always do)
+            if round_:  # static friction is checked once (on a curved mesh some vertex
+                more = (more[0][:0], more[1])  # always slips)
             if not (len(more[0]) or len(more[1])):
                 break
-            if not len(more[1]):
+            if not len(more[1]) and not self._on_bodies(constraints, system.bodies):
                 # only slips: their holding impulses are cut back to the friction cone's edge
                 # (what they keep is kinetic friction, against the way the rest pushes them)
                 # and the rest let go in the friction pass, one solve for both, with them free
                 # to slide. (A second solve for them, then the friction pass, took a tenth of
                 # a cloth's drape over Suzanne, where some vertex slips in half the steps.)
-                beyond = self._beyond_cone(constraints, newton.reaction, more[0])
+                # Not where vertices press on two-way coupled bodies: a slip can turn another
+                # contact there into a pull, which the step solved again finds (next round).
+                beyond = self._beyond_cone(constraints, newton.residual, more[0])
                 constraints = self._constraints(system, t, h, v0, f0, more[0])
                 newton.last = self._loosened(system, h, newton, constraints, more[0])
                 break
@@ -235,6 +237,12 @@ class BaraffWitkin(Integrator):
         return pressed[held[out]], pressed[pulls]
 
     @staticmethod
+    def _on_bodies(constraints: VelocityFilter, bodies: np.ndarray) -> bool:
+        """Whether some pressed vertex presses on one of ``bodies`` (two-way coupled)."""
+        return bool(len(bodies)) and bool(
+            np.isin(constraints.contact.collider[constraints.rows], bodies).any())
+
+    @staticmethod
     def _beyond_cone(constraints: VelocityFilter, reaction: np.ndarray,
                      slipping: np.ndarray) -> np.ndarray:
         """(n, 3) [N s] the part of the holding impulses (``reaction``) on the ``slipping``
@@ -339,7 +347,7 @@ class BaraffWitkin(Integrator):
         matrix enough that the first one's preconditioner would cost hundreds of iterations in
         the later Newton iterations. ``precondition``: the preconditioner of this matrix
         filtered with tighter constraints (a step solved again with vertices let slide or
-        leave), its finest blocks at those vertices made the looser filter's
+        leave, or its friction pass letting slipping ones go), its finest blocks at those vertices made the looser filter's
         (:func:`~.implicit_parts.loosened`): an SPD operator on all of the space, so CG
         projected onto the looser filter's directions converges with it as well, none of the
         filtering and multigrid set-up (a quarter of such a re-solve's time)."""
@@ -359,7 +367,8 @@ class BaraffWitkin(Integrator):
     def _loosened(self, system: BaraffWitkinSystem, h: float, newton: NewtonResult,
                   constraints: VelocityFilter, released: np.ndarray) -> Linearisation:
         """The step's last linearisation for the looser ``constraints`` that let the vertices
-        ``released`` slide: its preconditioner's blocks there made theirs (:func:`loosened`),
+        ``released`` slide (the friction pass's): its preconditioner's blocks there made
+        theirs (:func:`loosened`; an SPD operator on the whole space, see :meth:`_linear_system`),
         or, when the solve held every vertex (nothing to precondition, no matrix), the first
         linearisation's matrix and a preconditioner built for them."""
         last = newton.last

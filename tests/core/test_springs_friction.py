@@ -165,10 +165,11 @@ def test_vertices_static_friction_cannot_hold_slide_at_the_coulomb_rate_from_the
     """The patch at rest on a slope steeper than its friction angle: each vertex starts held by
     static friction, whose holding impulse, m g h sin theta along the slope, leaves the cone
     (mu m g h cos theta). The step cuts it back to the cone's edge and lets the rest go in the
-    friction pass, with the first solve's preconditioner loosened at them: after one step every
-    vertex slides at g h (sin theta - mu cos theta), within the solve's tolerance, and the
-    step's linear system was solved once (a second solve of the step with them sliding, then
-    the friction pass, took a tenth of a cloth's drape over Suzanne)."""
+    friction pass (every vertex was held: the pass builds the matrix and a preconditioner for
+    the looser filter): after one step every vertex slides at g h (sin theta - mu cos theta),
+    within the solve's tolerance, and the step's linear system was solved once (a second solve
+    of the step with them sliding, then the friction pass, took a tenth of a cloth's drape
+    over Suzanne)."""
     mu = 0.2
     model, slope, normal, downhill = _on_slope(mu)
     newtons = []  # per step, its linear solves
@@ -196,7 +197,52 @@ def test_vertices_static_friction_cannot_hold_slide_at_the_coulomb_rate_from_the
 
 
 @pytest.mark.parametrize("preconditioner", BaraffWitkin.PRECONDITIONERS)
-def test_a_step_solved_again_preconditions_its_let_go_vertices_as_their_new_filter(
+def test_the_friction_pass_letting_slipping_vertices_go_keeps_the_steps_preconditioner(
+        monkeypatch, preconditioner):
+    """Half of the patch at rest on a slope steeper than its friction angle, the other half
+    2 cm above it: the lying vertices start held by static friction, which cannot hold them,
+    and the friction pass lets them go, reusing the step's preconditioner (built for the
+    tighter filter; SPD on the whole space) with its blocks at them loosened. It ends where a
+    friction pass with a preconditioner built afresh for the looser filter ends, within the
+    solve's tolerance."""
+    from physanim.core.springs import implicit
+
+    loosened = implicit.loosened
+
+    def one_frame(fresh: bool):
+        model, slope, normal, downhill = _on_slope(0.2)
+        state = model.state()
+        state.x = state.x + np.where((state.x @ downhill)[:, None] < 0.0, 0.02 * normal, 0.0)
+        integrator, calls = BaraffWitkin(preconditioner=preconditioner), []
+
+        def kept_or_fresh(first, constraints, released):
+            if first[2] is None or first[3] is None or not len(released):
+                return first
+            calls.append(1)
+            if not fresh:
+                return loosened(first, constraints, released)
+            sliding = constraints.sliding
+            filtered = BaraffWitkin._filtered(first[2], constraints.free,
+                                              constraints.pressed[sliding],
+                                              constraints.normal[sliding])
+            return (*first[:3], integrator._preconditioner(filtered, constraints.free))
+        monkeypatch.setattr(implicit, "loosened", kept_or_fresh)
+        solver = SpringMeshSolver(model, "IMPLICIT", 1, frame_dt=DT, frame=1)  # (one step)
+        solver.integrator = integrator
+        solver.advance(state, SpringFrameInputs(1, DT, DT, colliders=[slope]))
+        return state.v.copy(), len(calls)
+
+    v_kept, kept = one_frame(fresh=False)
+    v_fresh, fresh = one_frame(fresh=True)
+    assert kept and fresh
+    dv = np.linalg.norm(v_fresh)  # (from rest: the frame's velocity change)
+    assert np.linalg.norm(v_kept - v_fresh) <= 10 * BaraffWitkin.TOLERANCE * dv
+    assert not np.array_equal(v_kept, v_fresh)  # two solves, each within the tolerance
+
+
+@pytest.mark.parametrize("preconditioner", BaraffWitkin.PRECONDITIONERS)
+def test_the_friction_pass_preconditions_its_let_go_vertices_as_their_new_filter(
+
         monkeypatch, preconditioner):
     """Half of the patch at rest on a slope steeper than its friction angle, the other half 2 cm
     above it: the friction pass's preconditioner for the lying vertices let slide (the first
@@ -225,7 +271,7 @@ def test_a_step_solved_again_preconditions_its_let_go_vertices_as_their_new_filt
     solver = SpringMeshSolver(model, "IMPLICIT", 1, frame_dt=DT, frame=1)
     solver.integrator = BaraffWitkin(preconditioner=preconditioner)
     solver.advance(state, SpringFrameInputs(1, DT, DT, colliders=[slope]))
-    changed = [call for call in seen if call[3] is not call[0]]  # (re-solves with a matrix)
+    changed = [call for call in seen if call[3] is not call[0]]  # (with a matrix)
     assert changed
     first, constraints, released, out = changed[-1]
     assert len(released)
