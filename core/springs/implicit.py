@@ -26,10 +26,11 @@ import numpy as np
 from ..integrators import Integrator, StepReport
 from ..integrators.krylov import projected_pcg
 from ..transforms import inverse3, scale_rows
+from .contact_friction import beyond_cone, contact_filter, kinetic_stop, on_bodies, released
 from .implicit_parts import (BaraffWitkinSystem, BlockJacobi, Linearisation, MatrixFree,
                              NewtonResult, SolvePattern, StepMemory, VelocityFilter,
-                             diagonal_filter, filter_blocks, filtered_diagonal, filtered_one_normal,
-                             loosened, positions_and_velocities)
+                             diagonal_filter, filter_blocks, filtered_diagonal,
+                             filtered_one_normal, loosened, positions_and_velocities)
 from .multigrid import AggregationHierarchy
 from .sparse import BlockMatrix, BlockPattern, MatrixBuilder
 
@@ -113,12 +114,12 @@ class BaraffWitkin(Integrator):
         for round_ in range(self.RELEASE_ROUNDS):
             if not len(constraints.pressed):
                 break
-            more = self._released(constraints, newton.reaction, system.bodies)
+            more = released(constraints, newton.reaction, system.bodies, self.PULL_SHARE)
             if round_:  # static friction is checked once (on a curved mesh some vertex
                 more = (more[0][:0], more[1])  # always slips)
             if not (len(more[0]) or len(more[1])):
                 break
-            if not len(more[1]) and not self._on_bodies(constraints, system.bodies):
+            if not len(more[1]) and not on_bodies(constraints, system.bodies):
                 # only slips: their holding impulses are cut back to the friction cone's edge
                 # (what they keep is kinetic friction, against the way the rest pushes them)
                 # and the rest let go in the friction pass, one solve for both, with them free
@@ -126,7 +127,7 @@ class BaraffWitkin(Integrator):
                 # a cloth's drape over Suzanne, where some vertex slips in half the steps.)
                 # Not where vertices press on two-way coupled bodies: a slip can turn another
                 # contact there into a pull, which the step solved again finds (next round).
-                beyond = self._beyond_cone(constraints, newton.residual, more[0])
+                beyond = beyond_cone(constraints, newton.residual, more[0])
                 constraints = self._constraints(system, t, h, v0, f0, more[0])
                 newton.last = self._loosened(system, h, newton, constraints, more[0])
                 break
@@ -182,82 +183,9 @@ class BaraffWitkin(Integrator):
     def _constraints(cls, system: BaraffWitkinSystem, t: float, h: float, v0: np.ndarray,
                      f0: np.ndarray, slipping: np.ndarray | None = None,
                      leaving: np.ndarray | None = None) -> VelocityFilter:
-        """Baraff & Witkin's filter: pinned vertices move with their pins at the step's end;
-        contacts hold their vertices on the surface where the forces ``f0`` press them into it.
-        A pressed vertex that is not sliding along its surface (slower than STICK_SPEED) is
-        held by static friction: its whole velocity becomes the surface's, as a pin's (the
-        solve then finds the friction impulse that holds it, :meth:`_released` checks it
-        against the cone). ``slipping``: vertices static friction was found not to hold;
-        ``leaving``: vertices the contact was found to pull (:meth:`_released`)."""
-        free = system.free.copy()
-        given = np.where(free[:, None], 0.0, system.pinned_velocity(t + h) - v0)
-        contact = system.contact
-        pressed, normal, stuck = np.zeros(0, np.int64), np.zeros((0, 3)), None
-        if len(contact):
-            push = np.einsum("ij,ij->i", f0[contact.index], contact.normal)
-            # only where forces press inwards, or where the vertex is held (landing: the
-            # solver's re-solve of a step in which it hit the surface, SpringMeshSolver.advance)
-            keep = ((push < 0.0) | contact.held) & system.free[contact.index]
-            if leaving is not None:
-                keep &= ~np.isin(contact.index, leaving)
-            pressed, normal = contact.index[keep], contact.normal[keep]
-            vn = np.einsum("ij,ij->i", v0[pressed], normal)
-            given[pressed] = (contact.normal_speed[keep] - vn)[:, None] * normal
-            rel = v0[pressed] - contact.surface_velocity[keep]
-            slide = rel - np.einsum("ij,ij->i", rel, normal)[:, None] * normal
-            stuck = (contact.friction[keep] > 0.0) & \
-                (np.einsum("ij,ij->i", slide, slide) <= cls.STICK_SPEED ** 2)
-            if slipping is not None:
-                stuck &= ~np.isin(pressed, slipping)
-            stuck |= contact.wedged[keep]
-            given[pressed[stuck]] -= slide[stuck]
-            free[pressed[stuck]] = False
-        sliding = slice(None) if stuck is None else ~stuck
-        return VelocityFilter(given, free[:, None].astype(np.float64), pressed, normal, contact,
-                              diagonal_filter(free, pressed[sliding], normal[sliding]), stuck)
-
-    @classmethod
-    def _released(cls, constraints: VelocityFilter, reaction: np.ndarray,
-                  bodies: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The pressed vertices the step's contact impulses (``reaction`` (n, 3) [N s], the
-        solve's constraint impulses) cannot hold: ``(slipping, leaving)``. Slipping: stuck
-        ones whose holding impulse leaves the friction cone, its tangential part above mu
-        times its normal part (not wedged ones: no one way to slide). Leaving: those pressed
-        on ``bodies`` (colliders, as in ``contact.collider``) that the contact pulls (more
-        than PULL_SHARE of the largest push)."""
-        pressed, normal = constraints.pressed, constraints.normal
-        rn = np.einsum("ij,ij->i", reaction[pressed], normal)
-        pulls = rn < -cls.PULL_SHARE * np.abs(rn).max(initial=0.0)
-        pulls &= np.isin(constraints.contact.collider[constraints.rows], bodies)
-        held = np.zeros(0, np.int64) if constraints.stuck is None else np.flatnonzero(
-            constraints.stuck & ~pulls & ~constraints.contact.wedged[constraints.rows])
-        rt = reaction[pressed[held]] - rn[held, None] * normal[held]
-        mu = constraints.contact.friction[constraints.rows[held]]
-        out = np.einsum("ij,ij->i", rt, rt) > (mu * np.maximum(rn[held], 0.0)) ** 2
-        return pressed[held[out]], pressed[pulls]
-
-    @staticmethod
-    def _on_bodies(constraints: VelocityFilter, bodies: np.ndarray) -> bool:
-        """Whether some pressed vertex presses on one of ``bodies`` (two-way coupled)."""
-        return bool(len(bodies)) and bool(
-            np.isin(constraints.contact.collider[constraints.rows], bodies).any())
-
-    @staticmethod
-    def _beyond_cone(constraints: VelocityFilter, reaction: np.ndarray,
-                     slipping: np.ndarray) -> np.ndarray:
-        """(n, 3) [N s] the part of the holding impulses (``reaction``) on the ``slipping``
-        vertices (stuck in ``constraints``) beyond the friction cone: their tangential part
-        less mu times their normal part along it (zero on every other vertex)."""
-        rows = np.flatnonzero(np.isin(constraints.pressed, slipping))
-        vertex, normal = constraints.pressed[rows], constraints.normal[rows]
-        rn = np.einsum("ij,ij->i", reaction[vertex], normal)
-        rt = reaction[vertex] - rn[:, None] * normal
-        size = np.sqrt(np.einsum("ij,ij->i", rt, rt))
-        mu = constraints.contact.friction[constraints.rows[rows]]
-        keep = mu * np.maximum(rn, 0.0) / np.where(size > 0.0, size, 1.0)
-        out = np.zeros_like(reaction)
-        out[vertex] = (1.0 - np.minimum(keep, 1.0))[:, None] * rt
-        return out
+        """The step's filter: pins, and contacts where ``f0`` presses, vertices slower than
+        STICK_SPEED held by static friction (:func:`.contact_friction.contact_filter`)."""
+        return contact_filter(system, t, h, v0, f0, cls.STICK_SPEED, slipping, leaving)
 
     def _newton(self, system: BaraffWitkinSystem, t: float, h: float, x0: np.ndarray,
                 v0: np.ndarray, f0: np.ndarray, constraints: VelocityFilter,
@@ -403,10 +331,7 @@ class BaraffWitkin(Integrator):
         Returns the new velocities (n, 3) [m/s], the CG iterations spent and the impulses
         (n, 3) [N s] the step's residual gains (friction's on the pressed vertices)."""
         mass = system.mass[:, None]
-        sliding = constraints.sliding  # (the stuck ones' friction was in the solve)
-        stop = self._friction(v1, constraints.pressed[sliding], constraints.normal[sliding],
-                              constraints.contact, constraints.rows[sliding], newton.reaction,
-                              mass)
+        stop = kinetic_stop(v1, constraints, newton.reaction, mass)
         if not np.any(stop) and beyond is None:
             return v1, 0, 0.0
         b = mass * stop if beyond is None else mass * stop - beyond
@@ -534,18 +459,3 @@ class BaraffWitkin(Integrator):
         # (the identity on constrained vertices, not zero: SPD on all of the space, so it
         # serves a looser filter too — their rows are projected out of every use here)
         return BlockJacobi(inverse3(np.where(free[:, None, None], a, np.eye(3))))
-
-    @staticmethod
-    def _friction(v1, pressed, normal, contact, row, reaction, mass) -> np.ndarray:
-        """Coulomb friction on pressed vertices (their rows ``row`` in ``contact``): the
-        velocity change (n, 3) that would stop each one's sliding, capped by mu times the
-        constraint's normal impulse (the residual of the unfiltered system along n)."""
-        mu = contact.friction[row]
-        impulse = np.maximum(0.0, np.einsum("ij,ij->i", reaction[pressed], normal))
-        rel = v1[pressed] - contact.surface_velocity[row]
-        vt = rel - np.einsum("ij,ij->i", rel, normal)[:, None] * normal
-        speed = np.sqrt(np.einsum("ij,ij->i", vt, vt))
-        stop = np.minimum(speed, mu * impulse / mass[pressed, 0])
-        out = np.zeros_like(v1)
-        out[pressed] = -(stop / np.where(speed > 1e-12, speed, np.inf))[:, None] * vt
-        return out
