@@ -127,8 +127,10 @@ class BakeJob(Resumable, Failures):
                             for ob in self.roles.spring_meshes}
         self.rigid_hash = inputs_hash.rigid_hash(self.scene, self.roles.rigid_bodies, all_roles)
         if self.roles.emitters:
+            peaks = {name: peak for name, (peak, _) in budget.emitter_estimates(
+                self.scene, self.roles, float(self.clock.scale.max())).items()}
             self.particles = ParticleBake(self.scene, self.roles.emitters, self.hashes, self.stats,
-                                          self.clock)
+                                          self.clock, peaks)
         self.extractor = extract.Extractor(self.scene, self.roles)
         self.scene.frame_set(self.frame_start)
         depsgraph = context.evaluated_depsgraph_get()

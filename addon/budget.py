@@ -19,7 +19,13 @@ MEMORY_BUDGET = 16 * 2**30  # the bake refuses to start when its estimate exceed
 def estimate(scene, roles: Roles, speed: float = 1.0) -> tuple[float, float]:
     """Peak alive particles and cache bytes of a bake, from rates and lifetimes (upper bounds).
     ``speed``: the largest Time Scale of the bake (a rate is per simulated frame: at double
-    speed a frame holds two frames' births).
+    speed a frame holds two frames' births)."""
+    each = emitter_estimates(scene, roles, speed).values()
+    return sum(peak for peak, _ in each), sum(size for _, size in each)
+
+
+def emitter_estimates(scene, roles: Roles, speed: float = 1.0) -> dict[str, tuple[float, float]]:
+    """:func:`estimate` of each emitter: its name -> (peak alive particles, cache bytes).
 
     A sub-emitter bursts its rate (+ random) where each of its parent's particles dies: at most
     every parent birth dies within the bake, so its births per frame are its parent's times that.
@@ -27,26 +33,27 @@ def estimate(scene, roles: Roles, speed: float = 1.0) -> tuple[float, float]:
     s = scene.physanim
     frames = math.ceil((max(0, s.frame_end - s.frame_start) + 1) * max(1.0, speed))
     baked = {ob.name for ob in roles.emitters}
-    peak = cache_bytes = 0.0
+    out = {}
     for ob in roles.emitters:
         chain = emitter_chain(ob)
         top = chain[-1].physanim.emitter
         if top.source == 'DEATHS' or any(o.name not in baked for o in chain):
-            continue  # a chain without a mesh/origin emitter on top never emits
+            out[ob.name] = (0.0, 0.0)  # a chain without a mesh/origin emitter on top never emits
+            continue
         p = ob.physanim.emitter
         life = p.lifetime + p.lifetime_random
         if len(chain) == 1:
             active = max(0, min(p.frame_end, s.frame_end) - max(p.frame_start, s.frame_start) + 1)
             active = math.ceil(active * max(1.0, speed))
-            peak += (p.rate + p.rate_random) * min(life, active) if active else 0.0
-            cache_bytes += ((p.rate + p.rate_random) * active * min(life, frames)
-                            * BYTES_PER_PARTICLE_FRAME)
+            peak = (p.rate + p.rate_random) * min(life, active) if active else 0.0
+            size = (p.rate + p.rate_random) * active * min(life, frames) * BYTES_PER_PARTICLE_FRAME
         else:
             births = math.prod(o.physanim.emitter.rate + o.physanim.emitter.rate_random
                                for o in reversed(chain))
-            peak += births * min(life, frames)
-            cache_bytes += births * frames * min(life, frames) * BYTES_PER_PARTICLE_FRAME
-    return peak, cache_bytes
+            peak = births * min(life, frames)
+            size = births * frames * min(life, frames) * BYTES_PER_PARTICLE_FRAME
+        out[ob.name] = (peak, size)
+    return out
 
 
 def check_budget(scene, roles: Roles, speed: float = 1.0) -> None:

@@ -24,11 +24,13 @@ class ParticleBake:
     Args:
         scene: the scene. emitters: the emitter objects (name order). hashes: per emitter name,
         the inputs hash stored with its cache. stats: counts to add to (births, collisions,
-        peak alive). clock: the bake's time map (frame -> simulated time).
+        peak alive). clock: the bake's time map (frame -> simulated time). peaks: per emitter
+        name, an upper bound of its particles alive at once (:func:`.budget.emitter_estimates`;
+        missing: unknown).
     """
 
     def __init__(self, scene, emitters: list, hashes: dict[str, str], stats: dict,
-                 clock: TimeMap):
+                 clock: TimeMap, peaks: dict[str, float] | None = None):
         self.scene, self.emitters, self.hashes, self.clock = scene, emitters, hashes, clock
         self.writers: dict[str, CacheWriter] = {}
         for ob in emitters:
@@ -38,6 +40,15 @@ class ParticleBake:
         self.usd = {ob.name for ob in emitters if ob.physanim.emitter.output == 'USD_POINTS'}
         self.usd_extension = native_points.file_extension() if self.usd else ""
         self.usd_processes: dict[str, usd_process.UsdProcess | None] = {}
+        # emitters that will reach the process's size: theirs starts now, while the bake sets up
+        # and simulates the first frames, not when their first large frame waits for it
+        self._starting: dict[str, usd_process.UsdProcess] = {}
+        if self.usd_extension == ".usdc":
+            for name in sorted(self.usd):
+                if (peaks or {}).get(name, 0.0) >= usd_process.MIN_POINTS:
+                    process = self._spawn(wait=False)
+                    if process is not None:
+                        self._starting[name] = process
         self.first_frame = 0  # set by start()
         # squash and stretch: each emitter's particles' last impacts, frame to frame
         self.trackers = {ob.name: ImpactTracker(SquashSettings(ob.physanim.emitter.squash,
@@ -134,16 +145,36 @@ class ParticleBake:
         if self.usd_extension != ".usdc" or count < usd_process.MIN_POINTS:
             return self.usd_processes.get(name)
         if name not in self.usd_processes:
-            process, site = None, compat.usd_site()
-            if site is not None and usd_process.can_start():
+            process = self._starting.pop(name, None)
+            if process is None:
+                process = self._spawn(wait=True)
+            else:
                 try:
-                    process = usd_process.UsdProcess(site)
+                    process.wait_ready()
                 except OSError:
                     process = None  # the writer thread writes them, as where there is no pxr
-                else:
-                    self.writers[name].attach(process)
+            if process is not None:
+                self.writers[name].attach(process)
             self.usd_processes[name] = process
         return self.usd_processes[name]
+
+    @staticmethod
+    def _spawn(wait: bool) -> usd_process.UsdProcess | None:
+        """A USD process (:class:`.usd_process.UsdProcess`, ``wait`` as there), or None where
+        none can start here."""
+        site = compat.usd_site()
+        if site is None or not usd_process.can_start():
+            return None
+        try:
+            return usd_process.UsdProcess(site, wait=wait)
+        except OSError:
+            return None
+
+    def _end_starting(self) -> None:
+        """End the processes started for emitters whose frames never reached their size."""
+        starting, self._starting = self._starting, {}
+        for process in starting.values():
+            process.close(kill=True)
 
     def _squash(self, ob, tracker: ImpactTracker, arrays: dict, frame: int) -> None:
         """The instances' squash and stretch (their volume kept): instance_scale and
@@ -208,6 +239,7 @@ class ParticleBake:
 
     def commit(self, meta: dict) -> dict[str, str]:
         """Swap every emitter's new cache in; returns emitter name -> cache folder."""
+        self._end_starting()
         paths = {ob.name: self.writers[ob.name].commit(dict(meta, emitter=ob.name,
                                                             hash=self.hashes[ob.name]))
                  for ob in self.emitters}
@@ -216,12 +248,14 @@ class ParticleBake:
 
     def detach(self) -> None:
         """Stop, keeping the partial caches for a resume; the previous bakes stay as they were."""
+        self._end_starting()
         for writer in self.writers.values():
             writer.detach()
         self.writers.clear()
 
     def abort(self) -> None:
         """Delete the partial caches; the previous bakes stay as they were."""
+        self._end_starting()
         for writer in self.writers.values():
             writer.abort()
         self.writers.clear()

@@ -155,19 +155,32 @@ class UsdProcess:
 
     Args:
         site: the folder ``pxr`` imports from in this Blender.
+        wait: wait here until the child is ready; else the child starts (imports ``pxr``,
+            about 0.3 s) while the bake goes on, and :meth:`wait_ready` must confirm it before
+            it is used.
 
     Raises:
-        OSError: the child did not start or could not import ``pxr`` (its reason).
+        OSError: the child did not start or could not import ``pxr`` (its reason), here or
+            from :meth:`wait_ready`.
     """
 
-    def __init__(self, site: str):
+    def __init__(self, site: str, wait: bool = True):
         self._replies: queue.Queue[str | None] = queue.Queue()
         self._failure: str | None = None
+        self._ready = False
         self._proc = subprocess.Popen(
             [sys.executable, "-s", str(Path(__file__).resolve()), site], stdin=subprocess.PIPE,
             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, encoding="utf-8",
             env=child_environment())
         threading.Thread(target=self._read, name="physanim-usd-replies", daemon=True).start()
+        if wait:
+            self.wait_ready()
+
+    def wait_ready(self) -> None:
+        """Wait until the child has imported ``pxr`` (at most START_TIMEOUT s from here);
+        raises OSError with its reason, the child ended, when it cannot."""
+        if self._ready:
+            return
         try:
             reply = self._replies.get(timeout=START_TIMEOUT)
         except queue.Empty:
@@ -175,6 +188,7 @@ class UsdProcess:
         if reply != "ready":
             self.close(kill=True)
             raise OSError(f"the USD writer process did not start: {reply or 'it exited'}")
+        self._ready = True
 
     def _read(self) -> None:
         for line in self._proc.stdout:

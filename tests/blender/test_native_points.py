@@ -342,8 +342,8 @@ def test_a_process_of_its_own_writes_the_same_usd_layers(physanim_ext, tmp_path,
     started = []
     start = usd_process.UsdProcess.__init__
 
-    def spy(self, site):
-        start(self, site)
+    def spy(self, site, **kwargs):
+        start(self, site, **kwargs)
         started.append(self)
 
     monkeypatch.setattr(usd_process.UsdProcess, "__init__", spy)
@@ -376,6 +376,66 @@ def test_a_process_of_its_own_writes_the_same_usd_layers(physanim_ext, tmp_path,
     assert len(shown["id"]) == 6 * 20
     for name in ("id", "position", "velocity", "color"):
         np.testing.assert_array_equal(shown[name], cached[name], err_msg=name)
+
+
+def test_a_large_emitters_process_starts_with_the_bake(physanim_ext, tmp_path, monkeypatch):
+    """An emitter whose estimated peak reaches MIN_POINTS has its process started as the bake
+    starts, without waiting (pxr imports while the first frames simulate), and confirmed at
+    its first large frame; one whose estimate stays below starts none; one started whose
+    frames never grow that large is ended with the bake, its layers written on the thread."""
+    usd_process = _addon(physanim_ext, "usd_process")
+    budget = _addon(physanim_ext, "budget")
+    cache = sys.modules[f"{physanim_ext.__name__}.core.cache"]
+    events: list[tuple] = []
+    processes: list = []
+    start, ready, write = (usd_process.UsdProcess.__init__, usd_process.UsdProcess.wait_ready,
+                           cache.CacheWriter.write_frame)
+
+    def spy_start(self, site, wait=True):
+        events.append(("start", wait))
+        processes.append(self)
+        start(self, site, wait=wait)
+
+    def spy_ready(self):
+        events.append(("ready",))
+        ready(self)
+
+    def spy_write(self, stream, frame, arrays):
+        events.append(("frame", frame, len(arrays["id"])))
+        return write(self, stream, frame, arrays)
+
+    monkeypatch.setattr(usd_process.UsdProcess, "__init__", spy_start)
+    monkeypatch.setattr(usd_process.UsdProcess, "wait_ready", spy_ready)
+    monkeypatch.setattr(cache.CacheWriter, "write_frame", spy_write)
+    scene = _scene(tmp_path, frame_end=8)
+    ob = _default_emitter(scene)  # 20 a frame over 8 frames: at most 160 alive
+    monkeypatch.setattr(usd_process, "MIN_POINTS", 100)
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    folder = Path(bpy.path.abspath(
+        ob.physanim.emitter.result.modifiers["physanim_cache"].cache_file.filepath)).parent
+    if _addon(physanim_ext, "compat").usd_modules() is None:  # no pxr (4.2): text layers
+        assert events == [("frame", f, 20 * f) for f in range(1, 9)] and processes == []
+        assert {p.suffix for p in folder.iterdir()} == {".usda"}
+        return
+    frames = [("frame", f, 20 * f) for f in range(1, 9)]
+    # started before the first frame was written; confirmed at frame 5 (100 points), whose
+    # layer it saves from the npz just queued
+    assert events == [("start", False)] + frames[:5] + [("ready",)] + frames[5:], events
+    assert processes[0]._proc.poll() == 0 and len(list(folder.iterdir())) == 8
+
+    events.clear()
+    monkeypatch.setattr(usd_process, "MIN_POINTS", 200)  # beyond the estimate: none starts
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    assert events == frames and len(processes) == 1
+
+    events.clear()  # an estimate above, frames below: started, unused, ended with the bake
+    monkeypatch.setattr(budget, "emitter_estimates",
+                        lambda *args: {ob.name: (1e6, 0.0)})
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    assert events == [("start", False)] + frames and len(processes) == 2
+    assert processes[1]._proc.poll() is not None
+    assert sorted(p.name for p in folder.iterdir()) == [f"points_{f:06d}.usdc"
+                                                        for f in range(1, 9)]
 
 
 def test_the_usd_process_reads_cache_frames_as_np_load_does(physanim_ext, tmp_path):

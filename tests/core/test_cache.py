@@ -56,6 +56,30 @@ def test_frames_round_trip(tmp_path):
     assert "format_version" in meta
 
 
+def test_frames_are_the_files_np_savez_writes(tmp_path):
+    """The cache writes each array from its own memory, not through numpy's copies; the zip
+    members are byte for byte those of ``np.savez`` (so ``np.load`` and any reader of npz
+    files read them alike), for every kind of array, contiguous or not."""
+    import zipfile
+
+    rng = np.random.default_rng(4)
+    arrays = {"id": np.arange(7, dtype=np.int32), "position": rng.random((7, 3), np.float32),
+              "flag": rng.random(7) > 0.5, "wide": rng.random((2, 3, 4)),
+              "empty": np.zeros((0, 3)), "fortran": np.asfortranarray(rng.random((5, 3))),
+              "scalar": np.array(2.5), "big_endian": np.arange(10, dtype=">i4"),
+              "bytes": np.arange(5, dtype=np.uint8), "strided": rng.random((6, 4))[:, 1],
+              "pairs": np.zeros(3, dtype=[("a", "<f4"), ("b", "<i2")])}
+    writer = CacheWriter(tmp_path / "bake", background=False)
+    ours = writer.write_frame("points", 1, arrays)
+    theirs = tmp_path / "savez.npz"
+    np.savez(theirs, **{k: np.ascontiguousarray(v) for k, v in arrays.items()})
+    with zipfile.ZipFile(ours) as got, zipfile.ZipFile(theirs) as expected:
+        assert got.namelist() == expected.namelist() == [f"{k}.npy" for k in arrays]
+        for name in expected.namelist():
+            assert got.read(name) == expected.read(name), name  # (read checks the CRC)
+    writer.abort()
+
+
 def test_read_frame_missing_returns_none(tmp_path):
     cache = _bake(tmp_path / "bake", [1, 2], seed=0)
     assert read_frame(cache / "Fountain", 3) is None
