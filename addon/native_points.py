@@ -194,7 +194,7 @@ def _ensure_group(layout: dict):
 
 def _build_group(group, layout: dict) -> None:
     """Geometry -> delete every point outside Start..End -> store each typed attribute from its
-    float primvars -> remove those primvars -> Geometry."""
+    float primvars (size from the reader's radius) -> remove those primvars -> Geometry."""
     group.nodes.clear()
     group.interface.clear()
     compat.new_interface_socket(group, "Geometry", 'INPUT', 'NodeSocketGeometry')
@@ -240,7 +240,8 @@ def _build_group(group, layout: dict) -> None:
         links.new(geometry, store.inputs["Geometry"])
         links.new(value, _value_input(store, kind))
         geometry = store.outputs["Geometry"]
-        removed += [n for n in names if n != name]
+        # (the attributes the reader makes, e.g. radius, stay)
+        removed += [n for n in names if n != name and n not in usd_points.FROM_READER.values()]
         x += 250
     for primvar in removed:
         remove = nodes.new('GeometryNodeRemoveAttribute')

@@ -35,6 +35,10 @@ MAX_FLOAT_ID = 2 ** 24
 _BUILTIN = ("position", "velocity")
 #: Attributes whose primvars take another name (Blender reserves these names for other types).
 _RENAMED = {"id": "physanim_id"}
+#: Attributes written as no primvar, since Blender's reader gives them already under another
+#: name: ``size`` is the radius it makes of ``widths`` (twice the size: doubling and halving a
+#: float32 are exact), so a primvar of it would write every frame's sizes twice.
+FROM_READER = {"size": "radius"}
 
 
 def frame_file_name(frame: int) -> str:
@@ -47,7 +51,8 @@ def attribute_layout(arrays: Mapping[str, np.ndarray]) -> dict[str, tuple[str, l
 
     ``kind`` is ``'INT'`` for (n,) integers, ``'FLOAT'`` for (n,) floats, ``'FLOAT_VECTOR'``
     for (n, 3) and ``'FLOAT_COLOR'`` for (n, 4) (RGBA); ``primvars`` are the float primvars
-    holding its components, in order. Any other shape raises :class:`ValueError`.
+    holding its components, in order — or, for the attributes of :data:`FROM_READER`, the
+    one attribute Blender's reader holds it in. Any other shape raises :class:`ValueError`.
     """
     layout: dict[str, tuple[str, list[str]]] = {}
     for name, array in arrays.items():
@@ -55,7 +60,9 @@ def attribute_layout(arrays: Mapping[str, np.ndarray]) -> dict[str, tuple[str, l
             continue
         a = np.asarray(array)
         base = _RENAMED.get(name, name)
-        if a.ndim == 1:
+        if name in FROM_READER and a.ndim == 1:
+            layout[name] = ('FLOAT', [FROM_READER[name]])
+        elif a.ndim == 1:
             layout[name] = ('INT' if a.dtype.kind in "biu" else 'FLOAT', [base])
         elif a.ndim == 2 and a.shape[1] in (3, 4):
             kind = {3: 'FLOAT_VECTOR', 4: 'FLOAT_COLOR'}[a.shape[1]]
@@ -86,6 +93,8 @@ def columns(arrays: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
         out["widths"] = 2.0 * _rows(arrays, "size", n)
     primvars = []
     for name, (kind, names) in attribute_layout(arrays).items():
+        if name in FROM_READER:
+            continue  # written as the prim's own attribute, above
         values = _rows(arrays, name, n)
         if kind == 'INT' and n and np.abs(values).max() > MAX_FLOAT_ID:
             raise ValueError(f'point attribute "{name}": integers up to {MAX_FLOAT_ID:,} fit a '

@@ -41,6 +41,7 @@ def test_every_float32_is_written_exactly():
     np.testing.assert_array_equal(got.view(np.uint32), arrays["position"].view(np.uint32))
     np.testing.assert_array_equal(_array(text, "velocities").reshape(-1, 3), arrays["velocity"])
     np.testing.assert_array_equal(_array(text, "widths"), 2.0 * arrays["size"])
+    assert "primvars:size" not in text and "primvars:radius" not in text  # widths only
     np.testing.assert_array_equal(_array(text, "primvars:age"), arrays["age"])
     np.testing.assert_array_equal(_array(text, "primvars:physanim_id"),
                                   arrays["id"].astype(np.float32))
@@ -66,6 +67,7 @@ def test_layout_names_each_attribute_and_its_primvars():
     layout = usd_points.attribute_layout(_frame(3))
     assert layout["id"] == ('INT', ["physanim_id"])
     assert layout["age"] == ('FLOAT', ["age"])
+    assert layout["size"] == ('FLOAT', ["radius"])  # Blender's reader: half the widths
     assert layout["color"] == ('FLOAT_COLOR', ["color_0", "color_1", "color_2", "color_3"])
     assert layout["instance_rotation"][0] == 'FLOAT_VECTOR'
     assert "position" not in layout and "velocity" not in layout
