@@ -39,16 +39,18 @@ class ParticleBake:
         # Emitters whose result plays without the extension: a USD layer per frame as well.
         self.usd = {ob.name for ob in emitters if ob.physanim.emitter.output == 'USD_POINTS'}
         self.usd_extension = native_points.file_extension() if self.usd else ""
-        self.usd_processes: dict[str, usd_process.UsdProcess | None] = {}
-        # emitters that will reach the process's size: theirs starts now, while the bake sets up
-        # and simulates the first frames, not when their first large frame waits for it
-        self._starting: dict[str, usd_process.UsdProcess] = {}
+        self.usd_processes: dict[str, usd_process.UsdPool | None] = {}
+        # emitters that will reach the processes' size: theirs start now, while the bake sets
+        # up and simulates the first frames, not when their first large frame waits for them
+        self._starting: dict[str, usd_process.UsdPool] = {}
+        large = sorted(name for name in self.usd
+                       if (peaks or {}).get(name, 0.0) >= usd_process.MIN_POINTS)
+        self._pool_size = usd_process.process_count(len(large) or len(self.usd))
         if self.usd_extension == ".usdc":
-            for name in sorted(self.usd):
-                if (peaks or {}).get(name, 0.0) >= usd_process.MIN_POINTS:
-                    process = self._spawn(wait=False)
-                    if process is not None:
-                        self._starting[name] = process
+            for name in large:
+                pool = self._spawn(wait=False)
+                if pool is not None:
+                    self._starting[name] = pool
         self.first_frame = 0  # set by start()
         # squash and stretch: each emitter's particles' last impacts, frame to frame
         self.trackers = {ob.name: ImpactTracker(SquashSettings(ob.physanim.emitter.squash,
@@ -138,8 +140,8 @@ class ParticleBake:
                     writer.write_file(native_points.STREAM, name, process.save, (npz, frame))
         self.stats["peak"] = max(self.stats["peak"], state.particle_count)
 
-    def _usd_process(self, name: str, count: int) -> usd_process.UsdProcess | None:
-        """The process writing emitter ``name``'s ``.usdc`` layers once its frames reach
+    def _usd_process(self, name: str, count: int) -> usd_process.UsdPool | None:
+        """The processes writing emitter ``name``'s ``.usdc`` layers once its frames reach
         :data:`usd_process.MIN_POINTS` points; None: the writer thread writes them (smaller
         frames, ``.usda`` text, or no process could start here)."""
         if self.usd_extension != ".usdc" or count < usd_process.MIN_POINTS:
@@ -158,15 +160,14 @@ class ParticleBake:
             self.usd_processes[name] = process
         return self.usd_processes[name]
 
-    @staticmethod
-    def _spawn(wait: bool) -> usd_process.UsdProcess | None:
-        """A USD process (:class:`.usd_process.UsdProcess`, ``wait`` as there), or None where
-        none can start here."""
+    def _spawn(self, wait: bool) -> usd_process.UsdPool | None:
+        """An emitter's USD processes (:class:`.usd_process.UsdPool`, ``wait`` as there), or
+        None where none can start here."""
         site = compat.usd_site()
         if site is None or not usd_process.can_start():
             return None
         try:
-            return usd_process.UsdProcess(site, wait=wait)
+            return usd_process.UsdPool(site, self._pool_size, wait=wait)
         except OSError:
             return None
 

@@ -335,8 +335,9 @@ def _layers(folder: Path, modules) -> dict[str, dict[str, np.ndarray]]:
 
 
 def test_a_process_of_its_own_writes_the_same_usd_layers(physanim_ext, tmp_path, monkeypatch):
-    """Large emitters' .usdc layers are saved by a child process (off the bake's lock): the
-    same layers as the writer thread saves, Blender showing the cache's points from them."""
+    """Large emitters' .usdc layers are saved by child processes (off the bake's lock), two
+    here taking the frames in turn: the same layers as the writer thread saves, Blender
+    showing the cache's points from them."""
     usd_process = _addon(physanim_ext, "usd_process")
     compat = _addon(physanim_ext, "compat")
     started = []
@@ -347,6 +348,15 @@ def test_a_process_of_its_own_writes_the_same_usd_layers(physanim_ext, tmp_path,
         started.append(self)
 
     monkeypatch.setattr(usd_process.UsdProcess, "__init__", spy)
+    saved = []
+    save = usd_process.UsdProcess.save
+
+    def spy_save(self, path, data):
+        saved.append((self, data[1]))
+        save(self, path, data)
+
+    monkeypatch.setattr(usd_process.UsdProcess, "save", spy_save)
+    monkeypatch.setattr(usd_process, "process_count", lambda emitters=1: 2)
     scene = _scene(tmp_path, frame_end=8)
     ob = _default_emitter(scene)  # 20 a frame: below MIN_POINTS, written on the thread
     assert bpy.ops.physanim.bake() == {'FINISHED'}
@@ -362,7 +372,8 @@ def test_a_process_of_its_own_writes_the_same_usd_layers(physanim_ext, tmp_path,
     assert started == [] and len(by_thread) == 8
 
     assert bpy.ops.physanim.bake() == {'FINISHED'}
-    assert len(started) == 1 and started[0]._proc.poll() == 0  # it ended with the bake
+    assert len(started) == 2 and all(p._proc.poll() == 0 for p in started)  # ended with it
+    assert saved == [(started[(f - 1) % 2], f) for f in range(1, 9)]  # in turn
     by_process = _layers(folder, modules)
     assert by_process.keys() == by_thread.keys()
     for name, layer in by_thread.items():
@@ -379,10 +390,11 @@ def test_a_process_of_its_own_writes_the_same_usd_layers(physanim_ext, tmp_path,
 
 
 def test_a_large_emitters_process_starts_with_the_bake(physanim_ext, tmp_path, monkeypatch):
-    """An emitter whose estimated peak reaches MIN_POINTS has its process started as the bake
-    starts, without waiting (pxr imports while the first frames simulate), and confirmed at
-    its first large frame; one whose estimate stays below starts none; one started whose
-    frames never grow that large is ended with the bake, its layers written on the thread."""
+    """An emitter whose estimated peak reaches MIN_POINTS has its processes (two here) started
+    as the bake starts, without waiting (pxr imports while the first frames simulate), and
+    confirmed at its first large frame; one whose estimate stays below starts none; ones
+    started whose frames never grow that large are ended with the bake, its layers written on
+    the thread."""
     usd_process = _addon(physanim_ext, "usd_process")
     budget = _addon(physanim_ext, "budget")
     cache = sys.modules[f"{physanim_ext.__name__}.core.cache"]
@@ -407,6 +419,7 @@ def test_a_large_emitters_process_starts_with_the_bake(physanim_ext, tmp_path, m
     monkeypatch.setattr(usd_process.UsdProcess, "__init__", spy_start)
     monkeypatch.setattr(usd_process.UsdProcess, "wait_ready", spy_ready)
     monkeypatch.setattr(cache.CacheWriter, "write_frame", spy_write)
+    monkeypatch.setattr(usd_process, "process_count", lambda emitters=1: 2)
     scene = _scene(tmp_path, frame_end=8)
     ob = _default_emitter(scene)  # 20 a frame over 8 frames: at most 160 alive
     monkeypatch.setattr(usd_process, "MIN_POINTS", 100)
@@ -420,20 +433,20 @@ def test_a_large_emitters_process_starts_with_the_bake(physanim_ext, tmp_path, m
     frames = [("frame", f, 20 * f) for f in range(1, 9)]
     # started before the first frame was written; confirmed at frame 5 (100 points), whose
     # layer it saves from the npz just queued
-    assert events == [("start", False)] + frames[:5] + [("ready",)] + frames[5:], events
-    assert processes[0]._proc.poll() == 0 and len(list(folder.iterdir())) == 8
+    assert events == [("start", False)] * 2 + frames[:5] + [("ready",)] * 2 + frames[5:], events
+    assert all(p._proc.poll() == 0 for p in processes) and len(list(folder.iterdir())) == 8
 
     events.clear()
     monkeypatch.setattr(usd_process, "MIN_POINTS", 200)  # beyond the estimate: none starts
     assert bpy.ops.physanim.bake() == {'FINISHED'}
-    assert events == frames and len(processes) == 1
+    assert events == frames and len(processes) == 2
 
     events.clear()  # an estimate above, frames below: started, unused, ended with the bake
     monkeypatch.setattr(budget, "emitter_estimates",
                         lambda *args: {ob.name: (1e6, 0.0)})
     assert bpy.ops.physanim.bake() == {'FINISHED'}
-    assert events == [("start", False)] + frames and len(processes) == 2
-    assert processes[1]._proc.poll() is not None
+    assert events == [("start", False)] * 2 + frames and len(processes) == 4
+    assert all(p._proc.poll() is not None for p in processes[2:])
     assert sorted(p.name for p in folder.iterdir()) == [f"points_{f:06d}.usdc"
                                                         for f in range(1, 9)]
 
@@ -487,11 +500,24 @@ def test_the_usd_process_runs_pxr_on_one_thread_and_keeps_freed_memory(physanim_
     assert usd_process.child_environment()["PXR_WORK_THREAD_LIMIT"] == "4"
 
 
+def test_the_usd_processes_are_the_cores_up_to_four_shared_by_the_emitters(physanim_ext,
+                                                                           monkeypatch):
+    usd_process = _addon(physanim_ext, "usd_process")
+    for cores, emitters, count in ((1, 1, 1), (2, 1, 2), (16, 1, 4), (4, 2, 2), (16, 3, 1),
+                                   (2, 5, 1)):
+        monkeypatch.setattr(usd_process.os, "sched_getaffinity", lambda pid: set(range(cores)))
+        assert usd_process.process_count(emitters) == count, (cores, emitters)
+
+
 def test_the_usd_process_names_a_layer_it_cannot_write(physanim_ext, tmp_path):
     usd_process = _addon(physanim_ext, "usd_process")
     site = _addon(physanim_ext, "compat").usd_site()
     with pytest.raises(OSError, match="cannot import pxr from /nowhere"):
         usd_process.UsdProcess("/nowhere")
+    pool = usd_process.UsdPool("/nowhere", 2, wait=False)  # both start; neither can import
+    with pytest.raises(OSError, match="cannot import pxr from /nowhere"):
+        pool.wait_ready()
+    assert len(pool.processes) == 2 and all(p._proc.poll() is not None for p in pool.processes)
     if site is None:
         return
     cache = sys.modules[f"{physanim_ext.__name__}.core.cache"]
