@@ -5,7 +5,9 @@ Each bake runs in a process of its own (``python bench/particles_memory.py --chi
 peak resident set (``ru_maxrss``) is its own: the benchmark's scene (``particles_compare``) with
 all ``--count`` particles born over the first frames and alive to the end, baked through the
 add-on at its defaults (USD points output included) for each frame count. A bake whose memory is
-flat in frame count writes each frame out and keeps nothing per frame.
+flat in frame count writes each frame out and keeps nothing per frame. Beside it, the processes
+that write the USD layers (as many as the cores, up to four): their count and the largest one's
+peak resident set, on top of the bake's.
 """
 from __future__ import annotations
 
@@ -21,8 +23,19 @@ from pathlib import Path
 EMIT_FRAMES = 10  # every particle is born within these first frames: the count is flat after
 
 
-def _peak_mb() -> float:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux: kB
+def _peak_mb(pid: int | str = "self") -> float:
+    """The peak resident set [MB] of a process (this one by default): Linux's VmHWM, which
+    starts afresh with each program (``ru_maxrss`` keeps the largest of the parent's at the
+    fork, so a bake run from a benchmark that had simulated Blender's particles started at
+    830 MB)."""
+    try:
+        with open(f"/proc/{pid}/status", encoding="ascii") as status:
+            for line in status:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0  # kB
+    except OSError:
+        pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # kB on Linux
 
 
 def child(count: int, frames: int) -> dict:
@@ -35,6 +48,18 @@ def child(count: int, frames: int) -> dict:
     with (tempfile.TemporaryDirectory(prefix="physanim_memory_", ignore_cleanup_errors=True)
           as folder, blender_side.extension_enabled()):
         scene, emitter = particles_compare.build_physanim_scene(sc, folder)
+        # the USD writers' peaks, read as the bake ends each of them
+        usd_process = next(m for name, m in sys.modules.items()
+                           if name.endswith(".addon.usd_process"))
+        writer_peaks: list[float] = []
+        close = usd_process.UsdProcess.close
+
+        def measured_close(self, kill: bool = False) -> None:
+            if self._proc.poll() is None:
+                writer_peaks.append(_peak_mb(self._proc.pid))
+            close(self, kill)
+
+        usd_process.UsdProcess.close = measured_close
         before = _peak_mb()
         start = time.perf_counter()
         particles_compare._bake()
@@ -46,7 +71,8 @@ def child(count: int, frames: int) -> dict:
         alive = len(result_points(emitter.physanim.emitter.result)["position"])
         cache = sum(f.stat().st_size for f in Path(folder).rglob("*") if f.is_file())
     return {"frames": frames, "time": took, "before": before, "peak": peak, "alive": alive,
-            "cache": cache / 2 ** 20}
+            "cache": cache / 2 ** 20, "writers": len(writer_peaks),
+            "writer_peak": max(writer_peaks, default=0.0)}
 
 
 def measure(count: int, frame_counts: list[int]) -> list[dict]:
@@ -72,14 +98,15 @@ def table(count: int, rows: list[dict]) -> str:
     cells = [(r["frames"], f"{r['alive']:,}", f"{r['time']:.1f}", f"{r['before']:,.0f}",
               f"{r['peak']:,.0f}", f"{r['peak'] - r['before']:,.0f}",
               f"{(r['peak'] - r['before']) / first:.2f}" if first > 0 else "—",
-              f"{r['cache']:,.0f}")
+              f"{r['writers']} x {r['writer_peak']:,.0f}", f"{r['cache']:,.0f}")
              for r in rows]
     return "\n".join([
         f"\n### Peak memory of a {count:,}-particle bake (defaults, USD points output), by "
         "frame count\n",
         *common.markdown_table(("frames", "alive at the end", "bake (s)", "memory before (MB)",
-                                "peak (MB)", "bake's peak (MB)", "x shortest", "cache (MB)"),
-                               "rrrrrrrr", cells)])
+                                "peak (MB)", "bake's peak (MB)", "x shortest",
+                                "USD writers x peak (MB)", "cache (MB)"),
+                               "rrrrrrrrr", cells)])
 
 
 if __name__ == "__main__":
