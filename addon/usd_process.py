@@ -48,21 +48,40 @@ else:  # the child process: this file run as a script
 MIN_POINTS = 20_000
 #: Seconds the child may take to start and import ``pxr`` before the bake writes without it.
 START_TIMEOUT = 30.0
-#: Children a bake runs for its layers at most (:func:`process_count`).
+#: Children a bake runs for its layers at most (:func:`process_count`), unless the environment
+#: variable of that name sets how many.
 MAX_PROCESSES = 4
+ENVIRONMENT_PROCESSES = "PHYSANIM_USD_PROCESSES"
 
 
 def process_count(emitters: int = 1) -> int:
     """How many children write the layers of each of ``emitters`` large emitters: as many as
-    the cores this process may run on, up to MAX_PROCESSES in all, shared among the emitters
-    (one each at least). On two cores two: the bake's own threads leave a core idle now and
-    then, which the second child takes (a 100,000-particle bake at one sub-step 5 % faster
-    there; with more cores the layers no longer hold the simulation back)."""
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except AttributeError:  # (not on Linux)
-        cores = os.cpu_count() or 1
-    return max(1, min(MAX_PROCESSES, cores) // max(1, emitters))
+    the cores this process may run on (its CPU affinity, as a farm's job slot sets it), up to
+    MAX_PROCESSES in all, shared among the emitters (one each at least). On two cores two: the
+    bake's own threads leave a core idle now and then, which the second child takes (a
+    100,000-particle bake a quarter faster there; with more cores the layers no longer hold
+    the simulation back). The environment variable PHYSANIM_USD_PROCESSES sets the
+    total instead (a whole number, 1 or more).
+
+    Raises:
+        ValueError: PHYSANIM_USD_PROCESSES is set to something else.
+    """
+    raw = os.environ.get(ENVIRONMENT_PROCESSES, "").strip()
+    if raw:
+        try:
+            total = int(raw)
+        except ValueError:
+            total = 0
+        if total < 1:
+            raise ValueError(f"{ENVIRONMENT_PROCESSES} must be a whole number of processes, 1 or "
+                             f"more (got {raw!r})")
+    else:
+        try:
+            cores = len(os.sched_getaffinity(0))
+        except AttributeError:  # (not on Linux)
+            cores = os.cpu_count() or 1
+        total = min(MAX_PROCESSES, cores)
+    return max(1, total // max(1, emitters))
 
 
 def save_usdc(path: str, data: dict, frame: int, modules: tuple) -> None:

@@ -503,10 +503,35 @@ def test_the_usd_process_runs_pxr_on_one_thread_and_keeps_freed_memory(physanim_
 def test_the_usd_processes_are_the_cores_up_to_four_shared_by_the_emitters(physanim_ext,
                                                                            monkeypatch):
     usd_process = _addon(physanim_ext, "usd_process")
+    monkeypatch.delenv("PHYSANIM_USD_PROCESSES", raising=False)
     for cores, emitters, count in ((1, 1, 1), (2, 1, 2), (16, 1, 4), (4, 2, 2), (16, 3, 1),
                                    (2, 5, 1)):
-        monkeypatch.setattr(usd_process.os, "sched_getaffinity", lambda pid: set(range(cores)))
+        monkeypatch.setattr(usd_process.os, "sched_getaffinity",
+                            lambda pid, cores=cores: set(range(cores)))
         assert usd_process.process_count(emitters) == count, (cores, emitters)
+    # a pipeline's own choice, whatever the cores
+    for value, emitters, count in (("1", 1, 1), ("6", 1, 6), (" 6 ", 2, 3), ("2", 3, 1)):
+        monkeypatch.setenv("PHYSANIM_USD_PROCESSES", value)
+        assert usd_process.process_count(emitters) == count, (value, emitters)
+    for value in ("0", "-2", "two", "1.5"):
+        monkeypatch.setenv("PHYSANIM_USD_PROCESSES", value)
+        with pytest.raises(ValueError, match=f"PHYSANIM_USD_PROCESSES .*{value!r}"):
+            usd_process.process_count(1)
+
+
+def test_a_bad_usd_process_count_fails_the_bake_naming_it(physanim_ext, tmp_path, monkeypatch):
+    """A pipeline's PHYSANIM_USD_PROCESSES that is no count stops the bake before anything is
+    written, naming the variable and its value; the previous bake stays."""
+    scene = _scene(tmp_path, frame_end=4)
+    ob = _default_emitter(scene)
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    cache = Path(bpy.path.abspath(ob.physanim.emitter.result.physanim.result.cache))
+    before = sorted((p.name, p.read_bytes()) for p in cache.iterdir())
+    monkeypatch.setenv("PHYSANIM_USD_PROCESSES", "lots")
+    ob.physanim.emitter.rate = 30.0
+    with pytest.raises(RuntimeError, match="PHYSANIM_USD_PROCESSES .*'lots'"):
+        bpy.ops.physanim.bake()
+    assert sorted((p.name, p.read_bytes()) for p in cache.iterdir()) == before
 
 
 def test_the_usd_process_names_a_layer_it_cannot_write(physanim_ext, tmp_path):
