@@ -33,35 +33,41 @@ class ParticleBake:
                  clock: TimeMap, peaks: dict[str, float] | None = None):
         self.scene, self.emitters, self.hashes, self.clock = scene, emitters, hashes, clock
         self.writers: dict[str, CacheWriter] = {}
-        for ob in emitters:
-            self.writers[ob.name] = CacheWriter(emitter_cache_dir(scene, ob))
         self.objects_limit = {ob.name for ob in emitters if ob.physanim.emitter.output == 'OBJECTS'}
         # Emitters whose result plays without the extension: a USD layer per frame as well.
         self.usd = {ob.name for ob in emitters if ob.physanim.emitter.output == 'USD_POINTS'}
         self.usd_extension = native_points.file_extension() if self.usd else ""
         self.usd_processes: dict[str, usd_process.UsdPool | None] = {}
-        # emitters that will reach the processes' size: theirs start now, while the bake sets
-        # up and simulates the first frames, not when their first large frame waits for them
         self._starting: dict[str, usd_process.UsdPool] = {}
+        # emitters that will reach the processes' size: theirs start with the bake (last,
+        # below), importing pxr while it sets up and simulates the first frames, not when
+        # their first large frame waits for them
         large = sorted(name for name in self.usd
                        if (peaks or {}).get(name, 0.0) >= usd_process.MIN_POINTS)
-        self._pool_size = usd_process.process_count(len(large) or len(self.usd))
-        if self.usd_extension == ".usdc":
-            for name in large:
-                pool = self._spawn(wait=False)
-                if pool is not None:
-                    self._starting[name] = pool
+        self._pool_size = (usd_process.process_count(len(large) or len(self.usd))
+                           if self.usd_extension == ".usdc" else 0)  # (before any folder)
         self.first_frame = 0  # set by start()
-        # squash and stretch: each emitter's particles' last impacts, frame to frame
-        self.trackers = {ob.name: ImpactTracker(SquashSettings(ob.physanim.emitter.squash,
-                                                               ob.physanim.emitter.squash_recovery),
-                                                convert.gravity(scene))
-                         for ob in emitters if ob.physanim.emitter.squash > 0.0}
         self.births = {ob.name: 0 for ob in emitters}
         self.watch: set[str] = set()  # emitters whose frames Hit the Mark follows
         self.watched: dict = {}  # (emitter, frame) -> (ids, positions, velocities, ages [frames])
         self.stats = stats
         self.system: ParticleSystem | None = None
+        try:
+            for ob in emitters:
+                self.writers[ob.name] = CacheWriter(emitter_cache_dir(scene, ob))
+            # squash and stretch: each emitter's particles' last impacts, frame to frame
+            self.trackers = {
+                ob.name: ImpactTracker(SquashSettings(ob.physanim.emitter.squash,
+                                                      ob.physanim.emitter.squash_recovery),
+                                       convert.gravity(scene))
+                for ob in emitters if ob.physanim.emitter.squash > 0.0}
+            for name in large if self._pool_size else ():
+                pool = self._spawn(wait=False)
+                if pool is not None:
+                    self._starting[name] = pool
+        except BaseException:  # nothing left behind: no partial folder, no process
+            self.abort()
+            raise
 
     @property
     def label(self) -> str:
@@ -147,14 +153,16 @@ class ParticleBake:
         if self.usd_extension != ".usdc" or count < usd_process.MIN_POINTS:
             return self.usd_processes.get(name)
         if name not in self.usd_processes:
-            process = self._starting.pop(name, None)
+            process = self._starting.get(name)
             if process is None:
                 process = self._spawn(wait=True)
             else:
                 try:
                     process.wait_ready()
-                except OSError:
+                except OSError:  # (they ended themselves)
                     process = None  # the writer thread writes them, as where there is no pxr
+                # (on any other exception they stay in _starting, which abort() ends)
+                del self._starting[name]
             if process is not None:
                 self.writers[name].attach(process)
             self.usd_processes[name] = process
@@ -164,7 +172,7 @@ class ParticleBake:
         """An emitter's USD processes (:class:`.usd_process.UsdPool`, ``wait`` as there), or
         None where none can start here."""
         site = compat.usd_site()
-        if site is None or not usd_process.can_start():
+        if site is None or not self._pool_size or not usd_process.can_start():
             return None
         try:
             return usd_process.UsdPool(site, self._pool_size, wait=wait)
@@ -172,10 +180,17 @@ class ParticleBake:
             return None
 
     def _end_starting(self) -> None:
-        """End the processes started for emitters whose frames never reached their size."""
+        """End the processes started for emitters whose frames never reached their size (or
+        whose bake stops before)."""
         starting, self._starting = self._starting, {}
+        failure = None
         for process in starting.values():
-            process.close(kill=True)
+            try:
+                process.close(kill=True)
+            except BaseException as exc:  # (the others are ended all the same)
+                failure = failure or exc
+        if failure is not None:
+            raise failure
 
     def _squash(self, ob, tracker: ImpactTracker, arrays: dict, frame: int) -> None:
         """The instances' squash and stretch (their volume kept): instance_scale and
@@ -240,23 +255,29 @@ class ParticleBake:
 
     def commit(self, meta: dict) -> dict[str, str]:
         """Swap every emitter's new cache in; returns emitter name -> cache folder."""
-        self._end_starting()
-        paths = {ob.name: self.writers[ob.name].commit(dict(meta, emitter=ob.name,
-                                                            hash=self.hashes[ob.name]))
-                 for ob in self.emitters}
+        try:
+            paths = {ob.name: self.writers[ob.name].commit(dict(meta, emitter=ob.name,
+                                                                hash=self.hashes[ob.name]))
+                     for ob in self.emitters}
+        finally:
+            self._end_starting()
         self.writers.clear()
         return paths
 
     def detach(self) -> None:
         """Stop, keeping the partial caches for a resume; the previous bakes stay as they were."""
-        self._end_starting()
-        for writer in self.writers.values():
-            writer.detach()
-        self.writers.clear()
+        try:
+            for writer in self.writers.values():
+                writer.detach()
+            self.writers.clear()
+        finally:
+            self._end_starting()
 
     def abort(self) -> None:
         """Delete the partial caches; the previous bakes stay as they were."""
-        self._end_starting()
-        for writer in self.writers.values():
-            writer.abort()
-        self.writers.clear()
+        try:
+            for writer in self.writers.values():
+                writer.abort()
+            self.writers.clear()
+        finally:
+            self._end_starting()

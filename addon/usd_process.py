@@ -43,8 +43,9 @@ else:  # the child process: this file run as a script
     usd_points = importlib.util.module_from_spec(_spec)
     _spec.loader.exec_module(usd_points)
 
-#: Frames with fewer points are saved on the writer thread (a few ms at most); a bake whose
-#: frames reach this many starts the process.
+#: Frames with fewer points are saved on the writer thread (a few ms at most); an emitter whose
+#: frames reach this many has its layers saved by child processes (started with the bake when
+#: its estimated peak reaches it, else at its first such frame).
 MIN_POINTS = 20_000
 #: Seconds the child may take to start and import ``pxr`` before the bake writes without it.
 START_TIMEOUT = 30.0
@@ -52,29 +53,30 @@ START_TIMEOUT = 30.0
 #: variable of that name sets how many.
 MAX_PROCESSES = 4
 ENVIRONMENT_PROCESSES = "PHYSANIM_USD_PROCESSES"
+MAX_ENVIRONMENT_PROCESSES = 32  # (each holds about 340 MB at a million points)
 
 
 def process_count(emitters: int = 1) -> int:
-    """How many children write the layers of each of ``emitters`` large emitters: as many as
-    the cores this process may run on (its CPU affinity, as a farm's job slot sets it), up to
-    MAX_PROCESSES in all, shared among the emitters (one each at least). On two cores two: the
-    bake's own threads leave a core idle now and then, which the second child takes (a
+    """How many children write the layers of each of ``emitters`` large emitters: the cores
+    this process may run on (its CPU affinity, as a farm's job slot sets it), up to
+    MAX_PROCESSES, shared among the emitters, one each at least. On two cores two: the bake's
+    own threads leave a core idle now and then, which the second child takes (a
     100,000-particle bake a quarter faster there; with more cores the layers no longer hold
-    the simulation back). The environment variable PHYSANIM_USD_PROCESSES sets the
-    total instead (a whole number, 1 or more).
+    the simulation back). The environment variable PHYSANIM_USD_PROCESSES sets the count to
+    share instead: 0 (no children: the writer thread writes the layers) up to
+    MAX_ENVIRONMENT_PROCESSES.
 
     Raises:
         ValueError: PHYSANIM_USD_PROCESSES is set to something else.
     """
     raw = os.environ.get(ENVIRONMENT_PROCESSES, "").strip()
     if raw:
-        try:
-            total = int(raw)
-        except ValueError:
-            total = 0
-        if total < 1:
-            raise ValueError(f"{ENVIRONMENT_PROCESSES} must be a whole number of processes, 1 or "
-                             f"more (got {raw!r})")
+        if not (raw.isascii() and raw.isdigit()) or int(raw) > MAX_ENVIRONMENT_PROCESSES:
+            raise ValueError(f"{ENVIRONMENT_PROCESSES} must be a whole number of processes from 0 "
+                             f"to {MAX_ENVIRONMENT_PROCESSES} (got {raw!r})")
+        total = int(raw)
+        if total == 0:
+            return 0
     else:
         try:
             cores = len(os.sched_getaffinity(0))
@@ -296,11 +298,12 @@ class UsdPool:
     to the next in turn; :meth:`sync` waits for all of them; :meth:`close` ends all of them.
 
     Args:
-        site, wait: as for :class:`UsdProcess`. count: the children (>= 1).
+        site, wait: as for :class:`UsdProcess` (all start at once; ``wait`` then waits for
+            each). count: the children (>= 1).
 
     Raises:
         OSError: a child did not start (here or from :meth:`wait_ready`); the others are
-            ended with it.
+            ended with it (as on any exception while they start).
     """
 
     def __init__(self, site: str, count: int, wait: bool = True):
@@ -308,8 +311,10 @@ class UsdPool:
         self._next = 0
         try:
             for _ in range(max(1, int(count))):
-                self.processes.append(UsdProcess(site, wait=wait))
-        except OSError:
+                self.processes.append(UsdProcess(site, wait=False))
+            if wait:
+                self.wait_ready()
+        except BaseException:
             self.close(kill=True)
             raise
 
@@ -317,7 +322,7 @@ class UsdPool:
         try:
             for process in self.processes:
                 process.wait_ready()
-        except OSError:
+        except BaseException:
             self.close(kill=True)
             raise
 
@@ -332,8 +337,15 @@ class UsdPool:
             process.sync()
 
     def close(self, kill: bool = False) -> None:
+        """End every child (each even when another fails to end); raises the first failure."""
+        failure = None
         for process in self.processes:
-            process.close(kill)
+            try:
+                process.close(kill)
+            except BaseException as exc:
+                failure = failure or exc
+        if failure is not None:
+            raise failure
 
 
 def _save_layer(frame: int, npz: str, path: str, modules: tuple) -> None:

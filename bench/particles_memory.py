@@ -2,7 +2,7 @@
 large bake at the product's defaults, and whether it grows with the frame count.
 
 Each bake runs in a process of its own (``python bench/particles_memory.py --child``), so its
-peak resident set (``ru_maxrss``) is its own: the benchmark's scene (``particles_compare``) with
+peak resident set (Linux's ``VmHWM``) is its own: the benchmark's scene (``particles_compare``) with
 all ``--count`` particles born over the first frames and alive to the end, baked through the
 add-on at its defaults (USD points output included) for each frame count. A bake whose memory is
 flat in frame count writes each frame out and keeps nothing per frame. Beside it, the processes
@@ -23,11 +23,12 @@ from pathlib import Path
 EMIT_FRAMES = 10  # every particle is born within these first frames: the count is flat after
 
 
-def _peak_mb(pid: int | str = "self") -> float:
+def _peak_mb(pid: int | str = "self") -> float | None:
     """The peak resident set [MB] of a process (this one by default): Linux's VmHWM, which
     starts afresh with each program (``ru_maxrss`` keeps the largest of the parent's at the
     fork, so a bake run from a benchmark that had simulated Blender's particles started at
-    830 MB)."""
+    830 MB). None for another process that has none (ended); this one's ``ru_maxrss`` where
+    there is no /proc."""
     try:
         with open(f"/proc/{pid}/status", encoding="ascii") as status:
             for line in status:
@@ -35,6 +36,8 @@ def _peak_mb(pid: int | str = "self") -> float:
                     return int(line.split()[1]) / 1024.0  # kB
     except OSError:
         pass
+    if pid != "self":
+        return None
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # kB on Linux
 
 
@@ -55,8 +58,9 @@ def child(count: int, frames: int) -> dict:
         close = usd_process.UsdProcess.close
 
         def measured_close(self, kill: bool = False) -> None:
-            if self._proc.poll() is None:
-                writer_peaks.append(_peak_mb(self._proc.pid))
+            peak = _peak_mb(self._proc.pid) if self._proc.poll() is None else None
+            if peak is not None:
+                writer_peaks.append(peak)
             close(self, kill)
 
         usd_process.UsdProcess.close = measured_close

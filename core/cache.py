@@ -186,9 +186,10 @@ class CacheWriter:
 
 
 def _save(path: Path, arrays: Mapping[str, np.ndarray]) -> None:
-    """``np.savez`` of contiguous ``arrays``, the same file, without its copy of each array:
-    the members are written from the arrays' own memory (a fifth of a 100,000-particle
-    frame's writing time went to those copies)."""
+    """``np.savez`` of ``arrays``, the same zip members, without its copy of each array: the
+    members are written from the arrays' own memory (a fifth of a 100,000-particle frame's
+    writing time went to those copies). Object arrays are refused (``np.savez`` would pickle
+    them; frames are read without pickles)."""
     with open(path, "wb") as handle, \
             zipfile.ZipFile(handle, "w", zipfile.ZIP_STORED, allowZip64=True) as archive:
         for key, values in arrays.items():

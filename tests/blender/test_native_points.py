@@ -419,6 +419,7 @@ def test_a_large_emitters_process_starts_with_the_bake(physanim_ext, tmp_path, m
     monkeypatch.setattr(usd_process.UsdProcess, "__init__", spy_start)
     monkeypatch.setattr(usd_process.UsdProcess, "wait_ready", spy_ready)
     monkeypatch.setattr(cache.CacheWriter, "write_frame", spy_write)
+    process_count = usd_process.process_count
     monkeypatch.setattr(usd_process, "process_count", lambda emitters=1: 2)
     scene = _scene(tmp_path, frame_end=8)
     ob = _default_emitter(scene)  # 20 a frame over 8 frames: at most 160 alive
@@ -447,6 +448,12 @@ def test_a_large_emitters_process_starts_with_the_bake(physanim_ext, tmp_path, m
     assert bpy.ops.physanim.bake() == {'FINISHED'}
     assert events == [("start", False)] * 2 + frames and len(processes) == 4
     assert all(p._proc.poll() is not None for p in processes[2:])
+
+    events.clear()  # a pipeline that wants none: the writer thread writes the layers
+    monkeypatch.setenv("PHYSANIM_USD_PROCESSES", "0")
+    monkeypatch.setattr(usd_process, "process_count", process_count)
+    assert bpy.ops.physanim.bake() == {'FINISHED'}
+    assert events == frames and len(processes) == 4 and len(list(folder.iterdir())) == 8
     assert sorted(p.name for p in folder.iterdir()) == [f"points_{f:06d}.usdc"
                                                         for f in range(1, 9)]
 
@@ -509,29 +516,69 @@ def test_the_usd_processes_are_the_cores_up_to_four_shared_by_the_emitters(physa
         monkeypatch.setattr(usd_process.os, "sched_getaffinity",
                             lambda pid, cores=cores: set(range(cores)))
         assert usd_process.process_count(emitters) == count, (cores, emitters)
-    # a pipeline's own choice, whatever the cores
-    for value, emitters, count in (("1", 1, 1), ("6", 1, 6), (" 6 ", 2, 3), ("2", 3, 1)):
+    # a pipeline's own choice, whatever the cores (0: none, the writer thread writes them)
+    for value, emitters, count in (("1", 1, 1), ("6", 1, 6), (" 6 ", 2, 3), ("2", 3, 1),
+                                   ("0", 1, 0), ("0", 3, 0), ("32", 1, 32)):
         monkeypatch.setenv("PHYSANIM_USD_PROCESSES", value)
         assert usd_process.process_count(emitters) == count, (value, emitters)
-    for value in ("0", "-2", "two", "1.5"):
+    for value in ("-2", "two", "1.5", "1_000", "33", "²"):
         monkeypatch.setenv("PHYSANIM_USD_PROCESSES", value)
         with pytest.raises(ValueError, match=f"PHYSANIM_USD_PROCESSES .*{value!r}"):
             usd_process.process_count(1)
 
 
 def test_a_bad_usd_process_count_fails_the_bake_naming_it(physanim_ext, tmp_path, monkeypatch):
-    """A pipeline's PHYSANIM_USD_PROCESSES that is no count stops the bake before anything is
-    written, naming the variable and its value; the previous bake stays."""
+    """A pipeline's PHYSANIM_USD_PROCESSES that is no count stops a bake that would start USD
+    processes before anything is written, naming the variable and its value; the previous
+    bake stays."""
     scene = _scene(tmp_path, frame_end=4)
     ob = _default_emitter(scene)
     assert bpy.ops.physanim.bake() == {'FINISHED'}
     cache = Path(bpy.path.abspath(ob.physanim.emitter.result.physanim.result.cache))
     before = sorted((p.name, p.read_bytes()) for p in cache.iterdir())
+    folders = sorted(p.name for p in cache.parent.iterdir())
     monkeypatch.setenv("PHYSANIM_USD_PROCESSES", "lots")
     ob.physanim.emitter.rate = 30.0
+    if _addon(physanim_ext, "compat").usd_modules() is None:  # no pxr (4.2): no process to
+        assert bpy.ops.physanim.bake() == {'FINISHED'}  # count, the variable is not read
+        return
     with pytest.raises(RuntimeError, match="PHYSANIM_USD_PROCESSES .*'lots'"):
         bpy.ops.physanim.bake()
     assert sorted((p.name, p.read_bytes()) for p in cache.iterdir()) == before
+    assert sorted(p.name for p in cache.parent.iterdir()) == folders  # no partial folder
+
+
+def test_a_bake_failing_as_it_starts_its_usd_processes_leaves_none(physanim_ext, tmp_path,
+                                                                    monkeypatch):
+    """Two large emitters: the first one's processes start, the second's fail to; the bake
+    stops with that error and ends the first one's processes, leaving no partial folder."""
+    usd_process = _addon(physanim_ext, "usd_process")
+    particles_bake = _addon(physanim_ext, "particles_bake")
+    scene = _scene(tmp_path, frame_end=4)
+    for x in (-2.0, 2.0):
+        _default_emitter(scene).location.x = x
+    monkeypatch.setattr(usd_process, "MIN_POINTS", 10)
+    monkeypatch.setattr(usd_process, "process_count", lambda emitters=1: 2)
+    pools = []
+    spawn = particles_bake.ParticleBake._spawn
+
+    def failing_spawn(self, wait):
+        if pools:
+            raise RuntimeError("no second pool")
+        pools.append(spawn(self, wait))
+        return pools[-1]
+
+    monkeypatch.setattr(particles_bake.ParticleBake, "_spawn", failing_spawn)
+    root = Path(bpy.path.abspath("//"))
+    if _addon(physanim_ext, "compat").usd_modules() is None:  # no pxr (4.2): none to start
+        assert bpy.ops.physanim.bake() == {'FINISHED'} and pools == []
+        return
+    with pytest.raises(RuntimeError, match="no second pool"):
+        bpy.ops.physanim.bake()
+    assert [p.name for p in root.rglob("*") if p.is_file()] == ["shot.blend"]
+    assert not [p for p in root.rglob("*") if ".partial-" in p.name]
+    assert len(pools) == 1 and len(pools[0].processes) == 2
+    assert all(p._proc.poll() is not None for p in pools[0].processes)
 
 
 def test_the_usd_process_names_a_layer_it_cannot_write(physanim_ext, tmp_path):

@@ -69,14 +69,22 @@ def test_frames_are_the_files_np_savez_writes(tmp_path):
               "scalar": np.array(2.5), "big_endian": np.arange(10, dtype=">i4"),
               "bytes": np.arange(5, dtype=np.uint8), "strided": rng.random((6, 4))[:, 1],
               "pairs": np.zeros(3, dtype=[("a", "<f4"), ("b", "<i2")])}
+    from physanim.core.cache import _save
+
     writer = CacheWriter(tmp_path / "bake", background=False)
-    ours = writer.write_frame("points", 1, arrays)
+    ours = writer.write_frame("points", 1, arrays)  # (made contiguous first, as np.savez...)
     theirs = tmp_path / "savez.npz"
     np.savez(theirs, **{k: np.ascontiguousarray(v) for k, v in arrays.items()})
-    with zipfile.ZipFile(ours) as got, zipfile.ZipFile(theirs) as expected:
-        assert got.namelist() == expected.namelist() == [f"{k}.npy" for k in arrays]
-        for name in expected.namelist():
-            assert got.read(name) == expected.read(name), name  # (read checks the CRC)
+    direct, as_given = tmp_path / "direct.npz", tmp_path / "as_given.npz"
+    _save(direct, arrays)  # ... and as they are: 0-d, Fortran order, strided
+    np.savez(as_given, **arrays)
+    for mine, numpys in ((ours, theirs), (direct, as_given)):
+        with zipfile.ZipFile(mine) as got, zipfile.ZipFile(numpys) as expected:
+            assert got.namelist() == expected.namelist() == [f"{k}.npy" for k in arrays]
+            for name in expected.namelist():
+                assert got.read(name) == expected.read(name), name  # (read checks the CRC)
+    with pytest.raises(ValueError):  # no pickles in a cache
+        _save(tmp_path / "objects.npz", {"names": np.array(["a", None], dtype=object)})
     writer.abort()
 
 
