@@ -293,9 +293,9 @@ class BaraffWitkin(Integrator):
                              matrix)
 
     def _loosened(self, system: BaraffWitkinSystem, h: float, newton: NewtonResult,
-                  constraints: VelocityFilter, released: np.ndarray) -> Linearisation:
+                  constraints: VelocityFilter, freed: np.ndarray) -> Linearisation:
         """The step's last linearisation for the looser ``constraints`` that let the vertices
-        ``released`` slide (the friction pass's): its preconditioner's blocks there made
+        ``freed`` slide (the friction pass's): its preconditioner's blocks there made
         theirs (:func:`loosened`; an SPD operator on the whole space, see :meth:`_linear_system`),
         or, when the solve held every vertex (nothing to precondition, no matrix), the first
         linearisation's matrix and a preconditioner built for them."""
@@ -303,7 +303,7 @@ class BaraffWitkin(Integrator):
         if last.matrix is None:
             blocks, rhs = newton.first[:2]
             return self._linear_system(system, h, blocks, rhs, constraints)
-        kept = loosened((None, last.rhs, last.matrix, last.precondition), constraints, released)
+        kept = loosened((None, last.rhs, last.matrix, last.precondition), constraints, freed)
         return Linearisation(last.rhs, last.apply_a, kept[3], last.matrix)
 
     def _solve(self, linear: Linearisation, known: np.ndarray, constraints: VelocityFilter,
