@@ -266,18 +266,17 @@ class ParticleBake:
 
     def detach(self) -> None:
         """Stop, keeping the partial caches for a resume; the previous bakes stay as they were."""
-        try:
-            for writer in self.writers.values():
-                writer.detach()
-            self.writers.clear()
-        finally:
-            self._end_starting()
+        self._stop(CacheWriter.detach)
 
     def abort(self) -> None:
         """Delete the partial caches; the previous bakes stay as they were."""
+        self._stop(CacheWriter.abort)
+
+    def _stop(self, end) -> None:
+        """``end(writer)`` for every emitter's cache writer, then no process left running."""
         try:
             for writer in self.writers.values():
-                writer.abort()
+                end(writer)
             self.writers.clear()
         finally:
             self._end_starting()
