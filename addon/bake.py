@@ -65,7 +65,8 @@ class BakeJob(Resumable, Failures):
         limits.check_scene(self.scene, self.frame_start, self.frame_end)
         # frame -> simulated time (Time Scale); the simulation steps whole frames of its own
         self.clock = timing.time_map(self.scene, self.frame_start, self.frame_end)
-        budget.check_budget(self.scene, self.roles, float(self.clock.scale.max()))
+        # (per emitter: its peak of particles alive and its cache bytes, upper bounds)
+        self.estimates = budget.check_budget(self.scene, self.roles, float(self.clock.scale.max()))
         for ob in self.roles.followers:  # refused before anything changes
             follow.check(ob, self.frame_start)
         # hit the mark: bodies with a target get the launch that reaches it (scratch bakes)
@@ -127,10 +128,8 @@ class BakeJob(Resumable, Failures):
                             for ob in self.roles.spring_meshes}
         self.rigid_hash = inputs_hash.rigid_hash(self.scene, self.roles.rigid_bodies, all_roles)
         if self.roles.emitters:
-            peaks = {name: peak for name, (peak, _) in budget.emitter_estimates(
-                self.scene, self.roles, float(self.clock.scale.max())).items()}
             self.particles = ParticleBake(self.scene, self.roles.emitters, self.hashes, self.stats,
-                                          self.clock, peaks)
+                                          self.clock, self.estimates)
         self.extractor = extract.Extractor(self.scene, self.roles)
         self.scene.frame_set(self.frame_start)
         depsgraph = context.evaluated_depsgraph_get()

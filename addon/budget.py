@@ -20,8 +20,11 @@ def estimate(scene, roles: Roles, speed: float = 1.0) -> tuple[float, float]:
     """Peak alive particles and cache bytes of a bake, from rates and lifetimes (upper bounds).
     ``speed``: the largest Time Scale of the bake (a rate is per simulated frame: at double
     speed a frame holds two frames' births)."""
-    each = emitter_estimates(scene, roles, speed).values()
-    return sum(peak for peak, _ in each), sum(size for _, size in each)
+    return _totals(emitter_estimates(scene, roles, speed))
+
+
+def _totals(each: dict[str, tuple[float, float]]) -> tuple[float, float]:
+    return sum(peak for peak, _ in each.values()), sum(size for _, size in each.values())
 
 
 def emitter_estimates(scene, roles: Roles, speed: float = 1.0) -> dict[str, tuple[float, float]]:
@@ -56,9 +59,11 @@ def emitter_estimates(scene, roles: Roles, speed: float = 1.0) -> dict[str, tupl
     return out
 
 
-def check_budget(scene, roles: Roles, speed: float = 1.0) -> None:
-    """Fail naming the scene when the estimated memory or cache size does not fit."""
-    peak, cache_bytes = estimate(scene, roles, speed)
+def check_budget(scene, roles: Roles, speed: float = 1.0) -> dict[str, tuple[float, float]]:
+    """Fail naming the scene when the estimated memory or cache size does not fit; returns
+    the estimates by emitter (:func:`emitter_estimates`)."""
+    each = emitter_estimates(scene, roles, speed)
+    peak, cache_bytes = _totals(each)
     stages = make_integrator(scene.physanim.integrator, scene.physanim.tolerance).stages
     memory = peak * BYTES_PER_PARTICLE_STATE * (1 + stages)
     if memory > MEMORY_BUDGET:
@@ -76,3 +81,4 @@ def check_budget(scene, roles: Roles, speed: float = 1.0) -> None:
             f"the cache needs an estimated {cache_bytes / 2**30:.2f} GiB but only "
             f"{free / 2**30:.2f} GiB are free at \"{root}\" — free space or lower rates",
             obj=scene.name, kind="scene")
+    return each
