@@ -24,13 +24,13 @@ class ParticleBake:
     Args:
         scene: the scene. emitters: the emitter objects (name order). hashes: per emitter name,
         the inputs hash stored with its cache. stats: counts to add to (births, collisions,
-        peak alive). clock: the bake's time map (frame -> simulated time). peaks: per emitter
-        name, an upper bound of its particles alive at once (:func:`.budget.emitter_estimates`;
-        missing: unknown).
+        peak alive). clock: the bake's time map (frame -> simulated time). estimates: per
+        emitter name, upper bounds of its particles alive at once and its cache bytes
+        (:func:`.budget.emitter_estimates`; missing: unknown).
     """
 
     def __init__(self, scene, emitters: list, hashes: dict[str, str], stats: dict,
-                 clock: TimeMap, peaks: dict[str, float] | None = None):
+                 clock: TimeMap, estimates: dict[str, tuple[float, float]] | None = None):
         self.scene, self.emitters, self.hashes, self.clock = scene, emitters, hashes, clock
         self.writers: dict[str, CacheWriter] = {}
         self.objects_limit = {ob.name for ob in emitters if ob.physanim.emitter.output == 'OBJECTS'}
@@ -43,7 +43,7 @@ class ParticleBake:
         # below), importing pxr while it sets up and simulates the first frames, not when
         # their first large frame waits for them
         large = sorted(name for name in self.usd
-                       if (peaks or {}).get(name, 0.0) >= usd_process.MIN_POINTS)
+                       if (estimates or {}).get(name, (0.0, 0.0))[0] >= usd_process.MIN_POINTS)
         self._pool_size = (usd_process.process_count(len(large) or len(self.usd))
                            if self.usd_extension == ".usdc" else 0)  # (before any folder)
         self.first_frame = 0  # set by start()
@@ -183,14 +183,7 @@ class ParticleBake:
         """End the processes started for emitters whose frames never reached their size (or
         whose bake stops before)."""
         starting, self._starting = self._starting, {}
-        failure = None
-        for process in starting.values():
-            try:
-                process.close(kill=True)
-            except BaseException as exc:  # (the others are ended all the same)
-                failure = failure or exc
-        if failure is not None:
-            raise failure
+        usd_process.close_all(starting.values(), kill=True)
 
     def _squash(self, ob, tracker: ImpactTracker, arrays: dict, frame: int) -> None:
         """The instances' squash and stretch (their volume kept): instance_scale and

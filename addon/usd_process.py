@@ -337,15 +337,20 @@ class UsdPool:
             process.sync()
 
     def close(self, kill: bool = False) -> None:
-        """End every child (each even when another fails to end); raises the first failure."""
-        failure = None
-        for process in self.processes:
-            try:
-                process.close(kill)
-            except BaseException as exc:
-                failure = failure or exc
-        if failure is not None:
-            raise failure
+        close_all(self.processes, kill)
+
+
+def close_all(processes, kill: bool = False) -> None:
+    """``close(kill)`` every one of ``processes`` (children or pools), each even when another
+    fails to end; raises the first failure."""
+    failure = None
+    for process in processes:
+        try:
+            process.close(kill)
+        except BaseException as exc:
+            failure = failure or exc
+    if failure is not None:
+        raise failure
 
 
 def _save_layer(frame: int, npz: str, path: str, modules: tuple) -> None:
