@@ -252,7 +252,7 @@ def test_vertices_whose_history_restarts_every_step_still_fall_at_g():
         _frames(solver, state, f, f)
         state.x[1:] = np.nextafter(state.x[1:], np.inf)
         assert f == 1 or solver.integrator.last_second_order
-    np.testing.assert_allclose(state.v[:, 2], -9.81, rtol=BaraffWitkin.TOLERANCE)
+    np.testing.assert_allclose(state.v[:, 2], -9.81, rtol=BDF2.TOLERANCE)
 
 
 def test_a_cloth_on_one_way_attachments_takes_bdf2_steps():
