@@ -56,9 +56,10 @@ class BaraffWitkin(Integrator):
 
     # relative residual at which CG stops: Baraff & Witkin's inexact solve, as Blender's cloth
     # solver stops (1e-2). Implicit Euler is first order: its own error at a frame's sub-step
-    # is larger than what a solve to a hundredth adds (a swinging sheet at 2e3 / 1e5 / 1e6 N/m:
-    # 0.4 / 14 / 68 mm off the exactly solved path, which is 600 / 1,150 / 98 mm off 16
-    # sub-steps'), and every implicit Euler accuracy test holds at it; the pinned, draped and
+    # is mostly far larger than what a solve to a hundredth adds (a swinging sheet at 2e3 /
+    # 1e5 / 1e6 N/m: 0.4 / 14 / 68 mm off the exactly solved path, which is 600 / 1,150 / 98
+    # mm off 16 sub-steps': alike only for the stiffest), and every implicit Euler accuracy
+    # test holds at it; the pinned, draped and
     # self-colliding cloth benchmarks take 13-23 % less time than at 1e-3. Second-order BDF2
     # keeps 1e-3 (its order needs it: :class:`~.bdf2.BDF2`).
     TOLERANCE = 1e-2
