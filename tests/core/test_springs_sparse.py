@@ -157,16 +157,24 @@ def test_loose_vertices_fall_back_to_jacobi_beyond_the_direct_limit():
                                np.linalg.solve(blocks, r[:, :, None])[:, :, 0], rtol=1e-9)
 
 
-def _run(model, frames: int, **integrator):
-    solver = SpringMeshSolver(model, "IMPLICIT", 1, frame_dt=1 / 24, frame=1)
+def _frames(model, frames: int, substeps: int = 1, **integrator):
+    """The model baked implicitly at 24 fps (``integrator``: BaraffWitkin's arguments): yields
+    the solver and the state after each frame."""
+    solver = SpringMeshSolver(model, "IMPLICIT", substeps, frame_dt=1 / 24, frame=1)
     solver.integrator = BaraffWitkin(**integrator)
     state = model.state()
-    iterations, residual = 0, 0.0
     for frame in range(1, frames + 1):
         solver.advance(state, SpringFrameInputs(frame, (frame - 1) / 24, 1 / 24))
+        yield solver, state
+
+
+def _run(model, frames: int, **integrator):
+    iterations, residual = 0, 0.0
+    for solver, state in _frames(model, frames, **integrator):
         iterations += solver.integrator.last_iterations
         residual = max(residual, solver.integrator.last_residual)
-    return state.x, iterations, residual
+        x = state.x
+    return x, iterations, residual
 
 
 def test_multigrid_solves_a_stiff_sheet_block_jacobi_cannot_within_the_cap():
@@ -276,15 +284,8 @@ def test_matrix_free_product_equals_the_assembled_matrix():
 
 
 def _swing(model, frames: int, substeps: int, tolerance: float | None):
-    solver = SpringMeshSolver(model, "IMPLICIT", substeps, frame_dt=1 / 24, frame=1)
-    if tolerance is not None:
-        solver.integrator = BaraffWitkin(tolerance=tolerance)
-    state = model.state()
-    path = []
-    for frame in range(1, frames + 1):
-        solver.advance(state, SpringFrameInputs(frame, (frame - 1) / 24, 1 / 24))
-        path.append(state.x.copy())
-    return np.array(path)
+    return np.array([state.x.copy() for _, state in
+                     _frames(model, frames, substeps, tolerance=tolerance)])
 
 
 def test_the_default_solve_errs_far_less_than_implicit_euler_itself():
