@@ -7,6 +7,7 @@ import numpy as np
 from ..core.cache import CacheWriter
 from ..core.contact import ColliderPaths
 from ..core.errors import PhysanimError, SimulationError
+from ..core.helper_process import can_start
 from ..core.controls import ImpactTracker, SquashSettings, euler_xyz, log_deformation, principal
 from ..core.controls.timing import TimeMap
 from ..core.particles import ParticleSolver, ParticleState, ParticleSystem, emitter_arrays
@@ -172,7 +173,7 @@ class ParticleBake:
         """An emitter's USD processes (:class:`.usd_process.UsdPool`, ``wait`` as there), or
         None where none can start here."""
         site = compat.usd_site()
-        if site is None or not self._pool_size or not usd_process.can_start():
+        if site is None or not self._pool_size or not can_start():
             return None
         try:
             return usd_process.UsdPool(site, self._pool_size, wait=wait)

@@ -227,6 +227,9 @@ class SpringMeshBake:
         self.pc2.append(local)
 
     def close(self) -> None:
+        solver = getattr(self, "solver", None)  # (none yet where the set-up failed)
+        if solver is not None:
+            solver.close()
         if self.pc2 is not None:
             self.pc2.close()
 

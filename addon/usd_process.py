@@ -34,6 +34,7 @@ import numpy as np
 
 if __package__:
     from ..core import usd_points
+    from ..core.helper_process import cores
     from .allocator import MMAP_MAX
 else:  # the child process: this file run as a script
     import importlib.util
@@ -78,11 +79,7 @@ def process_count(emitters: int = 1) -> int:
         if total == 0:
             return 0
     else:
-        try:
-            cores = len(os.sched_getaffinity(0))
-        except AttributeError:  # (not on Linux)
-            cores = os.cpu_count() or 1
-        total = min(MAX_PROCESSES, cores)
+        total = min(MAX_PROCESSES, cores())
     return max(1, total // max(1, emitters))
 
 
@@ -179,13 +176,6 @@ def child_environment() -> dict[str, str]:
     env.setdefault("MALLOC_MMAP_THRESHOLD_", str(MMAP_MAX))
     env.setdefault("MALLOC_TRIM_THRESHOLD_", str(1 << 30))
     return env
-
-
-def can_start() -> bool:
-    """Whether ``sys.executable`` is a Python interpreter (a Blender build that names its own
-    binary there would open Blender instead)."""
-    name = os.path.basename(sys.executable or "").lower()
-    return name.startswith("python") and os.path.isfile(sys.executable)
 
 
 class UsdProcess:

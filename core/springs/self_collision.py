@@ -30,6 +30,7 @@ Per sub-step, after the step and the colliders (positions x0 -> x1):
 """
 from __future__ import annotations
 
+import os
 from functools import partial
 from typing import NamedTuple
 
@@ -41,8 +42,9 @@ from ..collision.crossing import (MEET, TINY, box_pairs, element_boxes, segment_
 from ..collision.kept import KeptPairs, KeptTests
 from ..contact.features import FaceSet
 from ..contact.pair_solve import PointPairs, respond, separate, shares, within_cone
-from ..errors import SimulationError
+from ..errors import PhysanimError, SimulationError
 from ..forces.springs import scatter_add
+from ..helper_process import Helper, HelperError, can_start, cores
 from ..transforms import norm_rows, row_any, row_max
 
 ROUNDS = 8  # detections per sub-step
@@ -56,6 +58,13 @@ CARRY_KEEP = 0.9  # of a pair's carried force kept into the next sub-step (see C
 CROWD_LIMIT = 100
 SEARCH_LIMIT = 10  # x CROWD_LIMIT: the candidate pairs per element a search may make before
 # testing their boxes (a refused search fails the same way, before filling memory)
+# A mesh with this many edges finds its edge pairs in a helper process while it finds its
+# point pairs (:mod:`..helper_process`), where the bake may run on two cores or more: a
+# 32 x 32 cloth's detection is about a third shorter. Smaller meshes' detections are too
+# short to pay for the round trip. PHYSANIM_SELF_COLLISION_PROCESS=0 never starts one, =1
+# starts one for any mesh (where a process can start).
+HELPER_EDGES = 1_000
+ENVIRONMENT_HELPER = "PHYSANIM_SELF_COLLISION_PROCESS"
 
 
 class Carried(NamedTuple):
@@ -104,6 +113,9 @@ class SelfCollision:
         self._last_end: np.ndarray | None = None  # x1 of the last detection (see _Apart)
         self.carried: Carried | None = None
         self._fresh = True  # the next update starts a sub-step's carried forces
+        self._helper_mode = _helper_mode()
+        self._helper: Helper | None = None  # finding the edge pairs (see HELPER_EDGES)
+        self._helper_tried = False  # (one start per bake: a helper that failed is not restarted)
 
     def _leave_out_neighbours(self) -> None:
         """The candidate pairs leave out the pairs that share a vertex (a triangle and its
@@ -113,11 +125,45 @@ class SelfCollision:
         self._edges.exclude = partial(_edges_meet, self.faces.edges)
 
     def __getstate__(self):
-        return {**self.__dict__, "_last_end": None}  # (its kept tests are not kept either)
+        # (its kept tests are not kept either; nor its helper, which a resumed bake starts)
+        return {**self.__dict__, "_last_end": None, "_helper": None, "_helper_tried": False}
 
     def __setstate__(self, state: dict) -> None:
-        self.__dict__.update({"_last_end": None, **state})
+        self.__dict__.update({"_last_end": None, "_helper_mode": "auto", **state,
+                              "_helper": None, "_helper_tried": False})
         self._leave_out_neighbours()  # (a checkpoint written before they were left out)
+
+    def close(self) -> None:
+        """End the helper process, if any (a later detection does its work here)."""
+        if self._helper is not None:
+            self._helper.close()
+            self._helper = None
+        self._helper_tried = True
+
+    def _helper_ready(self) -> Helper | None:
+        """The helper process, started at the first detection where it pays (HELPER_EDGES), once
+        it is ready (until then, and if it cannot start or fails, the edge pairs are found
+        here: the same pairs, its kept candidates and tests being exact)."""
+        if self._helper is None:
+            edges = len(self.faces.edges)
+            if self._helper_tried or self._helper_mode == "off" or not edges or (
+                    self._helper_mode == "auto" and (edges < HELPER_EDGES or cores() < 2)) \
+                    or not can_start():
+                return None
+            self._helper_tried = True
+            faces = self.faces
+            try:
+                self._helper = Helper("springs.self_collision:edge_server", {
+                    "triangles": faces.triangles, "edges": faces.edges, "loose": faces.loose,
+                    "mass": self.mass, "inv_mass": self.inv_mass, "distance": self.distance,
+                    "friction": self.friction})
+            except (HelperError, OSError):
+                return None
+        try:
+            return self._helper if self._helper.ready else None
+        except HelperError:
+            self._helper = None
+            return None
 
     def begin_substep(self) -> None:
         """The next :meth:`keep_apart` begins a sub-step: the carried forces it finds replace
@@ -236,65 +282,112 @@ class SelfCollision:
     def _detect(self, x0: np.ndarray, x1: np.ndarray, keys: list | None = None
                 ) -> PointPairs | None:
         """Pairs nearer than the distance at the end, or crossed; ``keys``: each pair's key
-        appended (triangle and point, or the two edges)."""
+        appended (triangle and point, or the two edges). The edges' candidate pairs are
+        searched by the helper process where there is one (:meth:`_helper_ready`) while the
+        point pairs are found here: the same pairs either way."""
+        if self._margin is None:
+            self._margin = self.faces.margin(x0)
+        helper = self._helper_ready()
+        if helper is not None:
+            try:
+                helper.ask((x0, x1, self._margin))
+            except HelperError:
+                helper = self._helper = None
+        frame = self._prepare(x0, x1)
+        parts = [self._point_pairs(x0, x1, *frame)]
+        candidates = None
+        if helper is not None:
+            try:
+                answer = helper.answer()
+            except HelperError:
+                self._helper = None
+            else:
+                if answer[0] == "error":
+                    raise SimulationError(answer[1])
+                candidates = answer[1]
+        parts.append(self._edge_pairs(x0, x1, *frame, candidates))
+        parts = [p for p in parts if p is not None]
+        if not parts:
+            return None
+        vertex, weight, normal, depth, key = (np.concatenate(a) for a in zip(*parts))
+        if not len(vertex):
+            return None
+        if keys is not None:
+            keys.append(key)
+        return PointPairs(vertex, weight, normal, np.zeros_like(normal), depth, self.distance)
+
+    def _boxes(self, x0: np.ndarray, x1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The points' boxes over the sub-step (lo, hi (n, 3)), grown by half the distance.
+
+        They sweep the motion relative to the mesh's mean motion: the pairs and their gaps are
+        the same in any frame moving with it, and a mesh falling or thrown as a whole no longer
+        sweeps each element's box across its neighbours' (a sheet falling on edge at 40 m/s:
+        every triangle's box met 25 rows of others); and they are given about the mesh's
+        centre at the start, so a mesh moving as a whole keeps its boxes within those its
+        candidate pairs were found for (KeptPairs) from sub-step to sub-step."""
         d = self.distance
-        tris, edges = self.faces.triangles, self.faces.edges
-        # the boxes sweep the motion relative to the mesh's mean motion: the pairs and their
-        # gaps are the same in any frame moving with it, and a mesh falling or thrown as a
-        # whole no longer sweeps each element's box across its neighbours' (a sheet falling
-        # on edge at 40 m/s: every triangle's box met 25 rows of others); and they are given
-        # about the mesh's centre at the start, so a mesh moving as a whole keeps its boxes
-        # within those its candidate pairs were found for (KeptPairs) from sub-step to sub-step
         drift = (x1 - x0).mean(axis=0)
         centre = x0.mean(axis=0)
         x0_moving, x1_moving = x0 - centre, x1 - (drift + centre)
         lo = np.minimum(x0_moving, x1_moving) - 0.5 * d
         hi = np.maximum(x0_moving, x1_moving) + 0.5 * d
-        if self._margin is None:
-            self._margin = self.faces.margin(x0)
-        vertex, weight, normal, depth = [], [], [], []
-        moved, = self._tests.begin((x0, x1))
-        far = _Apart(x0, x1, self._last_end, d)
-        self._last_end = x1.copy()
-        if len(tris):
-            i, j = self._search(self._faces_points, "triangle", x0, x1,
-                                *element_boxes(lo, hi, tris), lo, hi)
-            if len(i):
-                sep = self._tests.separations(
-                    "faces", i * len(x0) + j, row_any(moved[tris[i]]) | moved[j],
-                    lambda r: triangle_point(x0[tris[i[r]]], x1[tris[i[r]]], x0[j[r]], x1[j[r]]),
-                    lambda r, gap: far(gap, tris[i[r]], j[r, None]))
-                near = sep.gap < d
-                if keys is not None:
-                    keys.append((i * len(x0) + j)[near])
-                vertex.append(np.concatenate([tris[i], j[:, None]], axis=1)[near])
-                weight.append(np.concatenate([sep.weight, -np.ones((len(i), 1))], axis=1)[near])
-                normal.append(sep.normal[near])
-                depth.append(sep.gap[near])
-        if len(edges):
-            i, j = self._search(self._edges, "edge", x0, x1, *element_boxes(lo, hi, edges))
-            a, b = edges[i], edges[j]
-            if len(a):
-                sep = self._tests.separations(
-                    "edges", i * len(edges) + j,
-                    row_any(moved[a]) | row_any(moved[b]),
-                    lambda r: segment_segment(x0[a[r, 0]], x0[a[r, 1]], x0[b[r, 0]], x0[b[r, 1]],
-                                              x1[a[r, 0]], x1[a[r, 1]], x1[b[r, 0]],
-                                              x1[b[r, 1]]),
-                    lambda r, gap: far(gap, a[r], b[r]))
-                near = sep.gap < d
-                if keys is not None:
-                    keys.append(len(tris) * len(x0) + (i * len(edges) + j)[near])
-                vertex.append(np.concatenate([a, b], axis=1)[near])
-                weight.append(np.concatenate([sep.weight, -sep.other], axis=1)[near])
-                normal.append(sep.normal[near])
-                depth.append(sep.gap[near])
-        if not sum(len(x) for x in vertex):
-            return None
-        normal = np.concatenate(normal)
-        return PointPairs(np.concatenate(vertex), np.concatenate(weight), normal,
-                          np.zeros_like(normal), np.concatenate(depth), d)
+        return lo, hi
 
+    def _prepare(self, x0: np.ndarray, x1: np.ndarray) -> tuple:
+        """What both kinds of pair are found from: the boxes (:meth:`_boxes`), the points
+        moved since the last detection and the bound of :class:`_Apart`."""
+        lo, hi = self._boxes(x0, x1)
+        moved, = self._tests.begin((x0, x1))
+        far = _Apart(x0, x1, self._last_end, self.distance)
+        self._last_end = x1.copy()
+        return lo, hi, moved, far
+
+    def _point_pairs(self, x0, x1, lo, hi, moved, far) -> tuple | None:
+        """The points near triangles: (vertex (c, 4), weight (c, 4), normal (c, 3), depth (c,),
+        key (c,)), or None."""
+        tris = self.faces.triangles
+        if not len(tris):
+            return None
+        i, j = self._search(self._faces_points, "triangle", x0, x1,
+                            *element_boxes(lo, hi, tris), lo, hi)
+        if not len(i):
+            return None
+        sep = self._tests.separations(
+            "faces", i * len(x0) + j, row_any(moved[tris[i]]) | moved[j],
+            lambda r: triangle_point(x0[tris[i[r]]], x1[tris[i[r]]], x0[j[r]], x1[j[r]]),
+            lambda r, gap: far(gap, tris[i[r]], j[r, None]))
+        near = sep.gap < self.distance
+        return (np.concatenate([tris[i], j[:, None]], axis=1)[near],
+                np.concatenate([sep.weight, -np.ones((len(i), 1))], axis=1)[near],
+                sep.normal[near], sep.gap[near], (i * len(x0) + j)[near])
+
+    def _edge_pairs(self, x0, x1, lo, hi, moved, far, candidates=None) -> tuple | None:
+        """The edges near edges, as :meth:`_point_pairs` gives the points (keys after every
+        point pair's); ``candidates``: their candidate pairs as :meth:`_edge_candidates` gives
+        them (the helper's), or None to search them here."""
+        tris, edges = self.faces.triangles, self.faces.edges
+        if not len(edges):
+            return None
+        i, j = self._edge_candidates(x0, x1, lo, hi) if candidates is None else candidates
+        a, b = edges[i], edges[j]
+        if not len(a):
+            return None
+        sep = self._tests.separations(
+            "edges", i * len(edges) + j,
+            row_any(moved[a]) | row_any(moved[b]),
+            lambda r: segment_segment(x0[a[r, 0]], x0[a[r, 1]], x0[b[r, 0]], x0[b[r, 1]],
+                                      x1[a[r, 0]], x1[a[r, 1]], x1[b[r, 0]], x1[b[r, 1]]),
+            lambda r, gap: far(gap, a[r], b[r]))
+        near = sep.gap < self.distance
+        return (np.concatenate([a, b], axis=1)[near],
+                np.concatenate([sep.weight, -sep.other], axis=1)[near], sep.normal[near],
+                sep.gap[near], len(tris) * len(x0) + (i * len(edges) + j)[near])
+
+    def _edge_candidates(self, x0, x1, lo, hi) -> tuple[np.ndarray, np.ndarray]:
+        """The pairs of edges whose boxes overlap (i < j), each edge's box over its points'
+        ``lo``, ``hi`` (:meth:`_boxes`)."""
+        return self._search(self._edges, "edge", x0, x1,
+                            *element_boxes(lo, hi, self.faces.edges))
 
     def _search(self, kept: KeptPairs, what: str, x0: np.ndarray, x1: np.ndarray, lo, hi,
                 *other) -> tuple[np.ndarray, np.ndarray]:
@@ -321,6 +414,36 @@ class SelfCollision:
             f"{self.distance:g} m, so its faces swept across each other (as when a collider "
             "pushes a mesh out from deep inside it) — start the mesh outside the colliders, "
             "add substeps, or turn Self Collision off")
+
+
+def _helper_mode() -> str:
+    """"auto", "off" or "on" from ENVIRONMENT_HELPER (unset: "auto")."""
+    raw = os.environ.get(ENVIRONMENT_HELPER, "").strip()
+    if raw not in ("", "0", "1"):
+        raise PhysanimError(f"{ENVIRONMENT_HELPER} must be 0 (no helper process for "
+                            f"self-collision) or 1 (one for any mesh), got {raw!r}")
+    return {"": "auto", "0": "off", "1": "on"}[raw]
+
+
+def edge_server(setup: dict):
+    """The helper process's handler (:mod:`..helper_process`): a request ``(x0, x1, margin)``
+    is answered ``("pairs", (i, j))``, the edges' candidate pairs
+    (:meth:`SelfCollision._edge_candidates`) of a copy of the mesh's self-collision that keeps
+    its own between requests, or ``("error", message)`` where the search refuses a crowded
+    sub-step. (The search takes about as long as the point pairs' search and tests together;
+    the edges' tests are made by the bake.)"""
+    itself = SelfCollision(FaceSet(setup["triangles"], setup["edges"], setup["loose"]),
+                           setup["mass"], setup["inv_mass"], setup["distance"],
+                           setup["friction"])
+
+    def handle(request):
+        x0, x1, itself._margin = request
+        try:
+            return "pairs", itself._edge_candidates(x0, x1, *itself._boxes(x0, x1))
+        except SimulationError as exc:
+            return "error", exc.detail
+
+    return handle
 
 
 class _Apart:

@@ -135,6 +135,12 @@ class SpringMeshSolver:
         """A solver saved before spring meshes slept resumes awake, never sleeping."""
         self.__dict__.update({"_sleep": None, "_anchored": None, **saved})
 
+    def close(self) -> None:
+        """End what the solver runs beside the bake (self-collision's helper process); a later
+        step runs without it."""
+        if getattr(self, "itself", None) is not None:
+            self.itself.close()
+
     @property
     def asleep(self) -> bool:
         """Whether the mesh sleeps (:mod:`.sleep`): its next frame is skipped if nothing

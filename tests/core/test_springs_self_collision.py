@@ -452,3 +452,111 @@ def test_pairs_shown_apart_without_a_test_change_nothing(monkeypatch):
     assert len(spared) == len(every) == 30
     assert all(np.array_equal(a, b) for a, b in zip(spared, every))
     assert spared_tests < 0.9 * every_tests, (spared_tests, every_tests)  # 297,378 of 356,059
+
+
+def _heap_with_helper(monkeypatch, mode: str, frames: int = 14, kill_after: int | None = None):
+    """A 24 x 24 sheet dropped on edge (1,657 edges) with PHYSANIM_SELF_COLLISION_PROCESS set
+    to ``mode``: each frame's positions, and the detections the helper answered. The helper
+    (when there is one) is waited for after the first frame, so that it answers the rest; with
+    ``kill_after``, its process is killed after that frame."""
+    from physanim.core.helper_process import Helper
+
+    monkeypatch.setenv("PHYSANIM_SELF_COLLISION_PROCESS", mode)
+    answered = []
+    answer = Helper.answer
+    monkeypatch.setattr(Helper, "answer", lambda self: answered.append(1) or answer(self))
+    model, _ = _sheet_on_edge(24, self_collision=True)
+    solver = SpringMeshSolver(model, "IMPLICIT", 2, frame_dt=DT, frame=1)
+    state, out = model.state(), []
+    try:
+        for frame in range(1, frames + 1):
+            solver.advance(state, SpringFrameInputs(frame, frame * DT, DT, gravity=(0, 0, -9.81),
+                                                    colliders=[GROUND_DEFAULT]))
+            out.append(state.x.copy())
+            helper = solver.itself._helper
+            if frame == 1 and helper is not None:
+                helper.wait_ready()
+            if frame == kill_after:
+                helper._proc.kill()
+                helper._proc.wait()
+    finally:
+        solver.close()
+    return out, len(answered), solver
+
+
+def test_the_helper_process_finds_the_same_pairs(monkeypatch):
+    """A mesh's edge pairs searched in a helper process (on another core) while the point
+    pairs are found in the bake's: the heap of a sheet dropped on edge is the same to the bit
+    as with every pair found in one process, and the helper answered every detection after
+    it started. Closing the solver ends the process."""
+    alone, none_answered, _ = _heap_with_helper(monkeypatch, "0")
+    helped, answered, solver = _heap_with_helper(monkeypatch, "1")
+    assert none_answered == 0 and answered > 50
+    assert all(np.array_equal(a, b) for a, b in zip(alone, helped))
+    assert solver.itself._helper is None  # (closed)
+
+
+def test_a_helper_process_that_dies_is_replaced_by_the_bake_itself(monkeypatch):
+    """The helper killed mid-bake: the next detection finds every pair in the bake's process,
+    from its own kept candidates and tests (exact however stale), and the heap is the same to
+    the bit; no helper is started again."""
+    alone, _, _ = _heap_with_helper(monkeypatch, "0")
+    helped, answered, solver = _heap_with_helper(monkeypatch, "1", kill_after=6)
+    assert 5 < answered < 20  # (about two a sub-step from frame 2 to 6)
+    assert all(np.array_equal(a, b) for a, b in zip(alone, helped))
+
+
+def test_a_crowded_search_in_the_helper_is_refused_as_in_the_bake(monkeypatch):
+    """A wire mesh (edges only, so every pair is searched by the helper) crushed towards a
+    point in one sub-step: the helper's search refuses it and the bake raises the same
+    SimulationError as its own search gives."""
+    from physanim.core.contact.features import FaceSet
+    from physanim.core.springs.self_collision import SelfCollision
+
+    def crushed(mode):
+        monkeypatch.setenv("PHYSANIM_SELF_COLLISION_PROCESS", mode)
+        x0, edges, *_ = grid(40, 40, 1.0)
+        n = len(x0)
+        itself = SelfCollision(FaceSet.of(np.zeros((0, 3)), edges), np.ones(n), np.ones(n),
+                               0.01, 0.3)
+        if mode == "1":
+            assert itself._helper_ready() is None  # (starting)
+            itself._helper.wait_ready()
+        x1 = x0.mean(axis=0) + 1e-3 * (x0 - x0.mean(axis=0))
+        try:
+            with pytest.raises(SimulationError) as caught:
+                itself.keep_apart(x0, x1.copy(), np.zeros_like(x1), 0.1)
+            return str(caught.value), itself
+        finally:
+            itself.close()
+
+    alone, _ = crushed("0")
+    helped, itself = crushed("1")
+    assert "candidate pairs for its 3,120 edges in one sub-step" in alone
+    assert helped == alone
+
+
+def test_a_checkpoint_holds_no_helper_process(monkeypatch):
+    """Pickled (a bake's checkpoint), a self-collision leaves its helper out; loaded, it starts
+    one of its own at its next detection. A bad PHYSANIM_SELF_COLLISION_PROCESS is refused,
+    naming it."""
+    import pickle
+
+    from physanim.core.errors import PhysanimError
+
+    monkeypatch.setenv("PHYSANIM_SELF_COLLISION_PROCESS", "1")
+    model, x0, x1, _ = _two_layers(0.05, 0.004)
+    solver = SpringMeshSolver(model, "IMPLICIT", 1, frame_dt=DT, frame=1)
+    try:
+        solver.itself._helper_ready()
+        assert solver.itself._helper is not None
+        copy = pickle.loads(pickle.dumps(solver.itself))
+        assert copy._helper is None and not copy._helper_tried
+        copy._helper_ready()
+        assert copy._helper is not None and copy._helper is not solver.itself._helper
+        copy.close()
+    finally:
+        solver.close()
+    monkeypatch.setenv("PHYSANIM_SELF_COLLISION_PROCESS", "yes")
+    with pytest.raises(PhysanimError, match="PHYSANIM_SELF_COLLISION_PROCESS must be 0"):
+        SpringMeshSolver(model, "IMPLICIT", 1, frame_dt=DT, frame=1)

@@ -1,0 +1,205 @@
+"""A child Python process that takes part of a sub-step's work to another core.
+
+A bake runs its simulation on one thread; numpy holds Python's lock between its calls, and a
+spring mesh's self-collision detection is hundreds of calls on a few thousand elements each,
+too short for two threads to overlap (measured: 8 % of a detection). A child process has a
+lock of its own: the bake hands it a request (pickled, through a pipe), does its own share of
+the work meanwhile, and reads the child's answer when it needs it.
+
+The child is the interpreter Blender runs Python with (``sys.executable``) running this file;
+it loads this ``core`` package by path under a name of its own (``physanim_core``: core never
+imports Blender or anything outside itself), calls ``module:function(setup)`` for the
+handler of its requests, answers ``ready``, then answers each request with
+``handler(request)``. It ends when the bake closes its input, or the bake's process ends.
+
+Messages are pickles between this package's own processes, each framed by its length.
+"""
+from __future__ import annotations
+
+import contextlib
+import os
+import pickle
+import queue
+import struct
+import subprocess
+import sys
+import threading
+import weakref
+from pathlib import Path
+
+#: Seconds the child may take to start and answer ``ready`` before it is given up.
+START_TIMEOUT = 30.0
+_LENGTH = struct.Struct("<Q")
+_CORE = Path(__file__).resolve().parent
+_PACKAGE = "physanim_core"
+
+
+class HelperError(RuntimeError):
+    """The child cannot answer: it did not start, exited, or failed (its reason)."""
+
+
+def can_start() -> bool:
+    """Whether ``sys.executable`` is a Python interpreter (a Blender build that names its own
+    binary there would open Blender instead)."""
+    name = os.path.basename(sys.executable or "").lower()
+    return name.startswith("python") and os.path.isfile(sys.executable)
+
+
+def cores() -> int:
+    """The cores this process may run on (its CPU affinity, as a farm's job slot sets it)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # (not on Linux)
+        return os.cpu_count() or 1
+
+
+def _write(stream, message) -> None:
+    data = pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL)
+    stream.write(_LENGTH.pack(len(data)))
+    stream.write(data)
+    stream.flush()
+
+
+def _read(stream):
+    """The next message, or raises EOFError when the stream ended."""
+    head = stream.read(_LENGTH.size)
+    if len(head) < _LENGTH.size:
+        raise EOFError
+    size, = _LENGTH.unpack(head)
+    data = stream.read(size)
+    if len(data) < size:
+        raise EOFError
+    return pickle.loads(data)
+
+
+class Helper:
+    """The child, seen from the bake. It starts at once and gets ready (about 0.3 s: numpy and
+    the handler's modules) while the bake goes on: :attr:`ready` says whether it is, without
+    waiting. :meth:`ask` sends a request, :meth:`answer` waits for its answer (requests are
+    numbered: an answer to a request whose reader gave up, as when a bake is cancelled between
+    the two, is skipped). Any failure — the child would not start, exited, broke its pipe —
+    raises :class:`HelperError`, after which the helper is closed and the caller does the work
+    itself. Ended by :meth:`close`, or when garbage-collected.
+
+    Args:
+        task: ``"module:function"``, a module of this package (dotted, from ``core``) and the
+            function the child calls with ``setup`` for the handler of its requests.
+        setup: what the handler is made from (picklable: numpy arrays, numbers, strings).
+    """
+
+    def __init__(self, task: str, setup):
+        self._answers: queue.Queue = queue.Queue()
+        self._ready = False
+        self._asked = self._answered = 0
+        self._proc = subprocess.Popen(
+            [sys.executable, "-s", str(Path(__file__).resolve()), str(_CORE), task],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
+        self._end = weakref.finalize(self, _end, self._proc)
+        threading.Thread(target=self._reader, name="physanim-helper", daemon=True).start()
+        try:
+            _write(self._proc.stdin, setup)
+        except OSError as exc:
+            self.close()
+            raise HelperError(f"the helper process did not start: {exc}") from exc
+
+    def _reader(self) -> None:
+        stream = self._proc.stdout
+        try:
+            while True:
+                self._answers.put(_read(stream))
+        except (EOFError, OSError, pickle.UnpicklingError):
+            self._answers.put(None)  # the child exited
+
+    @property
+    def ready(self) -> bool:
+        """Whether the child has answered ``ready`` (never waits). Raises HelperError when it
+        ended instead."""
+        if not self._ready:
+            try:
+                reply = self._answers.get_nowait()
+            except queue.Empty:
+                return False
+            self._check_ready(reply)
+        return True
+
+    def wait_ready(self, timeout: float = START_TIMEOUT) -> None:
+        """Wait until the child is ready (for tests and benchmarks); HelperError if it ends."""
+        if not self._ready:
+            try:
+                reply = self._answers.get(timeout=timeout)
+            except queue.Empty:
+                reply = None
+            self._check_ready(reply)
+
+    def _check_ready(self, reply) -> None:
+        if reply != "ready":
+            self.close()
+            raise HelperError(f"the helper process did not start: {reply or 'it exited'}")
+        self._ready = True
+
+    def ask(self, request) -> None:
+        """Send ``request`` (the child must be :attr:`ready`)."""
+        self._asked += 1
+        try:
+            _write(self._proc.stdin, (self._asked, request))
+        except (OSError, ValueError) as exc:  # (ValueError: a closed pipe)
+            self.close()
+            raise HelperError(f"the helper process exited: {exc}") from exc
+
+    def answer(self):
+        """The child's answer to the last request :meth:`ask` sent."""
+        while True:
+            reply = self._answers.get()
+            if reply is None:
+                self.close()
+                raise HelperError("the helper process exited")
+            number, value = reply
+            if number == self._asked:
+                return value
+
+    def close(self) -> None:
+        """End the child (its input closed; killed if it does not end within a few seconds)."""
+        self._end()
+
+
+def _end(proc: subprocess.Popen) -> None:
+    with contextlib.suppress(OSError, ValueError):
+        proc.stdin.close()
+    try:
+        proc.wait(timeout=5)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+    with contextlib.suppress(OSError, ValueError):
+        proc.stdout.close()
+
+
+def _serve(core: str, task: str) -> int:
+    """The child: the setup, then ``ready``, then an answer per request until the input ends.
+    An exception in the handler ends the child (the bake does that work itself)."""
+    import importlib
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        _PACKAGE, Path(core) / "__init__.py", submodule_search_locations=[core])
+    package = importlib.util.module_from_spec(spec)
+    sys.modules[_PACKAGE] = package
+    spec.loader.exec_module(package)
+    module, function = task.split(":")
+    stdin, stdout = sys.stdin.buffer, sys.stdout.buffer
+    try:
+        setup = _read(stdin)
+        handler = getattr(importlib.import_module(f"{_PACKAGE}.{module}"), function)(setup)
+    except EOFError:
+        return 0
+    _write(stdout, "ready")
+    while True:
+        try:
+            number, request = _read(stdin)
+        except EOFError:
+            return 0
+        _write(stdout, (number, handler(request)))
+
+
+if __name__ == "__main__":
+    sys.exit(_serve(sys.argv[1], sys.argv[2]))
