@@ -19,7 +19,6 @@ from __future__ import annotations
 import contextlib
 import os
 import pickle
-import queue
 import struct
 import subprocess
 import sys
@@ -75,7 +74,7 @@ def _read(stream):
 class Helper:
     """The child, seen from the bake. It starts at once and gets ready (about 0.3 s: numpy and
     the handler's modules) while the bake goes on: :attr:`ready` says whether it is, without
-    waiting. :meth:`ask` sends a request, :meth:`answer` waits for its answer (requests are
+    waiting. :meth:`ask` sends a request, :meth:`answer` reads its answer (requests are
     numbered: an answer to a request whose reader gave up, as when a bake is cancelled between
     the two, is skipped). Any failure — the child would not start, exited, broke its pipe —
     raises :class:`HelperError`, after which the helper is closed and the caller does the work
@@ -88,53 +87,51 @@ class Helper:
     """
 
     def __init__(self, task: str, setup):
-        self._answers: queue.Queue = queue.Queue()
+        self._started = threading.Event()  # the child's first answer came (or its end)
+        self._first = None
         self._ready = False
-        self._asked = self._answered = 0
+        self._asked = 0
         self._proc = subprocess.Popen(
             [sys.executable, "-s", str(Path(__file__).resolve()), str(_CORE), task],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
         self._end = weakref.finalize(self, _end, self._proc)
-        threading.Thread(target=self._reader, name="physanim-helper", daemon=True).start()
+        threading.Thread(target=self._wait_start, name="physanim-helper", daemon=True).start()
         try:
             _write(self._proc.stdin, setup)
         except OSError as exc:
             self.close()
             raise HelperError(f"the helper process did not start: {exc}") from exc
 
-    def _reader(self) -> None:
-        stream = self._proc.stdout
+    def _wait_start(self) -> None:
+        """(A thread) the child's first answer, ``ready``; later answers are read by
+        :meth:`answer` itself (a thread handing them over waited for Python's lock while
+        the bake computed: a millisecond a request)."""
         try:
-            while True:
-                self._answers.put(_read(stream))
-        except (EOFError, OSError, pickle.UnpicklingError):
-            self._answers.put(None)  # the child exited
+            self._first = _read(self._proc.stdout)
+        except (EOFError, OSError, ValueError, pickle.UnpicklingError):
+            self._first = None  # the child exited
+        self._started.set()
 
     @property
     def ready(self) -> bool:
         """Whether the child has answered ``ready`` (never waits). Raises HelperError when it
         ended instead."""
         if not self._ready:
-            try:
-                reply = self._answers.get_nowait()
-            except queue.Empty:
+            if not self._started.is_set():
                 return False
-            self._check_ready(reply)
+            self._check_ready()
         return True
 
     def wait_ready(self, timeout: float = START_TIMEOUT) -> None:
         """Wait until the child is ready (for tests and benchmarks); HelperError if it ends."""
         if not self._ready:
-            try:
-                reply = self._answers.get(timeout=timeout)
-            except queue.Empty:
-                reply = None
-            self._check_ready(reply)
+            self._started.wait(timeout)
+            self._check_ready()
 
-    def _check_ready(self, reply) -> None:
-        if reply != "ready":
+    def _check_ready(self) -> None:
+        if self._first != "ready":
             self.close()
-            raise HelperError(f"the helper process did not start: {reply or 'it exited'}")
+            raise HelperError(f"the helper process did not start: {self._first or 'it exited'}")
         self._ready = True
 
     def ask(self, request) -> None:
@@ -149,11 +146,11 @@ class Helper:
     def answer(self):
         """The child's answer to the last request :meth:`ask` sent."""
         while True:
-            reply = self._answers.get()
-            if reply is None:
+            try:
+                number, value = _read(self._proc.stdout)
+            except (EOFError, OSError, ValueError, pickle.UnpicklingError) as exc:
                 self.close()
-                raise HelperError("the helper process exited")
-            number, value = reply
+                raise HelperError("the helper process exited") from exc
             if number == self._asked:
                 return value
 

@@ -58,8 +58,8 @@ CARRY_KEEP = 0.9  # of a pair's carried force kept into the next sub-step (see C
 CROWD_LIMIT = 100
 SEARCH_LIMIT = 10  # x CROWD_LIMIT: the candidate pairs per element a search may make before
 # testing their boxes (a refused search fails the same way, before filling memory)
-# A mesh with this many edges finds its edge pairs in a helper process while it finds its
-# point pairs (:mod:`..helper_process`), where the bake may run on two cores or more: a
+# A mesh with this many edges finds its point pairs in a helper process while it finds its
+# edge pairs (:mod:`..helper_process`), where the bake may run on two cores or more: a
 # 32 x 32 cloth's detection is about a third shorter. Smaller meshes' detections are too
 # short to pay for the round trip. PHYSANIM_SELF_COLLISION_PROCESS=0 never starts one, =1
 # starts one for any mesh (where a process can start).
@@ -153,7 +153,7 @@ class SelfCollision:
             self._helper_tried = True
             faces = self.faces
             try:
-                self._helper = Helper("springs.self_collision:edge_server", {
+                self._helper = Helper("springs.self_collision:point_server", {
                     "triangles": faces.triangles, "edges": faces.edges, "loose": faces.loose,
                     "mass": self.mass, "inv_mass": self.inv_mass, "distance": self.distance,
                     "friction": self.friction})
@@ -282,9 +282,10 @@ class SelfCollision:
     def _detect(self, x0: np.ndarray, x1: np.ndarray, keys: list | None = None
                 ) -> PointPairs | None:
         """Pairs nearer than the distance at the end, or crossed; ``keys``: each pair's key
-        appended (triangle and point, or the two edges). The edges' candidate pairs are
-        searched by the helper process where there is one (:meth:`_helper_ready`) while the
-        point pairs are found here: the same pairs either way."""
+        appended (triangle and point, or the two edges). The point pairs are found by the
+        helper process where there is one (:meth:`_helper_ready`) while the edge pairs are
+        found here: the same pairs either way, and the same error where a search refuses a
+        crowded sub-step (the points' first)."""
         if self._margin is None:
             self._margin = self.faces.margin(x0)
         helper = self._helper_ready()
@@ -294,18 +295,24 @@ class SelfCollision:
             except HelperError:
                 helper = self._helper = None
         frame = self._prepare(x0, x1)
-        parts = [self._point_pairs(x0, x1, *frame)]
-        candidates = None
-        if helper is not None:
+        if helper is None:
+            parts = [self._point_pairs(x0, x1, *frame), self._edge_pairs(x0, x1, *frame)]
+        else:
+            failure = None
+            try:
+                edges = self._edge_pairs(x0, x1, *frame)
+            except SimulationError as exc:
+                edges, failure = None, exc
             try:
                 answer = helper.answer()
             except HelperError:
                 self._helper = None
-            else:
-                if answer[0] == "error":
-                    raise SimulationError(answer[1])
-                candidates = answer[1]
-        parts.append(self._edge_pairs(x0, x1, *frame, candidates))
+                answer = "pairs", self._point_pairs(x0, x1, *frame)
+            if answer[0] == "error":
+                raise SimulationError(answer[1])
+            if failure is not None:
+                raise failure
+            parts = [answer[1], edges]
         parts = [p for p in parts if p is not None]
         if not parts:
             return None
@@ -361,14 +368,13 @@ class SelfCollision:
                 np.concatenate([sep.weight, -np.ones((len(i), 1))], axis=1)[near],
                 sep.normal[near], sep.gap[near], (i * len(x0) + j)[near])
 
-    def _edge_pairs(self, x0, x1, lo, hi, moved, far, candidates=None) -> tuple | None:
+    def _edge_pairs(self, x0, x1, lo, hi, moved, far) -> tuple | None:
         """The edges near edges, as :meth:`_point_pairs` gives the points (keys after every
-        point pair's); ``candidates``: their candidate pairs as :meth:`_edge_candidates` gives
-        them (the helper's), or None to search them here."""
+        point pair's)."""
         tris, edges = self.faces.triangles, self.faces.edges
         if not len(edges):
             return None
-        i, j = self._edge_candidates(x0, x1, lo, hi) if candidates is None else candidates
+        i, j = self._search(self._edges, "edge", x0, x1, *element_boxes(lo, hi, edges))
         a, b = edges[i], edges[j]
         if not len(a):
             return None
@@ -382,12 +388,6 @@ class SelfCollision:
         return (np.concatenate([a, b], axis=1)[near],
                 np.concatenate([sep.weight, -sep.other], axis=1)[near], sep.normal[near],
                 sep.gap[near], len(tris) * len(x0) + (i * len(edges) + j)[near])
-
-    def _edge_candidates(self, x0, x1, lo, hi) -> tuple[np.ndarray, np.ndarray]:
-        """The pairs of edges whose boxes overlap (i < j), each edge's box over its points'
-        ``lo``, ``hi`` (:meth:`_boxes`)."""
-        return self._search(self._edges, "edge", x0, x1,
-                            *element_boxes(lo, hi, self.faces.edges))
 
     def _search(self, kept: KeptPairs, what: str, x0: np.ndarray, x1: np.ndarray, lo, hi,
                 *other) -> tuple[np.ndarray, np.ndarray]:
@@ -425,13 +425,13 @@ def _helper_mode() -> str:
     return {"": "auto", "0": "off", "1": "on"}[raw]
 
 
-def edge_server(setup: dict):
+def point_server(setup: dict):
     """The helper process's handler (:mod:`..helper_process`): a request ``(x0, x1, margin)``
-    is answered ``("pairs", (i, j))``, the edges' candidate pairs
-    (:meth:`SelfCollision._edge_candidates`) of a copy of the mesh's self-collision that keeps
-    its own between requests, or ``("error", message)`` where the search refuses a crowded
-    sub-step. (The search takes about as long as the point pairs' search and tests together;
-    the edges' tests are made by the bake.)"""
+    is answered ``("pairs", SelfCollision._point_pairs(...))`` of a copy of the mesh's
+    self-collision that keeps its own candidate pairs and tests between requests, or
+    ``("error", message)`` where its search refuses a crowded sub-step. (The point pairs'
+    search and tests take about two thirds as long as the edge pairs', which the bake finds
+    meanwhile.)"""
     itself = SelfCollision(FaceSet(setup["triangles"], setup["edges"], setup["loose"]),
                            setup["mass"], setup["inv_mass"], setup["distance"],
                            setup["friction"])
@@ -439,7 +439,7 @@ def edge_server(setup: dict):
     def handle(request):
         x0, x1, itself._margin = request
         try:
-            return "pairs", itself._edge_candidates(x0, x1, *itself._boxes(x0, x1))
+            return "pairs", itself._point_pairs(x0, x1, *itself._prepare(x0, x1))
         except SimulationError as exc:
             return "error", exc.detail
 

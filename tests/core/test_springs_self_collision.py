@@ -485,8 +485,8 @@ def _heap_with_helper(monkeypatch, mode: str, frames: int = 14, kill_after: int 
 
 
 def test_the_helper_process_finds_the_same_pairs(monkeypatch):
-    """A mesh's edge pairs searched in a helper process (on another core) while the point
-    pairs are found in the bake's: the heap of a sheet dropped on edge is the same to the bit
+    """A mesh's point pairs found in a helper process (on another core) while the edge pairs
+    are found in the bake's: the heap of a sheet dropped on edge is the same to the bit
     as with every pair found in one process, and the helper answered every detection after
     it started. Closing the solver ends the process."""
     alone, none_answered, _ = _heap_with_helper(monkeypatch, "0")
@@ -507,33 +507,29 @@ def test_a_helper_process_that_dies_is_replaced_by_the_bake_itself(monkeypatch):
 
 
 def test_a_crowded_search_in_the_helper_is_refused_as_in_the_bake(monkeypatch):
-    """A wire mesh (edges only, so every pair is searched by the helper) crushed towards a
-    point in one sub-step: the helper's search refuses it and the bake raises the same
-    SimulationError as its own search gives."""
-    from physanim.core.contact.features import FaceSet
-    from physanim.core.springs.self_collision import SelfCollision
-
+    """A sheet crushed towards a point in one sub-step: the helper's search of the point pairs
+    refuses it, and so does the bake's own search of the edge pairs meanwhile; the bake raises
+    the helper's SimulationError, the one a bake without a helper raises (its points' search
+    comes first)."""
     def crushed(mode):
         monkeypatch.setenv("PHYSANIM_SELF_COLLISION_PROCESS", mode)
-        x0, edges, *_ = grid(40, 40, 1.0)
-        n = len(x0)
-        itself = SelfCollision(FaceSet.of(np.zeros((0, 3)), edges), np.ones(n), np.ones(n),
-                               0.01, 0.3)
+        model, _ = _sheet_on_edge(40, self_collision=True)
+        itself = SpringMeshSolver(model, "IMPLICIT", 1, frame_dt=DT, frame=1).itself
         if mode == "1":
             assert itself._helper_ready() is None  # (starting)
             itself._helper.wait_ready()
+        x0 = model.state().x
         x1 = x0.mean(axis=0) + 1e-3 * (x0 - x0.mean(axis=0))
         try:
             with pytest.raises(SimulationError) as caught:
                 itself.keep_apart(x0, x1.copy(), np.zeros_like(x1), 0.1)
-            return str(caught.value), itself
+            return str(caught.value)
         finally:
             itself.close()
 
-    alone, _ = crushed("0")
-    helped, itself = crushed("1")
-    assert "candidate pairs for its 3,120 edges in one sub-step" in alone
-    assert helped == alone
+    alone = crushed("0")
+    assert "candidate pairs for its 3,042 triangles in one sub-step" in alone
+    assert crushed("1") == alone
 
 
 def test_a_checkpoint_holds_no_helper_process(monkeypatch):
