@@ -28,6 +28,11 @@ from pathlib import Path
 
 #: Seconds the child may take to start and answer ``ready`` before it is given up.
 START_TIMEOUT = 30.0
+#: Helpers alive at once at most (:func:`room`): each holds numpy and its task's data (about
+#: 40 MB), and a bake steps its meshes one after another, so more than the free cores gain
+#: nothing.
+MAX_HELPERS = 4
+_LIVE: weakref.WeakSet = weakref.WeakSet()
 _LENGTH = struct.Struct("<Q")
 _CORE = Path(__file__).resolve().parent
 _PACKAGE = "physanim_core"
@@ -50,6 +55,12 @@ def cores() -> int:
         return len(os.sched_getaffinity(0))
     except AttributeError:  # (not on Linux)
         return os.cpu_count() or 1
+
+
+def room() -> bool:
+    """Whether another helper may start: fewer alive than the cores this process may run on
+    less one (the bake's own), and than MAX_HELPERS."""
+    return sum(h.alive for h in list(_LIVE)) < min(MAX_HELPERS, cores() - 1)
 
 
 def _write(stream, message) -> None:
@@ -95,6 +106,7 @@ class Helper:
             [sys.executable, "-s", str(Path(__file__).resolve()), str(_CORE), task],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
         self._end = weakref.finalize(self, _end, self._proc)
+        _LIVE.add(self)
         threading.Thread(target=self._wait_start, name="physanim-helper", daemon=True).start()
         try:
             _write(self._proc.stdin, setup)
@@ -154,6 +166,11 @@ class Helper:
             if number == self._asked:
                 return value
 
+    @property
+    def alive(self) -> bool:
+        """Not closed (the child may have ended on its own: the next answer says so)."""
+        return self._end.alive
+
     def close(self) -> None:
         """End the child (its input closed; killed if it does not end within a few seconds)."""
         self._end()
@@ -184,6 +201,7 @@ def _serve(core: str, task: str) -> int:
     spec.loader.exec_module(package)
     module, function = task.split(":")
     stdin, stdout = sys.stdin.buffer, sys.stdout.buffer
+    sys.stdout = sys.stderr  # (anything printed must not come between the answers)
     try:
         setup = _read(stdin)
         handler = getattr(importlib.import_module(f"{_PACKAGE}.{module}"), function)(setup)

@@ -44,7 +44,7 @@ from ..contact.features import FaceSet
 from ..contact.pair_solve import PointPairs, respond, separate, shares, within_cone
 from ..errors import PhysanimError, SimulationError
 from ..forces.springs import scatter_add
-from ..helper_process import Helper, HelperError, can_start, cores
+from ..helper_process import Helper, HelperError, can_start, room
 from ..transforms import norm_rows, row_any, row_max
 
 ROUNDS = 8  # detections per sub-step
@@ -147,7 +147,7 @@ class SelfCollision:
         if self._helper is None:
             edges = len(self.faces.edges)
             if self._helper_tried or self._helper_mode == "off" or not edges or (
-                    self._helper_mode == "auto" and (edges < HELPER_EDGES or cores() < 2)) \
+                    self._helper_mode == "auto" and (edges < HELPER_EDGES or not room())) \
                     or not can_start():
                 return None
             self._helper_tried = True

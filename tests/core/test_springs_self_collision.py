@@ -556,3 +556,29 @@ def test_a_checkpoint_holds_no_helper_process(monkeypatch):
     monkeypatch.setenv("PHYSANIM_SELF_COLLISION_PROCESS", "yes")
     with pytest.raises(PhysanimError, match="PHYSANIM_SELF_COLLISION_PROCESS must be 0"):
         SpringMeshSolver(model, "IMPLICIT", 1, frame_dt=DT, frame=1)
+
+
+def test_helper_processes_are_no_more_than_the_free_cores(monkeypatch):
+    """A bake steps its meshes one after another: two self-colliding meshes on two cores get
+    one helper between them (the first to detect), on four cores one each; a closed helper
+    makes room for another."""
+    from physanim.core import helper_process
+
+    monkeypatch.delenv("PHYSANIM_SELF_COLLISION_PROCESS", raising=False)
+    model, _ = _sheet_on_edge(24, self_collision=True)
+    for cores, started in ((2, [True, False]), (4, [True, True])):
+        monkeypatch.setattr(helper_process, "cores", lambda cores=cores: cores)
+        solvers = [SpringMeshSolver(model, "IMPLICIT", 1, frame_dt=DT, frame=1)
+                   for _ in started]
+        try:
+            for solver in solvers:
+                solver.itself._helper_ready()
+            assert [s.itself._helper is not None for s in solvers] == started, cores
+        finally:
+            for solver in solvers:
+                solver.close()
+    monkeypatch.setattr(helper_process, "cores", lambda: 2)
+    again = SpringMeshSolver(model, "IMPLICIT", 1, frame_dt=DT, frame=1)
+    again.itself._helper_ready()
+    assert again.itself._helper is not None
+    again.close()
