@@ -534,3 +534,43 @@ def test_cli_bakes_a_spring_mesh_and_saves(physanim_ext, tmp_path):
     assert samples.shape == (FRAME_END - FRAME_START + 1, 25, 3)
     _assert_playback(ob, samples, [FRAME_START, FRAME_END, 6])
     assert bpy.data.objects["Spray"].physanim.emitter.result is None
+
+
+# ------------------------------------------------------------- self-collision's helper process
+
+def test_a_self_colliding_bake_ends_its_helper_process_and_bakes_the_same(physanim_ext,
+                                                                          tmp_path, monkeypatch):
+    """A 24 x 24 sheet standing on edge with Self Collision, baked with its helper process
+    (PHYSANIM_SELF_COLLISION_PROCESS=1: the point pairs found in the helper) and without
+    (=0): the two caches are the same bytes, and the bake ended the helper it started.
+    (A mesh of 1,000 edges or more gets one by itself where the bake may use two cores.)"""
+    helper_process = _core(physanim_ext, "helper_process")
+    started = []
+    init = helper_process.Helper.__init__
+
+    def recording(self, *args, **kwargs):
+        init(self, *args, **kwargs)
+        started.append(self)
+
+    monkeypatch.setattr(helper_process.Helper, "__init__", recording)
+    answered = []
+    answer = helper_process.Helper.answer
+    monkeypatch.setattr(helper_process.Helper, "answer",
+                        lambda self: answered.append(1) or answer(self))
+    scene = _scene(1, 24)
+    ob = _grid("Sheet", segments=23, pin=False, self_collision=True)
+    ob.rotation_euler = (1.52, 0.0, 0.0)  # (standing on edge, leaning 3 degrees)
+    ob.location.z = 0.6
+    ground = bpy.data.objects.new("Ground", None)
+    scene.collection.objects.link(ground)
+    ground.physanim.collider.enabled = True
+    _save(tmp_path)
+    caches = {}
+    for mode in ("1", "0"):
+        monkeypatch.setenv("PHYSANIM_SELF_COLLISION_PROCESS", mode)
+        assert bpy.ops.physanim.bake() == {'FINISHED'}
+        caches[mode] = _pc2_path(ob).read_bytes()
+    assert len(started) == 1
+    assert not started[0].alive and started[0]._proc.poll() is not None
+    assert caches["1"] == caches["0"]
+    assert answered  # (it answered the detections once it was ready)
