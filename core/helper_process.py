@@ -57,6 +57,16 @@ def cores() -> int:
         return os.cpu_count() or 1
 
 
+def _environment() -> dict[str, str]:
+    """The child's environment: this one, with its BLAS on one thread (unless set already):
+    the child runs beside the bake on the core the bake leaves, and a BLAS thread pool would
+    take the bake's core too (see ``addon/blas.py``)."""
+    env = dict(os.environ)
+    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        env.setdefault(name, "1")
+    return env
+
+
 def room() -> bool:
     """Whether another helper may start: fewer alive than the cores this process may run on
     less one (the bake's own), and than MAX_HELPERS."""
@@ -104,7 +114,8 @@ class Helper:
         self._asked = 0
         self._proc = subprocess.Popen(
             [sys.executable, "-s", str(Path(__file__).resolve()), str(_CORE), task],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+            env=_environment(), creationflags=getattr(subprocess, "CREATE_NO_WINDOW", 0))
         self._end = weakref.finalize(self, _end, self._proc)
         _LIVE.add(self)
         threading.Thread(target=self._wait_start, name="physanim-helper", daemon=True).start()

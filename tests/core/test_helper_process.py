@@ -1,0 +1,25 @@
+"""The helper process's own rules (its use by self-collision: test_springs_self_collision.py)."""
+from __future__ import annotations
+
+from physanim.core import helper_process
+
+
+def test_the_helper_runs_its_blas_on_one_thread_unless_told_otherwise(monkeypatch):
+    """A BLAS thread pool in the child would take the bake's core too."""
+    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        monkeypatch.delenv(name, raising=False)
+    env = helper_process._environment()
+    assert env["OPENBLAS_NUM_THREADS"] == env["OMP_NUM_THREADS"] == env["MKL_NUM_THREADS"] == "1"
+    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "3")
+    assert helper_process._environment()["OPENBLAS_NUM_THREADS"] == "3"
+
+
+def test_a_helper_that_cannot_start_its_task_says_so():
+    """A task the child cannot import: it ends before answering ``ready``, and the bake's side
+    learns it as a HelperError (never a hang), the process ended."""
+    import pytest
+
+    helper = helper_process.Helper("no_such_module:serve", {})
+    with pytest.raises(helper_process.HelperError, match="did not start"):
+        helper.wait_ready(timeout=60)
+    assert not helper.alive and helper._proc.poll() is not None
