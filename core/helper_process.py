@@ -95,9 +95,9 @@ def _read(stream):
 class Helper:
     """The child, seen from the bake. It starts at once and gets ready (about 0.3 s: numpy and
     the handler's modules) while the bake goes on: :attr:`ready` says whether it is, without
-    waiting. :meth:`ask` sends a request, :meth:`answer` reads its answer (requests are
-    numbered: an answer to a request whose reader gave up, as when a bake is cancelled between
-    the two, is skipped). Any failure — the child would not start, exited, broke its pipe —
+    waiting. :meth:`ask` sends a request, :meth:`answer` reads its answer (an answer to a
+    request whose reader gave up, as when a search refused a sub-step between the two, is read
+    and dropped by the next :meth:`ask`). Any failure — the child would not start, exited, broke its pipe —
     raises :class:`HelperError`, after which the helper is closed and the caller does the work
     itself. Ended by :meth:`close`, or when garbage-collected.
 
@@ -111,7 +111,7 @@ class Helper:
         self._started = threading.Event()  # the child's first answer came (or its end)
         self._first = None
         self._ready = False
-        self._asked = 0
+        self._asked = self._answered = 0  # requests sent, and the last one answered
         self._proc = subprocess.Popen(
             [sys.executable, "-s", str(Path(__file__).resolve()), str(_CORE), task],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
@@ -158,7 +158,12 @@ class Helper:
         self._ready = True
 
     def ask(self, request) -> None:
-        """Send ``request`` (the child must be :attr:`ready`)."""
+        """Send ``request`` (the child must be :attr:`ready`). An answer left unread (its
+        reader raised before reading it) is read first: a child writing a large answer into a
+        full pipe would otherwise wait for the bake, while the bake writing a large request
+        into the child's full pipe waited for the child."""
+        if self._answered < self._asked:
+            self.answer()
         self._asked += 1
         try:
             _write(self._proc.stdin, (self._asked, request))
@@ -174,6 +179,7 @@ class Helper:
             except (EOFError, OSError, ValueError, pickle.UnpicklingError) as exc:
                 self.close()
                 raise HelperError("the helper process exited") from exc
+            self._answered = number
             if number == self._asked:
                 return value
 

@@ -582,3 +582,39 @@ def test_helper_processes_are_no_more_than_the_free_cores(monkeypatch):
     again.itself._helper_ready()
     assert again.itself._helper is not None
     again.close()
+
+
+def test_an_answer_left_unread_never_blocks_the_next_request(monkeypatch):
+    """Two 60 x 60 layers 4 mm apart: the helper's answer (thousands of near pairs) and the
+    request (7,200 points twice) are each larger than a pipe holds. A request whose answer was
+    never read (its reader raised in between) is followed by another: the answer left unread
+    is read first, so neither side waits for the other for good, and the second answer is the
+    bake's own point pairs."""
+    import threading
+
+    monkeypatch.setenv("PHYSANIM_SELF_COLLISION_PROCESS", "1")
+    model, x0, x1, _ = _two_layers(0.05, 0.004, n=60)
+    solver = SpringMeshSolver(model, "IMPLICIT", 1, frame_dt=DT, frame=1)
+    itself = solver.itself
+    itself._margin = itself.faces.margin(x0)
+    itself._helper_ready()
+    helper = itself._helper
+    helper.wait_ready()
+    out = []
+    worker = threading.Thread(target=lambda: (helper.ask((x0, x1, itself._margin)),
+                                              helper.ask((x0, x1, itself._margin)),
+                                              out.append(helper.answer())), daemon=True)
+    try:
+        worker.start()
+        worker.join(120)
+        stuck = worker.is_alive()
+        if stuck:  # (the child killed: the blocked write fails and the thread ends)
+            helper._proc.kill()
+            worker.join(10)
+        assert not stuck, "the bake and its helper waited for each other"
+    finally:
+        solver.close()
+    kind, pairs = out[0]
+    own = itself._point_pairs(x0, x1, *itself._prepare(x0, x1))
+    assert kind == "pairs" and len(own[0]) > 3000
+    assert all(np.array_equal(a, b) for a, b in zip(pairs, own))
