@@ -131,6 +131,12 @@ def main(argv: list[str]) -> int:
             lambda: run_physanim(args.grid, args.frames, folder))
         alone = run_physanim(args.grid, args.frames, folder, helper=False)
     problems = [x for run in ours + [alone] for x in run[2]]
+    if os.environ.get("PHYSANIM_SELF_COLLISION_PROCESS", "").strip() == "0":
+        problems.append("PHYSANIM_SELF_COLLISION_PROCESS=0 is set: the headline row ran "
+                        "without the helper process too")
+    if any(run[1] != alone[1] for run in ours):
+        problems.append("physanim with and without its helper process baked different "
+                        "crossings or lowest points (they must be the same to the bit)")
     middle = (len(ratios) - 1) // 2
     b_time, b_seen = blenders[middle]
     p_time, p_seen, _, substeps = ours[middle]

@@ -6,8 +6,8 @@ too short for two threads to overlap (measured: 8 % of a detection). A child pro
 lock of its own: the bake hands it a request (pickled, through a pipe), does its own share of
 the work meanwhile, and reads the child's answer when it needs it.
 
-The child is the interpreter Blender runs Python with (``sys.executable``) running this file;
-it loads this ``core`` package by path under a name of its own (``physanim_core``: core never
+The child is the interpreter Blender runs Python with (``sys.executable``, isolated as Blender
+runs it) running this file; it loads this ``core`` package by path under a name of its own (``physanim_core``: core never
 imports Blender or anything outside itself), calls ``module:function(setup)`` for the
 handler of its requests, answers ``ready``, then answers each request with
 ``handler(request)``. It ends when the bake closes its input, or the bake's process ends.
@@ -19,6 +19,7 @@ from __future__ import annotations
 import contextlib
 import os
 import pickle
+import signal
 import struct
 import subprocess
 import sys
@@ -47,6 +48,23 @@ def can_start() -> bool:
     binary there would open Blender instead)."""
     name = os.path.basename(sys.executable or "").lower()
     return name.startswith("python") and os.path.isfile(sys.executable)
+
+
+def pipes_safe() -> bool:
+    """Whether writing to a child that has ended raises an error here rather than ending this
+    process: SIGPIPE ignored, as Python sets it at start-up (an embedding program that leaves
+    it at its default — some Blender builds did — is ended by such a write). Where it is at
+    its default and this is the main thread, it is set to be ignored, as Python would have;
+    elsewhere no helper starts."""
+    if not hasattr(signal, "SIGPIPE"):
+        return True  # (Windows: a broken pipe is always an error)
+    if signal.getsignal(signal.SIGPIPE) != signal.SIG_DFL:
+        return True
+    try:
+        signal.signal(signal.SIGPIPE, signal.SIG_IGN)
+    except ValueError:  # (not the main thread)
+        return False
+    return True
 
 
 def cores() -> int:
@@ -96,7 +114,7 @@ class Helper:
     """The child, seen from the bake. It starts at once and gets ready (about 0.3 s: numpy and
     the handler's modules) while the bake goes on: :attr:`ready` says whether it is, without
     waiting. :meth:`ask` sends a request, :meth:`answer` reads its answer (an answer to a
-    request whose reader gave up, as when a search refused a sub-step between the two, is read
+    request whose reader gave up, as when the bake was interrupted between the two, is read
     and dropped by the next :meth:`ask`). Any failure — the child would not start, exited, broke its pipe —
     raises :class:`HelperError`, after which the helper is closed and the caller does the work
     itself. Ended by :meth:`close`, or when garbage-collected.
@@ -112,27 +130,29 @@ class Helper:
         self._first = None
         self._ready = False
         self._asked = self._answered = 0  # requests sent, and the last one answered
+        # -I: isolated, as Blender's own Python (no PYTHON* variables, no user site), so the
+        # child imports the numpy the bake runs; its own session, so Ctrl+C in a terminal
+        # reaches the bake (which ends the child), not the child
         self._proc = subprocess.Popen(
-            [sys.executable, "-s", str(Path(__file__).resolve()), str(_CORE), task],
+            [sys.executable, "-I", str(Path(__file__).resolve()), str(_CORE), task],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
-            env=_environment(), creationflags=getattr(subprocess, "CREATE_NO_WINDOW", 0))
+            env=_environment(), creationflags=getattr(subprocess, "CREATE_NO_WINDOW", 0),
+            start_new_session=os.name == "posix")
         self._end = weakref.finalize(self, _end, self._proc)
         _LIVE.add(self)
-        threading.Thread(target=self._wait_start, name="physanim-helper", daemon=True).start()
+        threading.Thread(target=self._wait_start, args=(setup,), name="physanim-helper",
+                         daemon=True).start()
+
+    def _wait_start(self, setup) -> None:
+        """(A thread) the setup sent (larger than a pipe holds: written while the child
+        starts, not by the bake), then the child's first answer, ``("ready", numpy's
+        version)``; later answers are read by :meth:`answer` itself (a thread handing them
+        over waited for Python's lock while the bake computed: a millisecond a request)."""
         try:
             _write(self._proc.stdin, setup)
-        except OSError as exc:
-            self.close()
-            raise HelperError(f"the helper process did not start: {exc}") from exc
-
-    def _wait_start(self) -> None:
-        """(A thread) the child's first answer, ``ready``; later answers are read by
-        :meth:`answer` itself (a thread handing them over waited for Python's lock while
-        the bake computed: a millisecond a request)."""
-        try:
             self._first = _read(self._proc.stdout)
-        except (EOFError, OSError, ValueError, pickle.UnpicklingError):
-            self._first = None  # the child exited
+        except Exception:  # (EOFError, a broken pipe, a garbled answer: the child exited)
+            self._first = None
         self._started.set()
 
     @property
@@ -152,9 +172,13 @@ class Helper:
             self._check_ready()
 
     def _check_ready(self) -> None:
-        if self._first != "ready":
+        import numpy
+
+        if self._first != ("ready", numpy.__version__):
             self.close()
-            raise HelperError(f"the helper process did not start: {self._first or 'it exited'}")
+            reason = "it exited" if self._first is None else f"it answered {self._first!r} " \
+                f"(numpy {numpy.__version__} here)"
+            raise HelperError(f"the helper process did not start: {reason}")
         self._ready = True
 
     def ask(self, request) -> None:
@@ -176,7 +200,7 @@ class Helper:
         while True:
             try:
                 number, value = _read(self._proc.stdout)
-            except (EOFError, OSError, ValueError, pickle.UnpicklingError) as exc:
+            except Exception as exc:  # (EOFError, a broken pipe, a garbled answer)
                 self.close()
                 raise HelperError("the helper process exited") from exc
             self._answered = number
@@ -197,7 +221,7 @@ def _end(proc: subprocess.Popen) -> None:
     with contextlib.suppress(OSError, ValueError):
         proc.stdin.close()
     try:
-        proc.wait(timeout=5)
+        proc.wait(timeout=1)  # (it holds nothing to save: one blocked writing is killed)
     except subprocess.TimeoutExpired:
         proc.kill()
         proc.wait()
@@ -217,14 +241,18 @@ def _serve(core: str, task: str) -> int:
     sys.modules[_PACKAGE] = package
     spec.loader.exec_module(package)
     module, function = task.split(":")
-    stdin, stdout = sys.stdin.buffer, sys.stdout.buffer
-    sys.stdout = sys.stderr  # (anything printed must not come between the answers)
+    # the answers on a copy of the output; the output itself (fd 1, where anything printed,
+    # by Python or by a library, would go) joins stderr
+    stdin, stdout = sys.stdin.buffer, os.fdopen(os.dup(1), "wb")
+    os.dup2(2, 1)
     try:
         setup = _read(stdin)
         handler = getattr(importlib.import_module(f"{_PACKAGE}.{module}"), function)(setup)
     except EOFError:
         return 0
-    _write(stdout, "ready")
+    import numpy
+
+    _write(stdout, ("ready", numpy.__version__))
     while True:
         try:
             number, request = _read(stdin)

@@ -44,7 +44,7 @@ from ..contact.features import FaceSet
 from ..contact.pair_solve import PointPairs, respond, separate, shares, within_cone
 from ..errors import PhysanimError, SimulationError
 from ..forces.springs import scatter_add
-from ..helper_process import Helper, HelperError, can_start, room
+from ..helper_process import Helper, HelperError, can_start, pipes_safe, room
 from ..transforms import norm_rows, row_any, row_max
 
 ROUNDS = 8  # detections per sub-step
@@ -114,7 +114,7 @@ class SelfCollision:
         self.carried: Carried | None = None
         self._fresh = True  # the next update starts a sub-step's carried forces
         self._helper_mode = _helper_mode()
-        self._helper: Helper | None = None  # finding the edge pairs (see HELPER_EDGES)
+        self._helper: Helper | None = None  # finding the point pairs (see HELPER_EDGES)
         self._helper_tried = False  # (one start per bake: a helper that failed is not restarted)
 
     def _leave_out_neighbours(self) -> None:
@@ -125,12 +125,14 @@ class SelfCollision:
         self._edges.exclude = partial(_edges_meet, self.faces.edges)
 
     def __getstate__(self):
-        # (its kept tests are not kept either; nor its helper, which a resumed bake starts)
-        return {**self.__dict__, "_last_end": None, "_helper": None, "_helper_tried": False}
+        # (its kept tests are not kept either; nor its helper, which a resumed bake starts
+        # as the environment it resumes in says)
+        return {**self.__dict__, "_last_end": None, "_helper": None, "_helper_tried": False,
+                "_helper_mode": None}
 
     def __setstate__(self, state: dict) -> None:
-        self.__dict__.update({"_last_end": None, "_helper_mode": "auto", **state,
-                              "_helper": None, "_helper_tried": False})
+        self.__dict__.update({"_last_end": None, **state, "_helper": None,
+                              "_helper_tried": False, "_helper_mode": None})
         self._leave_out_neighbours()  # (a checkpoint written before they were left out)
 
     def close(self) -> None:
@@ -142,13 +144,16 @@ class SelfCollision:
 
     def _helper_ready(self) -> Helper | None:
         """The helper process, started at the first detection where it pays (HELPER_EDGES), once
-        it is ready (until then, and if it cannot start or fails, the edge pairs are found
+        it is ready (until then, and if it cannot start or fails, the point pairs are found
         here: the same pairs, its kept candidates and tests being exact)."""
         if self._helper is None:
+            if self._helper_mode is None:  # (resumed: as the environment says now)
+                self._helper_mode = _helper_mode()
             edges = len(self.faces.edges)
-            if self._helper_tried or self._helper_mode == "off" or not edges or (
-                    self._helper_mode == "auto" and (edges < HELPER_EDGES or not room())) \
-                    or not can_start():
+            if self._helper_tried or self._helper_mode == "off" or \
+                    not len(self.faces.triangles) or (self._helper_mode == "auto" and (
+                        edges < HELPER_EDGES or not room())) or not can_start() \
+                    or not pipes_safe():
                 return None
             self._helper_tried = True
             faces = self.faces
@@ -157,7 +162,7 @@ class SelfCollision:
                     "triangles": faces.triangles, "edges": faces.edges, "loose": faces.loose,
                     "mass": self.mass, "inv_mass": self.inv_mass, "distance": self.distance,
                     "friction": self.friction})
-            except (HelperError, OSError):
+            except Exception:  # (it cannot start here: the bake finds every pair itself)
                 return None
         try:
             return self._helper if self._helper.ready else None
@@ -301,7 +306,7 @@ class SelfCollision:
             failure = None
             try:
                 edges = self._edge_pairs(x0, x1, *frame)
-            except SimulationError as exc:
+            except Exception as exc:  # (raised after the points' error, as without a helper)
                 edges, failure = None, exc
             try:
                 answer = helper.answer()

@@ -551,6 +551,7 @@ def test_a_self_colliding_bake_ends_its_helper_process_and_bakes_the_same(physan
     def recording(self, *args, **kwargs):
         init(self, *args, **kwargs)
         started.append(self)
+        self.wait_ready()  # (so that it answers from the first detection, however slow)
 
     monkeypatch.setattr(helper_process.Helper, "__init__", recording)
     answered = []
@@ -573,4 +574,4 @@ def test_a_self_colliding_bake_ends_its_helper_process_and_bakes_the_same(physan
     assert len(started) == 1
     assert not started[0].alive and started[0]._proc.poll() is not None
     assert caches["1"] == caches["0"]
-    assert answered  # (it answered the detections once it was ready)
+    assert len(answered) > 40  # (it answered every detection)
