@@ -2,7 +2,9 @@
 bending and virtual springs; explicit integrators or Baraff-Witkin implicit Euler."""
 from .model import (Attachment, SpringMeshBuilder, SpringMeshModel, SpringMeshSettings,
                     SpringMeshState, VirtualSprings)
-from .solver import SpringDrive, SpringFrameInputs, SpringMeshSolver, SpringMeshSystem
+from .frame_step import SpringMeshSystem
+from .inputs import SpringDrive, SpringFrameInputs
+from .solver import SpringMeshSolver
 
 __all__ = ["Attachment", "SpringDrive", "SpringFrameInputs", "SpringMeshBuilder", "SpringMeshModel", "SpringMeshSettings",
            "SpringMeshSolver", "SpringMeshState", "SpringMeshSystem", "VirtualSprings"]

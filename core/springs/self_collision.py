@@ -30,7 +30,6 @@ Per sub-step, after the step and the colliders (positions x0 -> x1):
 """
 from __future__ import annotations
 
-import os
 from functools import partial
 from typing import NamedTuple
 
@@ -42,10 +41,11 @@ from ..collision.crossing import (MEET, TINY, box_pairs, element_boxes, segment_
 from ..collision.kept import KeptPairs, KeptTests
 from ..contact.features import FaceSet
 from ..contact.pair_solve import PointPairs, respond, separate, shares, within_cone
-from ..errors import PhysanimError, SimulationError
+from ..errors import SimulationError
 from ..forces.springs import scatter_add
-from ..helper_process import Helper, HelperError, can_start, pipes_safe, room
+from ..helper_process import Helper, HelperError
 from ..transforms import norm_rows, row_any, row_max
+from .self_collision_helper import helper_mode, start_helper
 
 ROUNDS = 8  # detections per sub-step
 GROUNDED_SHARE = 0.01  # of the inverse mass a point touching a collider keeps here
@@ -58,13 +58,6 @@ CARRY_KEEP = 0.9  # of a pair's carried force kept into the next sub-step (see C
 CROWD_LIMIT = 100
 SEARCH_LIMIT = 10  # x CROWD_LIMIT: the candidate pairs per element a search may make before
 # testing their boxes (a refused search fails the same way, before filling memory)
-# A mesh with this many edges finds its point pairs in a helper process while it finds its
-# edge pairs (:mod:`..helper_process`), where the bake may run on two cores or more: a
-# 32 x 32 cloth's detection is about a third shorter. Smaller meshes' detections are too
-# short to pay for the round trip. PHYSANIM_SELF_COLLISION_PROCESS=0 never starts one, =1
-# starts one for any mesh (where a process can start).
-HELPER_EDGES = 1_000
-ENVIRONMENT_HELPER = "PHYSANIM_SELF_COLLISION_PROCESS"
 
 
 class Carried(NamedTuple):
@@ -113,8 +106,8 @@ class SelfCollision:
         self._last_end: np.ndarray | None = None  # x1 of the last detection (see _Apart)
         self.carried: Carried | None = None
         self._fresh = True  # the next update starts a sub-step's carried forces
-        self._helper_mode = _helper_mode()
-        self._helper: Helper | None = None  # finding the point pairs (see HELPER_EDGES)
+        self._helper_mode = helper_mode()
+        self._helper: Helper | None = None  # finding the point pairs (.self_collision_helper)
         self._helper_tried = False  # (one start per bake: a helper that failed is not restarted)
 
     def _leave_out_neighbours(self) -> None:
@@ -143,26 +136,17 @@ class SelfCollision:
         self._helper_tried = True
 
     def _helper_ready(self) -> Helper | None:
-        """The helper process, started at the first detection where it pays (HELPER_EDGES), once
-        it is ready (until then, and if it cannot start or fails, the point pairs are found
-        here: the same pairs, its kept candidates and tests being exact)."""
+        """The helper process (:mod:`.self_collision_helper`), started at the first detection
+        where it pays, once it is ready (until then, and if it cannot start or fails, the point
+        pairs are found here: the same pairs, its kept candidates and tests being exact)."""
         if self._helper is None:
             if self._helper_mode is None:  # (resumed: as the environment says now)
-                self._helper_mode = _helper_mode()
-            edges = len(self.faces.edges)
-            if self._helper_tried or self._helper_mode == "off" or \
-                    not len(self.faces.triangles) or (self._helper_mode == "auto" and (
-                        edges < HELPER_EDGES or not room())) or not can_start() \
-                    or not pipes_safe():
+                self._helper_mode = helper_mode()
+            if self._helper_tried:
                 return None
             self._helper_tried = True
-            faces = self.faces
-            try:
-                self._helper = Helper("springs.self_collision:point_server", {
-                    "triangles": faces.triangles, "edges": faces.edges, "loose": faces.loose,
-                    "mass": self.mass, "inv_mass": self.inv_mass, "distance": self.distance,
-                    "friction": self.friction})
-            except Exception:  # (it cannot start here: the bake finds every pair itself)
+            self._helper = start_helper(self)
+            if self._helper is None:
                 return None
         try:
             return self._helper if self._helper.ready else None
@@ -419,36 +403,6 @@ class SelfCollision:
             f"{self.distance:g} m, so its faces swept across each other (as when a collider "
             "pushes a mesh out from deep inside it) — start the mesh outside the colliders, "
             "add substeps, or turn Self Collision off")
-
-
-def _helper_mode() -> str:
-    """"auto", "off" or "on" from ENVIRONMENT_HELPER (unset: "auto")."""
-    raw = os.environ.get(ENVIRONMENT_HELPER, "").strip()
-    if raw not in ("", "0", "1"):
-        raise PhysanimError(f"{ENVIRONMENT_HELPER} must be 0 (no helper process for "
-                            f"self-collision) or 1 (one for any mesh), got {raw!r}")
-    return {"": "auto", "0": "off", "1": "on"}[raw]
-
-
-def point_server(setup: dict):
-    """The helper process's handler (:mod:`..helper_process`): a request ``(x0, x1, margin)``
-    is answered ``("pairs", SelfCollision._point_pairs(...))`` of a copy of the mesh's
-    self-collision that keeps its own candidate pairs and tests between requests, or
-    ``("error", message)`` where its search refuses a crowded sub-step. (The point pairs'
-    search and tests take about two thirds as long as the edge pairs', which the bake finds
-    meanwhile.)"""
-    itself = SelfCollision(FaceSet(setup["triangles"], setup["edges"], setup["loose"]),
-                           setup["mass"], setup["inv_mass"], setup["distance"],
-                           setup["friction"])
-
-    def handle(request):
-        x0, x1, itself._margin = request
-        try:
-            return "pairs", itself._point_pairs(x0, x1, *itself._prepare(x0, x1))
-        except SimulationError as exc:
-            return "error", exc.detail
-
-    return handle
 
 
 class _Apart:

@@ -13,8 +13,6 @@ features off the faces and edges (:mod:`..contact.features`) -> keep the mesh of
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import numpy as np
 
 from ..bounds import DEFAULT_BOUNDS, StateBounds
@@ -24,11 +22,11 @@ from ..errors import PhysanimError, SimulationError
 from ..forces import AnchorSprings, DampedSprings, Gravity
 from ..integrators import make_integrator
 from ..transforms import TransformPath, inverse_affine, transform_points
-from ..world import SolverSettings, SolverSystem, World, WorldFrame, merged
+from ..world import SolverSettings, World, merged
 from .forces import AngularSprings, ConstantForces, LinearDrag, MassShared
 from .bdf2 import BDF2
 from .implicit import BaraffWitkin
-from .inputs import SpringDrive, SpringFrameInputs
+from .inputs import SpringFrameInputs
 from . import attach
 from . import landing as landing_
 from . import sleep as sleep_
@@ -37,46 +35,12 @@ from .self_collision import SelfCollision
 from .ode import MeshOde, SubstepForces
 from .strain import limit_strain
 from .wind import FaceWind
+from .frame_step import FrameStep, SpringMeshSystem
 
 TEAR_FACTOR = 50.0  # a spring stretched past this many rest lengths means the solve blew up
 LANDING_ROUNDS = 3  # re-solves of a sub-step whose vertices hit colliders (implicit only)
 GROUND_ROUNDS = 3  # self-collision passes alternating with the colliders' in a sub-step
 LIFT_SHARE = 0.25  # of the self-collision distance: a collider's lift that needs another pass
-
-
-@dataclass
-class _FrameStep:
-    """One frame interval of a spring mesh in progress (between begin and end of frame)."""
-
-    state: SpringMeshState
-    inputs: SpringFrameInputs
-    paths: list  # the colliders' paths over the interval
-    h: float  # sub-step [s]
-    g: np.ndarray  # gravity (3,) [m/s^2]
-    rest0: np.ndarray  # (n, 3) pin targets at the interval's start and end
-    rest1: np.ndarray
-    rest_speed: float  # [m/s] a bounce slower than this ends in contact
-    hits: int = 0  # collisions handled
-    held: attach.Held | None = None  # the attachments' paths this frame
-    reactions: list = field(default_factory=list)  # impulses on bodies held by attachments
-    conditions: sleep_.Conditions | None = None  # what its sub-steps depend on (:mod:`.sleep`)
-    asleep: bool = False  # the mesh sleeps through the interval: its sub-steps do nothing
-    start: np.ndarray | None = None  # (n, 3) positions at the interval's start (for sleeping)
-
-
-class SpringMeshSystem(SolverSystem):
-    """A spring-mesh state and its solver as one system of a
-    :class:`~physanim.core.world.World`; its own per-frame input is a :class:`SpringDrive`.
-    A frame reports the collisions handled."""
-
-    def __init__(self, solver: SpringMeshSolver, state: SpringMeshState, name: str | None = None):
-        super().__init__(solver, state, solver.model.settings.name if name is None else name)
-
-    def inputs(self, frame: WorldFrame, drive: SpringDrive | None) -> SpringFrameInputs:
-        return SpringFrameInputs.of(frame, drive)
-
-    def report(self, step: _FrameStep) -> int:
-        return step.hits
 
 
 class SpringMeshSolver:
@@ -173,7 +137,7 @@ class SpringMeshSolver:
         return world.advance(inputs.world, {system: inputs.drive}).reports[system]
 
     def begin_frame(self, state: SpringMeshState, inputs: SpringFrameInputs,
-                    paths: list) -> _FrameStep:
+                    paths: list) -> FrameStep:
         # attached to them, not colliding with them; nor with its own object as a collider
         # (that is its undeformed shape, which the mesh starts on)
         apart = {a.target for a in self.model.attachments if not a.collide}
@@ -191,7 +155,7 @@ class SpringMeshSolver:
             raise self._fail(f'an attachment to the rigid body "{body}" moves it with the '
                              f"mesh, which needs the IMPLICIT integrator (this mesh uses "
                              f"{self.integrator_name})", inputs.frame)
-        step = _FrameStep(state, inputs, paths, h, g, rest0, rest1,
+        step = FrameStep(state, inputs, paths, h, g, rest0, rest1,
                           2.0 * float(np.linalg.norm(g)) * h + 1e-4, held=held)
         if self._sleep is not None:
             coupled = held is not None and any(b is not None for b in held.coupled)
@@ -201,7 +165,7 @@ class SpringMeshSolver:
             step.start = None if step.asleep else state.x.copy()
         return step
 
-    def substep(self, step: _FrameStep, k: int) -> None:
+    def substep(self, step: FrameStep, k: int) -> None:
         """Sub-step ``k``: the passes of the module docstring (none while the mesh sleeps)."""
         if step.asleep:
             return
@@ -243,7 +207,7 @@ class SpringMeshSolver:
                 step.conditions, self.free, step.start, state.x, state.v, inputs.frame_dt):
             state.v = np.zeros_like(state.v)
 
-    def _keep_off(self, step: _FrameStep, x0: np.ndarray, x: np.ndarray, v: np.ndarray,
+    def _keep_off(self, step: FrameStep, x0: np.ndarray, x: np.ndarray, v: np.ndarray,
                   s0: float, s1: float, outside: np.ndarray | None) -> Contacts:
         """The colliders' corners, creases and spheres kept off the mesh's faces and edges
         (:mod:`..contact.features`): x and v in place; their impulses join ``outside``."""
@@ -254,7 +218,7 @@ class SpringMeshSolver:
             outside += self.model.vertex_mass[:, None] * (v - before)
         return kept
 
-    def _keep_apart(self, step: _FrameStep, start: np.ndarray, touched: list, s1: float) -> None:
+    def _keep_apart(self, step: FrameStep, start: np.ndarray, touched: list, s1: float) -> None:
         """The mesh kept off itself (:mod:`.self_collision`); the colliders then stop whatever
         its pushes drove at them (a layer on a two-sided plane pushed through it would stay
         beneath). A layer pushed down onto the ground under another one, and lifted back
@@ -294,7 +258,7 @@ class SpringMeshSolver:
             grounded = np.union1d(grounded, lifted)
         self.itself.fail_safe(start, state.x, state.v)
 
-    def _react(self, step: _FrameStep, touched: list, outside: np.ndarray, s1: float) -> None:
+    def _react(self, step: FrameStep, touched: list, outside: np.ndarray, s1: float) -> None:
         """Two-way coupling with the bodies stepped first this frame: the attached ones move
         with the mesh (solved implicitly), and every body takes back the impulses that held
         the mesh's vertices on it or pushed them off it (:mod:`.attach`)."""
@@ -321,7 +285,7 @@ class SpringMeshSolver:
             self.model, held, self.model.vertex_mass, self.free, pushed, hits, outside,
             state.x, state.v, step.h, s1)])
 
-    def _pressed_on(self, step: _FrameStep) -> dict:
+    def _pressed_on(self, step: FrameStep) -> dict:
         """The vertices the last implicit step held on the surfaces of bodies stepped first:
         body -> (vertices, normals)."""
         if not isinstance(self.integrator, BaraffWitkin) or self.integrator.last_solve is None:
@@ -340,7 +304,7 @@ class SpringMeshSolver:
         return out
 
     # -- passes ---------------------------------------------------------------------------------
-    def _forces(self, step: _FrameStep, t: float, s0: float, s1: float) -> SubstepForces:
+    def _forces(self, step: FrameStep, t: float, s0: float, s1: float) -> SubstepForces:
         """Gravity, springs, bending, drag, virtual springs, wind on faces, force objects."""
         model, inputs = self.model, step.inputs
         virtual = self._virtual(step.state, inputs, t, step.h, s0, s1)
@@ -385,7 +349,7 @@ class SpringMeshSolver:
         return (np.broadcast_to(m0[:3, 3], (len(vs.index), 3)),
                 np.broadcast_to(m1[:3, 3], (len(vs.index), 3)))
 
-    def _solve(self, step: _FrameStep, forces: SubstepForces, contact: Contacts, t: float,
+    def _solve(self, step: FrameStep, forces: SubstepForces, contact: Contacts, t: float,
                s0: float, s1: float, pin_x1, pin_v):
         """Integrate, then respond to collisions on the vertices' paths; with IMPLICIT, a step
         whose vertices hit a collider is solved again with them landing on it (up to
