@@ -7,7 +7,7 @@ import numpy as np
 from ..core.cache import CacheWriter
 from ..core.contact import ColliderPaths
 from ..core.errors import PhysanimError, SimulationError
-from ..core.helper_process import can_start
+from ..core.helper_process import can_start, pipes_safe
 from ..core.controls import ImpactTracker, SquashSettings, euler_xyz, log_deformation, principal
 from ..core.controls.timing import TimeMap
 from ..core.particles import ParticleSolver, ParticleState, ParticleSystem, emitter_arrays
@@ -173,7 +173,8 @@ class ParticleBake:
         """An emitter's USD processes (:class:`.usd_process.UsdPool`, ``wait`` as there), or
         None where none can start here."""
         site = compat.usd_site()
-        if site is None or not self._pool_size or not can_start():
+        if site is None or not self._pool_size or not can_start() \
+                or not pipes_safe():
             return None
         try:
             return usd_process.UsdPool(site, self._pool_size, wait=wait)

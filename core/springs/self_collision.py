@@ -312,29 +312,24 @@ class SelfCollision:
             keys.append(key)
         return PointPairs(vertex, weight, normal, np.zeros_like(normal), depth, self.distance)
 
-    def _boxes(self, x0: np.ndarray, x1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The points' boxes over the sub-step (lo, hi (n, 3)), grown by half the distance.
-
-        They sweep the motion relative to the mesh's mean motion: the pairs and their gaps are
-        the same in any frame moving with it, and a mesh falling or thrown as a whole no longer
-        sweeps each element's box across its neighbours' (a sheet falling on edge at 40 m/s:
-        every triangle's box met 25 rows of others); and they are given about the mesh's
-        centre at the start, so a mesh moving as a whole keeps its boxes within those its
-        candidate pairs were found for (KeptPairs) from sub-step to sub-step."""
+    def _prepare(self, x0: np.ndarray, x1: np.ndarray) -> tuple:
+        """What both kinds of pair are found from: the points' boxes over the sub-step (lo, hi
+        (n, 3), grown by half the distance), the points moved since the last detection and
+        the bound of :class:`_Apart`."""
         d = self.distance
+        # the boxes sweep the motion relative to the mesh's mean motion: the pairs and their
+        # gaps are the same in any frame moving with it, and a mesh falling or thrown as a
+        # whole no longer sweeps each element's box across its neighbours' (a sheet falling
+        # on edge at 40 m/s: every triangle's box met 25 rows of others); and they are given
+        # about the mesh's centre at the start, so a mesh moving as a whole keeps its boxes
+        # within those its candidate pairs were found for (KeptPairs) from sub-step to sub-step
         drift = (x1 - x0).mean(axis=0)
         centre = x0.mean(axis=0)
         x0_moving, x1_moving = x0 - centre, x1 - (drift + centre)
         lo = np.minimum(x0_moving, x1_moving) - 0.5 * d
         hi = np.maximum(x0_moving, x1_moving) + 0.5 * d
-        return lo, hi
-
-    def _prepare(self, x0: np.ndarray, x1: np.ndarray) -> tuple:
-        """What both kinds of pair are found from: the boxes (:meth:`_boxes`), the points
-        moved since the last detection and the bound of :class:`_Apart`."""
-        lo, hi = self._boxes(x0, x1)
         moved, = self._tests.begin((x0, x1))
-        far = _Apart(x0, x1, self._last_end, self.distance)
+        far = _Apart(x0, x1, self._last_end, d)
         self._last_end = x1.copy()
         return lo, hi, moved, far
 

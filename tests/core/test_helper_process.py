@@ -23,3 +23,25 @@ def test_a_helper_that_cannot_start_its_task_says_so():
     with pytest.raises(helper_process.HelperError, match="did not start"):
         helper.wait_ready(timeout=60)
     assert not helper.alive and helper._proc.poll() is not None
+
+
+def test_a_write_to_an_ended_child_is_made_an_error_not_the_end_of_the_process():
+    """SIGPIPE left at its default by an embedding program: on the main thread it is ignored
+    from then on (as Python sets it at start-up) and children may start; on another thread it
+    cannot be set, and none start."""
+    import signal
+    import threading
+
+    before = signal.getsignal(signal.SIGPIPE)
+    try:
+        signal.signal(signal.SIGPIPE, signal.SIG_DFL)
+        seen = []
+        thread = threading.Thread(target=lambda: seen.append(helper_process.pipes_safe()))
+        thread.start()
+        thread.join()
+        assert seen == [False] and signal.getsignal(signal.SIGPIPE) == signal.SIG_DFL
+        assert helper_process.pipes_safe()
+        assert signal.getsignal(signal.SIGPIPE) == signal.SIG_IGN
+        assert helper_process.pipes_safe()  # (already ignored)
+    finally:
+        signal.signal(signal.SIGPIPE, before)
