@@ -5,6 +5,9 @@ numpy's dense linear algebra.
 """
 from __future__ import annotations
 
+import copy
+import pickle
+
 import numpy as np
 import pytest
 from physanim.core.springs import (
@@ -21,7 +24,7 @@ from physanim.core.springs.multigrid import (
     AggregationHierarchy,
     aggregate,
 )
-from physanim.core.springs.sparse import BlockPattern, MatrixBuilder
+from physanim.core.springs.sparse import BlockMatrix, BlockPattern, MatrixBuilder
 from physanim.tests.core.helpers import grid as _grid
 
 
@@ -78,6 +81,15 @@ def test_assembled_matrix_equals_a_dense_reference(seed):
     np.testing.assert_allclose(matrix @ u, (dense @ u.ravel()).reshape(n, 3), atol=1e-12)
     diagonal = np.stack([dense[3 * v:3 * v + 3, 3 * v:3 * v + 3] for v in range(n)])
     np.testing.assert_allclose(matrix.diagonal(), diagonal, atol=1e-12)
+    # a saved bake state's matrix multiplies the same (its work buffer is not saved; one saved
+    # by an older version, in another shape, is made anew)
+    expected = matrix @ u
+    np.testing.assert_array_equal(pickle.loads(pickle.dumps(matrix)) @ u, expected)
+    old = copy.copy(matrix.__dict__)
+    old["_gathered"] = np.empty((n, 3 * pattern.width))
+    restored = BlockMatrix.__new__(BlockMatrix)
+    restored.__setstate__(old)
+    np.testing.assert_array_equal(restored @ u, expected)
     # a reused buffer starts from zero again
     again = MatrixBuilder(pattern, out=matrix.data.ravel())
     again.add_pairs(pairs, blocks)
