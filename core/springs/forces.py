@@ -45,16 +45,22 @@ class LinearizedHinges:
 def dihedral_angles_and_gradients(x: np.ndarray, hinge: np.ndarray):
     """Signed dihedral angles theta (h,) [rad] (as :func:`topology.dihedral_angles`) and their
     gradients d(theta)/dx (h, 4, 3) for (e0, e1, w0, w1), sharing the face normals."""
-    (x0, x1, x2, x3), e, length, n1, n2, theta = topology.hinge_geometry(x, hinge)
+    geometry = topology.hinge_geometry(x, hinge)
+    return geometry[5], dihedral_gradients(geometry)
+
+
+def dihedral_gradients(geometry: tuple) -> np.ndarray:
+    """d(theta)/dx (h, 4, 3) from :func:`topology.hinge_geometry`'s results."""
+    (x0, x1, x2, x3), e, length, n1, n2, _ = geometry
     safe = np.where(length > 1e-12, length, 1.0)
     a1 = n1 / np.maximum(dot_rows(n1, n1), 1e-24)[:, None]
     a2 = n2 / np.maximum(dot_rows(n2, n2), 1e-24)[:, None]
-    grad = np.empty((len(hinge), 4, 3))
+    grad = np.empty((len(length), 4, 3))
     grad[:, 2] = -safe[:, None] * a1
     grad[:, 3] = -safe[:, None] * a2
     grad[:, 0] = -(dot_rows(x2 - x1, e) / safe)[:, None] * a1 - (dot_rows(x3 - x1, e) / safe)[:, None] * a2
     grad[:, 1] = (dot_rows(x2 - x0, e) / safe)[:, None] * a1 + (dot_rows(x3 - x0, e) / safe)[:, None] * a2
-    return theta, grad
+    return grad
 
 
 def wrap_angle(a: np.ndarray) -> np.ndarray:
@@ -82,19 +88,16 @@ class AngularSprings:
         object.__setattr__(self, "_last", _LastGeometry())
 
     def _geometry(self, x: np.ndarray, gradients: bool = True):
-        """(theta, grad) at x — grad None unless ``gradients`` — the last ones again while x is
-        the same: an implicit step asks at its start for the forces, the energy and the
-        Jacobian, and the energy at its end is the next step's start."""
+        """(theta, grad) at x — grad None unless ``gradients`` — from the last hinge geometry
+        while x is the same: an implicit step asks at its start for the forces, the energy and
+        the Jacobian, and the energy at its end (angles only: the gradients follow from the
+        same geometry if the next step starts there) is the next step's start."""
         last = self._last
-        if last.x is not None and (last.grad is not None or not gradients) and \
-                np.array_equal(last.x, x):
-            return last.theta, last.grad
-        if gradients:
-            theta, grad = dihedral_angles_and_gradients(x, self.hinge)
-        else:
-            theta, grad = topology.dihedral_angles(x, self.hinge), None
-        last.x, last.theta, last.grad = x.copy(), theta, grad
-        return theta, grad
+        if last.x is None or not np.array_equal(last.x, x):
+            last.x, last.geometry, last.grad = x.copy(), topology.hinge_geometry(x, self.hinge), None
+        if gradients and last.grad is None:
+            last.grad = dihedral_gradients(last.geometry)
+        return last.geometry[5], last.grad
 
     def _forces(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
         theta, grad = self._geometry(x)
@@ -124,7 +127,7 @@ class _LastGeometry:
     function: copies and pickles empty, so a saved bake state holds none of it)."""
 
     def __init__(self):
-        self.x = self.theta = self.grad = None
+        self.x = self.geometry = self.grad = None
 
     def __reduce__(self):
         return _LastGeometry, ()
