@@ -19,6 +19,7 @@ from __future__ import annotations
 import contextlib
 import os
 import pickle
+import select
 import signal
 import struct
 import subprocess
@@ -29,6 +30,11 @@ from pathlib import Path
 
 #: Seconds the child may take to start and answer ``ready`` before it is given up.
 START_TIMEOUT = 30.0
+#: Seconds the bake waits for an answer (for each part of it) before it takes the child for
+#: stuck — stopped, or waiting on something that will not come —, ends it and does the work
+#: itself: an answer takes milliseconds, its share of the bake's own work. (Not on Windows,
+#: whose pipes cannot be waited on with a time limit: there the bake waits.)
+ANSWER_TIMEOUT = 60.0
 #: Helpers alive at once at most (:func:`room`): each holds numpy and its task's data (about
 #: 40 MB), and a bake steps its meshes one after another, so more than the free cores gain
 #: nothing.
@@ -110,14 +116,37 @@ def _read(stream):
     return pickle.loads(data)
 
 
+def _read_fd(fd: int, timeout: float | None):
+    """The next message from the pipe ``fd`` (read directly: nothing is buffered ahead, so
+    waiting on the pipe is waiting for the message); EOFError when the pipe ended,
+    TimeoutError when no part of it came within ``timeout`` seconds (None: no limit)."""
+    size, = _LENGTH.unpack(_read_bytes(fd, _LENGTH.size, timeout))
+    return pickle.loads(_read_bytes(fd, size, timeout))
+
+
+def _read_bytes(fd: int, size: int, timeout: float | None) -> bytes:
+    parts, got = [], 0
+    while got < size:
+        if timeout is not None and os.name == "posix" and \
+                not select.select([fd], [], [], timeout)[0]:
+            raise TimeoutError
+        chunk = os.read(fd, min(size - got, 1 << 20))
+        if not chunk:
+            raise EOFError
+        parts.append(chunk)
+        got += len(chunk)
+    return b"".join(parts)
+
+
 class Helper:
     """The child, seen from the bake. It starts at once and gets ready (about 0.3 s: numpy and
     the handler's modules) while the bake goes on: :attr:`ready` says whether it is, without
     waiting. :meth:`ask` sends a request, :meth:`answer` reads its answer (an answer to a
     request whose reader gave up, as when the bake was interrupted between the two, is read
-    and dropped by the next :meth:`ask`). Any failure — the child would not start, exited, broke its pipe —
-    raises :class:`HelperError`, after which the helper is closed and the caller does the work
-    itself. Ended by :meth:`close`, or when garbage-collected.
+    and dropped by the next :meth:`ask`). Any failure — the child would not start, exited,
+    broke its pipe, gave no answer for ANSWER_TIMEOUT seconds — raises :class:`HelperError`,
+    after which the helper is closed and the caller does the work itself. Ended by
+    :meth:`close`, or when garbage-collected.
 
     Args:
         task: ``"module:function"``, a module of this package (dotted, from ``core``) and the
@@ -150,7 +179,7 @@ class Helper:
         over waited for Python's lock while the bake computed: a millisecond a request)."""
         try:
             _write(self._proc.stdin, setup)
-            self._first = _read(self._proc.stdout)
+            self._first = _read_fd(self._proc.stdout.fileno(), None)
         except Exception:  # (EOFError, a broken pipe, a garbled answer: the child exited)
             self._first = None
         self._started.set()
@@ -196,10 +225,15 @@ class Helper:
             raise HelperError(f"the helper process exited: {exc}") from exc
 
     def answer(self):
-        """The child's answer to the last request :meth:`ask` sent."""
+        """The child's answer to the last request :meth:`ask` sent. A child that gives no part
+        of it for ANSWER_TIMEOUT seconds is ended (HelperError), as one that exited."""
         while True:
             try:
-                number, value = _read(self._proc.stdout)
+                number, value = _read_fd(self._proc.stdout.fileno(), ANSWER_TIMEOUT)
+            except TimeoutError as exc:
+                self.close()
+                raise HelperError("the helper process gave no answer within "
+                                  f"{ANSWER_TIMEOUT:g} s: ended") from exc
             except Exception as exc:  # (EOFError, a broken pipe, a garbled answer)
                 self.close()
                 raise HelperError("the helper process exited") from exc

@@ -4,6 +4,9 @@ share no vertex must never overlap (the library's hierarchy query and exact tria
 touching counts as overlap)."""
 from __future__ import annotations
 
+import contextlib
+import os
+import signal
 from pathlib import Path
 
 import numpy as np
@@ -454,11 +457,13 @@ def test_pairs_shown_apart_without_a_test_change_nothing(monkeypatch):
     assert spared_tests < 0.9 * every_tests, (spared_tests, every_tests)  # 297,378 of 356,059
 
 
-def _heap_with_helper(monkeypatch, mode: str, frames: int = 14, kill_after: int | None = None):
+def _heap_with_helper(monkeypatch, mode: str, frames: int = 14, kill_after: int | None = None,
+                      stop_after: int | None = None):
     """A 24 x 24 sheet dropped on edge (1,657 edges) with PHYSANIM_SELF_COLLISION_PROCESS set
     to ``mode``: each frame's positions, and the detections the helper answered. The helper
     (when there is one) is waited for after the first frame, so that it answers the rest; with
-    ``kill_after``, its process is killed after that frame."""
+    ``kill_after``, its process is killed after that frame; with ``stop_after``, stopped
+    (SIGSTOP: alive, never answering)."""
     from physanim.core.helper_process import Helper
 
     monkeypatch.setenv("PHYSANIM_SELF_COLLISION_PROCESS", mode)
@@ -473,7 +478,7 @@ def _heap_with_helper(monkeypatch, mode: str, frames: int = 14, kill_after: int 
     monkeypatch.setattr(Helper, "answer", recording)
     model, _ = _sheet_on_edge(24, self_collision=True)
     solver = SpringMeshSolver(model, "IMPLICIT", 2, frame_dt=DT, frame=1)
-    state, out = model.state(), []
+    state, out, stopped = model.state(), [], []
     try:
         for frame in range(1, frames + 1):
             solver.advance(state, SpringFrameInputs(frame, frame * DT, DT, gravity=(0, 0, -9.81),
@@ -485,8 +490,14 @@ def _heap_with_helper(monkeypatch, mode: str, frames: int = 14, kill_after: int 
             if frame == kill_after:
                 helper._proc.kill()
                 helper._proc.wait()
+            if frame == stop_after:
+                os.kill(helper._proc.pid, signal.SIGSTOP)
+                stopped.append(helper)
     finally:
         solver.close()
+        for helper in stopped:  # (a stopped child is ended by SIGKILL; this frees it anyway)
+            with contextlib.suppress(OSError):
+                os.kill(helper._proc.pid, signal.SIGCONT)
         monkeypatch.setattr(Helper, "answer", answer)  # (the next call records its own)
     return out, answered, solver
 
@@ -512,6 +523,43 @@ def test_a_helper_process_that_dies_is_replaced_by_the_bake_itself(monkeypatch):
     helped, answered, solver = _heap_with_helper(monkeypatch, "1", kill_after=10)
     assert len(answered) > 15 and any(answered)  # (frames 2-10; none after the kill)
     assert all(np.array_equal(a, b) for a, b in zip(alone, helped))
+
+
+def test_a_helper_process_that_stops_answering_is_ended_and_replaced(monkeypatch):
+    """The helper stopped mid-bake (alive, its pipe open, never answering: a hung child): the
+    bake waits ANSWER_TIMEOUT for the next answer, ends the child and finds every pair itself
+    from then on — the heap the same to the bit, the child gone, no wait after that one. (Run
+    on a thread: without the limit the bake would wait for good.)"""
+    import threading
+    import time
+
+    from physanim.core import helper_process
+
+    alone, _, _ = _heap_with_helper(monkeypatch, "0")
+    monkeypatch.setattr(helper_process, "ANSWER_TIMEOUT", 0.5)
+    out, waits = [], []
+    wait = helper_process._read_bytes
+
+    def timed(fd, size, timeout):
+        start = time.perf_counter()
+        try:
+            return wait(fd, size, timeout)
+        finally:
+            if timeout is not None:  # (answers, not the child's start)
+                waits.append(time.perf_counter() - start)
+
+    monkeypatch.setattr(helper_process, "_read_bytes", timed)
+    worker = threading.Thread(
+        target=lambda: out.append(_heap_with_helper(monkeypatch, "1", stop_after=8)),
+        daemon=True)
+    worker.start()
+    worker.join(300)
+    assert not worker.is_alive(), "the bake waited for the stopped helper for good"
+    helped, answered, solver = out[0]
+    assert len(answered) > 10 and any(answered)  # (frames 2-8; none after it stopped)
+    assert all(np.array_equal(a, b) for a, b in zip(alone, helped))
+    assert solver.itself._helper is None
+    assert sum(w >= 0.5 for w in waits) == 1  # (one wait for the stopped child, then none)
 
 
 def test_a_crowded_search_in_the_helper_is_refused_as_in_the_bake(monkeypatch):
