@@ -104,18 +104,6 @@ def _write(stream, message) -> None:
     stream.flush()
 
 
-def _read(stream):
-    """The next message, or raises EOFError when the stream ended."""
-    head = stream.read(_LENGTH.size)
-    if len(head) < _LENGTH.size:
-        raise EOFError
-    size, = _LENGTH.unpack(head)
-    data = stream.read(size)
-    if len(data) < size:
-        raise EOFError
-    return pickle.loads(data)
-
-
 def _read_fd(fd: int, timeout: float | None):
     """The next message from the pipe ``fd`` (read directly: nothing is buffered ahead, so
     waiting on the pipe is waiting for the message); EOFError when the pipe ended,
@@ -277,10 +265,10 @@ def _serve(core: str, task: str) -> int:
     module, function = task.split(":")
     # the answers on a copy of the output; the output itself (fd 1, where anything printed,
     # by Python or by a library, would go) joins stderr
-    stdin, stdout = sys.stdin.buffer, os.fdopen(os.dup(1), "wb")
+    stdin, stdout = sys.stdin.fileno(), os.fdopen(os.dup(1), "wb")
     os.dup2(2, 1)
     try:
-        setup = _read(stdin)
+        setup = _read_fd(stdin, None)
         handler = getattr(importlib.import_module(f"{_PACKAGE}.{module}"), function)(setup)
     except EOFError:
         return 0
@@ -289,7 +277,7 @@ def _serve(core: str, task: str) -> int:
     _write(stdout, ("ready", numpy.__version__))
     while True:
         try:
-            number, request = _read(stdin)
+            number, request = _read_fd(stdin, None)
         except EOFError:
             return 0
         _write(stdout, (number, handler(request)))

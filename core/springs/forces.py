@@ -42,15 +42,10 @@ class LinearizedHinges:
                     self.flat)
 
 
-def dihedral_angles_and_gradients(x: np.ndarray, hinge: np.ndarray):
-    """Signed dihedral angles theta (h,) [rad] (as :func:`topology.dihedral_angles`) and their
-    gradients d(theta)/dx (h, 4, 3) for (e0, e1, w0, w1), sharing the face normals."""
-    geometry = topology.hinge_geometry(x, hinge)
-    return geometry[5], dihedral_gradients(geometry)
-
-
 def dihedral_gradients(geometry: tuple) -> np.ndarray:
-    """d(theta)/dx (h, 4, 3) from :func:`topology.hinge_geometry`'s results."""
+    """The gradients d(theta)/dx (h, 4, 3) of the signed dihedral angles (as
+    :func:`topology.dihedral_angles`) for (e0, e1, w0, w1), from
+    :func:`topology.hinge_geometry`'s results (sharing its face normals)."""
     (x0, x1, x2, x3), e, length, n1, n2, _ = geometry
     safe = np.where(length > 1e-12, length, 1.0)
     a1 = n1 / np.maximum(dot_rows(n1, n1), 1e-24)[:, None]
