@@ -112,7 +112,11 @@ class BaraffWitkin(Integrator):
         """forces -> constraints (the filter) -> Newton iterations (linearise -> assemble ->
         precondition -> first guess -> solve -> energy check) -> friction -> the new state."""
         x0, v0 = positions_and_velocities(y)
-        f0 = system.forces_at(t, x0, v0)
+        # backward Euler's forces are those at the step's end, t + h: the linearisation is
+        # about (x0, v0) at that time, so anchors and targets that move during the step
+        # (virtual springs, attachments' springs, gusting winds) pull from where they are at
+        # its end, as pins are held there (at t they lagged a step behind a moving target)
+        f0 = system.forces_at(t + h, x0, v0)
         constraints = self._constraints(system, t, h, v0, f0)
         # residuals are judged against the impulse gravity gives in one step (at least): near
         # equilibrium the right-hand side -> 0 and a purely relative test never stops
@@ -227,7 +231,7 @@ class BaraffWitkin(Integrator):
             if first and first_linear is not None:
                 blocks, rhs, matrix, precondition = first_linear
             elif first:
-                blocks, rhs = self._linearize(system, t, h, x0, v0, f0)
+                blocks, rhs = self._linearize(system, t + h, h, x0, v0, f0)
             else:  # Newton: linearised at the step's end
                 blocks = system.linearize(t + h, x0 + h * (v0 + out.dv), v0 + out.dv)
                 kept = out.first[2]
@@ -259,7 +263,8 @@ class BaraffWitkin(Integrator):
     def _linearize(system: BaraffWitkinSystem, t: float, h: float, x0: np.ndarray,
                    v0: np.ndarray, f0: np.ndarray):
         """Jacobian blocks and right-hand side (n, 3) [N s] of the first Newton iteration,
-        Baraff & Witkin's: linearised at (x0, v0), rhs h (f0 + h df/dx v0)."""
+        Baraff & Witkin's: linearised at (x0, v0) and time ``t`` (the step's end), rhs
+        h (f0 + h df/dx v0)."""
         blocks = system.linearize(t, x0, v0)
         rhs = f0.copy()
         for blk in blocks:
