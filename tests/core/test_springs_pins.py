@@ -122,8 +122,9 @@ def test_a_soft_pin_moving_at_constant_speed_is_followed_without_a_step_of_lag(i
     """One step per frame, no gravity, the rest position moving at u: the implicit steps take
     the springs' pull at each step's end, where the anchor then is, so the vertex settles on
     it (v -> u, x -> a with no lag). Pulled from where the anchor was at the step's start, it
-    trailed it for good (10 mm with BDF2, 14 mm with backward Euler; u h is 21 mm). The one-vertex solve is exact; after 4 s the
-    critically damped transient (omega = 32 rad/s) is gone."""
+    trailed it for good (10 mm with BDF2, 14 mm with backward Euler; u h is 21 mm). The
+    one-vertex solve is exact; after 4 s the critically damped transient (omega = 32 rad/s) is
+    gone."""
     k, m, w = 100.0, 0.1, 0.5
     builder = _one_vertex(mass=m)
     builder.add_virtual(VirtualSprings("PIN", np.array([0]), np.array([w]), 0.0, k,
