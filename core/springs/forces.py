@@ -13,6 +13,8 @@ from ..forces.springs import LinearizedVertices, flat_index, scatter_add
 from ..transforms import dot_rows, scale_rows
 from . import topology
 
+FADE_AREA = 0.1  # of its rest area: a hinge's triangle squashed smaller fades its bending out
+
 
 @dataclass(frozen=True)
 class LinearizedHinges:
@@ -58,6 +60,19 @@ def dihedral_gradients(geometry: tuple) -> np.ndarray:
     return grad
 
 
+def hinge_normals(x: np.ndarray, hinge: np.ndarray) -> np.ndarray:
+    """(h, 2) the lengths of each hinge's two unnormalised face normals at ``x`` (twice the
+    triangles' areas) [m^2]: at rest, what :class:`AngularSprings` fades squashed ones by."""
+    return _normal_lengths(topology.hinge_geometry(np.asarray(x, np.float64),
+                                                   np.asarray(hinge)))
+
+
+def _normal_lengths(geometry) -> np.ndarray:
+    """(h, 2) |n1|, |n2| of :func:`topology.hinge_geometry`'s results."""
+    return np.sqrt(np.stack([dot_rows(geometry[3], geometry[3]),
+                             dot_rows(geometry[4], geometry[4])], axis=1))
+
+
 def wrap_angle(a: np.ndarray) -> np.ndarray:
     """Angles wrapped into [-pi, pi): a hinge folded past pi still turns back the short way."""
     return np.remainder(a + np.pi, 2.0 * np.pi) - np.pi
@@ -68,14 +83,24 @@ class AngularSprings:
     """Angular spring-dampers on hinges: the torque -[k (theta - theta0) + kd theta_dot] about
     the shared edge, applied as forces along d(theta)/dx (they sum to zero force and zero torque).
 
+    A hinge whose triangle is squashed flat (its corners in a line: a cloth standing on its
+    edge crumples along the ground) has no dihedral angle: the gradient grows as one over the
+    triangle's area and the angle jumps by pi as the triangle turns over. Below FADE_AREA of its
+    rest area a triangle fades its hinge out by s = area / (FADE_AREA rest area): the torque by
+    s^2 and the gradient it acts along by s, so the force and the Jacobian stay bounded (a
+    cloth landing corner-down pushed its solve to forces of 1e14 N and gained energy; with BDF2
+    it blew up).
+
     Args: hinge: (h, 4) vertex indices (e0, e1, w0, w1). rest: (h,) theta0 [rad].
-    stiffness: k [N m/rad]. damping: kd [N m s/rad].
+    stiffness: k [N m/rad]. damping: kd [N m s/rad]. rest_normals: (h, 2) the lengths of the
+    two triangles' unnormalised normals (twice their areas) at rest [m^2]; None: no fading.
     """
 
     hinge: np.ndarray
     rest: np.ndarray
     stiffness: float
     damping: float
+    rest_normals: np.ndarray | None = None
 
     def __post_init__(self):
         # derived once from the frozen fields (scatter order of the (h, 4) hinge vertices)
@@ -83,20 +108,39 @@ class AngularSprings:
         object.__setattr__(self, "_last", _LastGeometry())
 
     def _geometry(self, x: np.ndarray, gradients: bool = True):
-        """(theta, grad) at x — grad None unless ``gradients`` — from the last hinge geometry
-        while x is the same: an implicit step asks at its start for the forces, the energy and
-        the Jacobian, and the energy at its end (angles only: the gradients follow from the
-        same geometry if the next step starts there) is the next step's start."""
+        """(theta, grad, fade) at x — grad None unless ``gradients``, fade None when no hinge
+        fades — from the last hinge geometry while x is the same: an implicit step asks at its
+        start for the forces, the energy and the Jacobian, and the energy at its end (angles
+        only: the gradients follow from the same geometry if the next step starts there) is the
+        next step's start. grad is the angle's gradient times the fade s (class docstring)."""
         last = self._last
         if last.x is None or not np.array_equal(last.x, x):
             last.x, last.geometry, last.grad = x.copy(), topology.hinge_geometry(x, self.hinge), None
+            last.fade = self._fade(last.geometry)
         if gradients and last.grad is None:
             last.grad = dihedral_gradients(last.geometry)
-        return last.geometry[5], last.grad
+            if last.fade is not None:
+                last.grad *= last.fade[:, None, None]
+        return last.geometry[5], last.grad, last.fade
+
+    def _fade(self, geometry) -> np.ndarray | None:
+        """s (h,) of each hinge (class docstring), or None when every hinge keeps its whole
+        stiffness."""
+        rest = getattr(self, "rest_normals", None)  # (a solver saved before hinges faded)
+        if rest is None:
+            return None
+        size = _normal_lengths(geometry)
+        least = FADE_AREA * rest
+        if not (size < least).any():
+            return None
+        share = np.divide(size, least, out=np.ones_like(size), where=size < least)
+        return share.min(axis=1)
 
     def _forces(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
-        theta, grad = self._geometry(x)
+        theta, grad, fade = self._geometry(x)
         delta = wrap_angle(theta - self.rest)
+        if fade is not None:
+            delta = delta * fade
         rate = np.einsum("hkc,hkc->h", grad, v[self.hinge])
         torque = self.stiffness * delta + self.damping * rate
         return -torque[:, None, None] * grad
@@ -112,8 +156,11 @@ class AngularSprings:
                                 self._flat)
 
     def energy(self, x: np.ndarray) -> float:
-        """0.5 k sum (theta - theta0)^2 [J]."""
-        turn = wrap_angle(self._geometry(x, gradients=False)[0] - self.rest)
+        """0.5 k sum (s (theta - theta0))^2 [J] (s: the fade, class docstring)."""
+        theta, _, fade = self._geometry(x, gradients=False)
+        turn = wrap_angle(theta - self.rest)
+        if fade is not None:
+            turn *= fade
         return 0.5 * self.stiffness * float(np.vdot(turn, turn))
 
 
@@ -122,7 +169,7 @@ class _LastGeometry:
     function: copies and pickles empty, so a saved bake state holds none of it)."""
 
     def __init__(self):
-        self.x = self.geometry = self.grad = None
+        self.x = self.geometry = self.grad = self.fade = None
 
     def __reduce__(self):
         return _LastGeometry, ()

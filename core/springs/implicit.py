@@ -69,6 +69,7 @@ class BaraffWitkin(Integrator):
     # this fraction of the energy's own size.
     ENERGY_SPEED = 1e-5
     ENERGY_ROUNDING = 1e-12
+    LINE_SEARCH = 4  # halvings of a Newton correction that raises the step's end energy
     # A pressed vertex sliding slower than this [m/s] is taken as held by static friction (and
     # let slide when the impulse that holds it leaves the friction cone): a cloth at rest on a
     # collider then has nothing left to solve, where each step solved its tiny in-plane
@@ -212,10 +213,12 @@ class BaraffWitkin(Integrator):
         slack = 0.5 * float(system.mass[system.free].sum()) * self.ENERGY_SPEED ** 2 + \
             self.ENERGY_ROUNDING * abs(e0)
         out = NewtonResult(dv=constraints.given.copy())
+        e_end = None  # the energy at the end of the step out.dv makes, once known
         for newton in range(self.newton_iterations):
             first = newton == 0
             if not first:
-                e_end = system.energy(x0 + h * (v0 + out.dv), v0 + out.dv)
+                if e_end is None:
+                    e_end = system.energy(x0 + h * (v0 + out.dv), v0 + out.dv)
                 if e_end <= e0 + slack:
                     out.energy = e_end  # the step already lost energy: no need to re-linearise
                     break
@@ -250,6 +253,14 @@ class BaraffWitkin(Integrator):
                                                              floor)
             out.scale = max(out.scale, scale)
             out.iterations += iterations
+            stop = False
+            if not first:
+                delta, e_end = self._line_search(system, h, x0, v0, out.dv, delta, e_end)
+                # no share of the correction lowers the energy: the step stays where it is
+                # (linearised there: this iteration's matrix and residual serve what follows)
+                stop = delta is None
+                if stop:
+                    delta = np.zeros_like(out.dv)
             out.residual = linear.apply_a(delta + known) - rhs  # the constraints' impulses
             if first:
                 self._remember_solution(delta + known, t, not len(constraints.pressed))
@@ -257,7 +268,25 @@ class BaraffWitkin(Integrator):
             out.dv = out.dv + delta
             out.last = linear
             self.last_residual = residual
+            if stop:
+                break
         return out
+
+    def _line_search(self, system: BaraffWitkinSystem, h: float, x0: np.ndarray,
+                     v0: np.ndarray, dv: np.ndarray, delta: np.ndarray, e_end: float):
+        """A Newton correction ``delta`` of the step's velocity change ``dv``, halved until it
+        lowers the energy at the step's end below ``e_end``, where ``dv`` leaves it (the
+        iterations run to stop a step gaining energy): ``(delta, its end energy)``, or
+        ``(None, e_end)`` when LINE_SEARCH halvings do not. Far from the solution a full
+        correction can overshoot: a cloth landing on its edge, a row of triangles squashed
+        flat, had its second correction end the step at 3,800 J from 11 J, the next at 9 J."""
+        for _ in range(self.LINE_SEARCH):
+            trial = dv + delta
+            e_trial = system.energy(x0 + h * (v0 + trial), v0 + trial)
+            if e_trial < e_end:
+                return delta, e_trial
+            delta = 0.5 * delta
+        return None, e_end
 
     @staticmethod
     def _linearize(system: BaraffWitkinSystem, t: float, h: float, x0: np.ndarray,

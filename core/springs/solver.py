@@ -23,7 +23,7 @@ from ..forces import AnchorSprings, DampedSprings, Gravity
 from ..integrators import make_integrator
 from ..transforms import TransformPath, inverse_affine, transform_points
 from ..world import SolverSettings, World, merged
-from .forces import AngularSprings, ConstantForces, LinearDrag, MassShared
+from .forces import AngularSprings, ConstantForces, LinearDrag, MassShared, hinge_normals
 from .bdf2 import BDF2
 from .implicit import BaraffWitkin
 from .inputs import SpringFrameInputs
@@ -70,7 +70,7 @@ class SpringMeshSolver:
         self.springs = DampedSprings(model.spring_i, model.spring_j, model.spring_rest,
                                  model.spring_stiffness, model.spring_damping)
         self.bending = AngularSprings(model.hinge, model.hinge_rest, s.bend_stiffness,
-                                      s.bend_damping)
+                                      s.bend_damping, hinge_normals(model.rest_x, model.hinge))
         self.free = ~model.held
         self._inv_mass = np.where(self.free, 1.0 / model.vertex_mass, 0.0)
         self._mass_share = model.vertex_mass / model.vertex_mass.sum()

@@ -13,7 +13,8 @@ import pytest
 from physanim.core.forces import ParticleView
 from physanim.core.springs import SpringMeshBuilder, SpringMeshSettings, topology
 from physanim.core.forces import DampedSprings
-from physanim.core.springs.forces import AngularSprings, dihedral_gradients
+from physanim.core.springs.forces import (FADE_AREA, AngularSprings, dihedral_gradients,
+                                         hinge_normals)
 from physanim.tests.core.helpers import grid as _grid
 
 
@@ -104,6 +105,50 @@ def test_flat_hinge_has_zero_angle_and_sign_follows_the_fold():
     up[3, 2], down[3, 2] = 0.5, -0.5
     a_up, a_down = topology.dihedral_angles(up, hinge)[0], topology.dihedral_angles(down, hinge)[0]
     assert a_up == pytest.approx(-a_down) and abs(a_up) == pytest.approx(np.arctan2(0.5, 1.0))
+
+
+def _squashed_hinge_forces(height: float, fade: bool, speed: float = 0.0):
+    """Forces and Jacobian blocks of one angular spring (rest flat) whose first triangle is
+    squashed to ``height`` (its rest height 1) and folded 1 rad about the hinge, its wing
+    vertex moving up at ``speed``."""
+    rest_x = np.array([[0, 0, 0], [1, 0, 0], [0.5, 1, 0], [0.5, -1, 0]], float)
+    hinge = np.array([[0, 1, 2, 3]])
+    springs = AngularSprings(hinge, np.zeros(1), 2.0, 0.5,
+                             hinge_normals(rest_x, hinge) if fade else None)
+    x = rest_x.copy()
+    x[2] = [0.5, height * np.cos(1.0), height * np.sin(1.0)]
+    v = np.zeros_like(x)
+    v[2, 2] = speed
+    view = ParticleView(x, v, np.ones(4), 0.0)
+    f = np.zeros_like(x)
+    springs.apply(view, f)
+    return f, springs.linearize(view).grad, springs
+
+
+def test_a_hinge_squashed_flat_pushes_with_bounded_forces():
+    """A triangle squashed to a line has no normal, so its hinge no angle: the angle's gradient
+    grows as one over its area. Below FADE_AREA of its rest area the hinge fades out (forces as
+    the area, damping and the Jacobian bounded), while a hinge above it is untouched to the
+    bit. Without the fading, the same spring's force grows a thousand-fold per thousand-fold
+    squash."""
+    heights = [1e-3, 1e-6, 1e-9]
+    bare = [np.abs(_squashed_hinge_forces(h, False)[0]).max() for h in heights]
+    assert bare[1] > 500.0 * bare[0] and bare[2] > 500.0 * bare[1]
+    faded = [_squashed_hinge_forces(h, True) for h in heights]
+    for (f, grad, _), h in zip(faded, heights):
+        assert np.all(np.isfinite(f)) and np.abs(f).max() < 1e4 * h
+        assert np.abs(grad).max() < 20.0
+        np.testing.assert_allclose(f.sum(axis=0), 0.0, atol=1e-12)
+        assert np.abs(_squashed_hinge_forces(h, True, speed=1.0)[0]).max() < 100.0
+    # above the fade: the same forces and Jacobian as a spring that never fades
+    h = 2.0 * FADE_AREA
+    (f, grad, springs), (f0, grad0, _) = (_squashed_hinge_forces(h, True, 1.0),
+                                          _squashed_hinge_forces(h, False, 1.0))
+    assert np.array_equal(f, f0) and np.array_equal(grad, grad0)
+    # the energy fades with it: a squashed hinge stores nearly none, whatever its angle
+    x = np.array([[0, 0, 0], [1, 0, 0], [0.5, 1e-6 * np.cos(1.0), 1e-6 * np.sin(1.0)],
+                  [0.5, -1, 0]], float)
+    assert springs.energy(x) < 1e-9
 
 
 @pytest.mark.parametrize("rest", [0.0, 0.6, -1.2])
