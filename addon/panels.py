@@ -400,6 +400,7 @@ class PHYSANIM_PT_scene(bpy.types.Panel):
         layout.prop(s, "time_scale")
         layout.prop(s, "substeps")
         layout.prop(s, "integrator")
+        layout.prop(s, "spring_substeps")
         layout.prop(s, "rigid_substeps")
         if s.integrator == 'RK45':
             layout.prop(s, "tolerance")

@@ -395,7 +395,7 @@ class PHYSANIM_PG_spring_mesh(bpy.types.PropertyGroup):
                                          "at any step; Implicit BDF2 too, with far less damping; "
                                          "explicit methods need small steps")
     substeps: IntProperty(name="Substeps", min=0, max=1000, default=0, options=STATIC,
-                          description="Steps per frame (0 = the scene's)")
+                          description="Steps per frame (0 = the scene's Spring Mesh Substeps)")
     bake_hash: StringProperty(name="Bake Hash", options={'HIDDEN'})
 
 
@@ -441,6 +441,11 @@ class PHYSANIM_PG_scene(bpy.types.PropertyGroup):
                           description="Simulation steps per frame", options=STATIC)
     integrator: EnumProperty(name="Integrator", items=INTEGRATOR_ITEMS, default='SYMPLECTIC_EULER',
                              options=STATIC)
+    spring_substeps: IntProperty(
+        name="Spring Mesh Substeps", default=1, min=1, max=1000, soft_max=50, options=STATIC,
+        description="Implicit steps per frame for spring meshes (more: less numerical damping, "
+                    "slower; a mesh attached to rigid bodies it moves takes at least 2; a mesh's "
+                    "own Substeps overrides this)")
     rigid_substeps: IntProperty(name="Rigid Body Substeps", default=8, min=1, max=1000,
                                 soft_max=50, options=STATIC,
                                 description="Contact solver steps per frame for rigid bodies "

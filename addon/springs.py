@@ -148,7 +148,7 @@ class SpringMeshBake:
             builder.add_attachment(attachment(c, weights, len(rest), frame))
         self.model = builder.finalize(frame)
         integrator = s.integrator if p.integrator == 'SCENE' else p.integrator
-        substeps = p.substeps or s.substeps
+        substeps = p.substeps or s.spring_substeps
         self.solver = SpringMeshSolver(self.model, integrator, substeps, s.tolerance,
                                        convert.seconds_per_frame(self.scene), frame,
                                        limits.bounds(self.scene), self.colliders)

@@ -48,7 +48,7 @@ def build(scene) -> None:
     ground = scene.objects["Ground"].physanim.collider
     ground.restitution, ground.friction, ground.thickness = 0.0, 0.6, 0.005
     scene.physanim.integrator = 'IMPLICIT'
-    scene.physanim.substeps = 2
+    scene.physanim.spring_substeps = 2
 
 
 def check(scene) -> list[str]:

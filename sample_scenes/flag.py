@@ -58,7 +58,7 @@ def build(scene) -> None:
     f.strength = 12.0  # N/m^2 (about a 4.5 m/s breeze: 0.5 rho v^2)
     f.noise, f.noise_scale, f.noise_speed = 0.8, 1.5, 0.8
     scene.physanim.integrator = 'IMPLICIT'
-    scene.physanim.substeps = 2
+    scene.physanim.spring_substeps = 2
 
 
 def check(scene) -> list[str]:

@@ -50,7 +50,7 @@ def build(scene, shear: bool = True, angular: bool = True) -> None:
     g = scene.objects["Ground"].physanim.collider
     g.restitution, g.friction = 0.2, 0.8
     scene.physanim.integrator = 'IMPLICIT'
-    scene.physanim.substeps = 4
+    scene.physanim.spring_substeps = 4
 
 
 def volumes(scene, frames) -> np.ndarray:

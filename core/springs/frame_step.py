@@ -35,6 +35,7 @@ class FrameStep:
     conditions: sleep_.Conditions | None = None  # what its sub-steps depend on (:mod:`.sleep`)
     asleep: bool = False  # the mesh sleeps through the interval: its sub-steps do nothing
     start: np.ndarray | None = None  # (n, 3) positions at the interval's start (for sleeping)
+    substeps: int = 1  # sub-steps of this interval (more than asked when coupled: the solver's)
 
 
 class SpringMeshSystem(SolverSystem):
@@ -47,6 +48,12 @@ class SpringMeshSystem(SolverSystem):
 
     def inputs(self, frame: WorldFrame, drive: SpringDrive | None) -> SpringFrameInputs:
         return SpringFrameInputs.of(frame, drive)
+
+    def begin_frame(self, frame: WorldFrame, paths, own) -> None:
+        """Begin the interval; it takes the sub-steps the solver chose for it (a mesh coupled
+        to bodies takes at least COUPLED_SUBSTEPS: :meth:`.solver.SpringMeshSolver.begin_frame`)."""
+        super().begin_frame(frame, paths, own)
+        self.substeps = self._step.substeps
 
     def report(self, step: FrameStep) -> int:
         return step.hits

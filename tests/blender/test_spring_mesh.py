@@ -33,7 +33,7 @@ def _scene(start: int = FRAME_START, end: int = FRAME_END, substeps: int = 2,
     scene = bpy.context.scene
     scene.frame_start, scene.frame_end = 1, end + 3
     scene.physanim.frame_start, scene.physanim.frame_end = start, end
-    scene.physanim.substeps = substeps
+    scene.physanim.spring_substeps = substeps
     scene.physanim.integrator = integrator
     scene.render.fps, scene.render.fps_base = 24, 1.0
     scene.use_gravity = True

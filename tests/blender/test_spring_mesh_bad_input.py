@@ -34,7 +34,7 @@ def _scene(integrator: str = 'IMPLICIT'):
     scene = bpy.context.scene
     scene.frame_start, scene.frame_end = 1, FRAME_END + 2
     scene.physanim.frame_start, scene.physanim.frame_end = FRAME_START, FRAME_END
-    scene.physanim.substeps = 2
+    scene.physanim.spring_substeps = 2
     scene.physanim.integrator = integrator
     scene.render.fps, scene.render.fps_base = 24, 1.0
     scene.frame_set(FRAME_START)
