@@ -175,7 +175,7 @@ def run_physanim_dropped(grid: int, frames: int, folder: str, suzanne: bool = Fa
     took = time.perf_counter() - start
     p = ob.physanim.spring_mesh
     integrator = scene.physanim.integrator if p.integrator == 'SCENE' else p.integrator
-    settings = f"{integrator.lower()}, {p.substeps or scene.physanim.substeps} substeps"
+    settings = f"{integrator.lower()}, {p.substeps or scene.physanim.spring_substeps} substeps"
     scene.frame_set(frames)
     x = world_vertices(ob)
     problems = [] if result == {'FINISHED'} else ["physanim: bake failed"]
@@ -276,11 +276,11 @@ def run_physanim(grid: int, frames: int, folder: str, mode: str):
         p.shear_stiffness, p.shear_damping = STIFFNESS / 5.0, 0.01
         p.bend_mode, p.bend_stiffness, p.bend_damping = 'ANGULAR', 1e-3, 1e-5
         p.drag = 0.5
-        scene.physanim.integrator, scene.physanim.substeps = 'IMPLICIT', 1
+        scene.physanim.integrator, scene.physanim.spring_substeps = 'IMPLICIT', 1
     if mode == "bdf2":
         p.integrator, p.substeps = 'BDF2', 1
     integrator = scene.physanim.integrator if p.integrator == 'SCENE' else p.integrator
-    settings = f"{integrator.lower()}, {p.substeps or scene.physanim.substeps} substeps"
+    settings = f"{integrator.lower()}, {p.substeps or scene.physanim.spring_substeps} substeps"
     bpy.ops.wm.save_as_mainfile(filepath=str(Path(folder) / "cloth.blend"))
     start = time.perf_counter()
     result = bpy.ops.physanim.bake()

@@ -112,7 +112,7 @@ def run_physanim(grid: int, frames: int, folder: str, helper: bool = True):
     result = bpy.ops.physanim.bake()
     took = time.perf_counter() - start
     problems = [] if result == {'FINISHED'} else ["physanim: bake failed"]
-    return took, _frames(scene, ob, frames), problems, scene.physanim.substeps
+    return took, _frames(scene, ob, frames), problems, scene.physanim.spring_substeps
 
 
 def main(argv: list[str]) -> int:
