@@ -7,6 +7,8 @@ or assemble it sparse (the spring meshes' Baraff-Witkin stepper).
 - :func:`projected_pcg`: symmetric positive definite ``A`` with some directions prescribed
   (Baraff & Witkin's filtered conjugate gradients): preconditioned CG on the unknowns a
   projection leaves free.
+- :func:`best_start`: its first guess from the solutions of earlier systems of a sequence (the
+  steps of a simulation): their combination closest to the new solution (Fischer 1998).
 """
 from __future__ import annotations
 
@@ -19,6 +21,7 @@ from ..errors import SimulationError
 from .base import non_finite
 
 Product = Callable[[np.ndarray], np.ndarray]
+MAX_CONDITION = 1e10  # of best_start's k x k system: beyond, its coefficients are rounding
 
 
 def bicgstab(
@@ -142,3 +145,38 @@ def projected_pcg(
         p += z
         rz = rz_new
     return x, max_iterations, residual
+
+
+def best_start(matvec: Product, b: np.ndarray, project: Product,
+               candidates: list[np.ndarray]) -> np.ndarray:
+    """The combination of ``candidates`` (earlier solutions of systems like this one, newest
+    first, each projected here) closest to the solution of ``A x = b`` in the A-norm — the
+    Galerkin projection onto their span (Fischer 1998, for sequences of right-hand sides):
+    solves (U^T A U) c = U^T b for the k coefficients c, k products with ``A``. Contains the
+    newest candidate alone and every extrapolation of them, so it is never a worse start in the
+    A-norm than any of those. Where the candidates are nearly dependent (a motion changing
+    little from step to step: the k x k system singular, indefinite or conditioned beyond
+    MAX_CONDITION, its coefficients rounding) it is the newest extrapolated along the one
+    before, 2 u0 - u1 (the newest alone when there is one).
+
+    Args: matvec, project: as :func:`projected_pcg`'s. b: the right-hand side (projected).
+    candidates: newest first, each of b's shape (not changed)."""
+    u = [project(np.array(c, dtype=np.float64)) for c in candidates]
+    fallback = 2.0 * u[0] - u[1] if len(u) > 1 else u[0]
+    au = [project(matvec(c)) for c in u]
+    gram = np.array([[float(np.vdot(a, c)) for c in u] for a in au])
+    rhs = np.array([float(np.vdot(c, b)) for c in u])
+    gram = 0.5 * (gram + gram.T)  # (symmetric up to rounding)
+    try:
+        np.linalg.cholesky(gram)  # positive definite: the candidates independent
+        if np.linalg.cond(gram) > MAX_CONDITION:
+            return fallback
+        coefficient = np.linalg.solve(gram, rhs)
+    except np.linalg.LinAlgError:
+        return fallback
+    if not np.all(np.isfinite(coefficient)):
+        return fallback
+    out = coefficient[0] * u[0]
+    for k, c in zip(coefficient[1:], u[1:]):
+        out += k * c
+    return out

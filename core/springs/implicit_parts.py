@@ -199,7 +199,8 @@ class StepMemory:
     speeds the next step up.
 
     Attributes:
-        warm: the last two steps' solutions dv (n, 3), newest first: the next first guess.
+        warm: the last steps' solutions dv (n, 3), newest first (BaraffWitkin.WARM_HISTORY of
+            them): the next first guess.
         warm_t: the step time [s] of ``warm[0]``.
         smooth: for each of them, whether its step pressed no vertex on a collider.
         end: ``(x, v, energy)`` at the end of the last step, when the Newton check computed it.
