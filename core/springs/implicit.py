@@ -29,8 +29,8 @@ from ..transforms import inverse3, scale_rows
 from .contact_friction import beyond_cone, contact_filter, kinetic_stop, on_bodies, released
 from .implicit_parts import (BaraffWitkinSystem, BlockJacobi, Linearisation, MatrixFree,
                              NewtonResult, SolvePattern, StepMemory, VelocityFilter,
-                             diagonal_filter, filter_blocks, filtered_diagonal,
-                             filtered_one_normal, loosened, positions_and_velocities)
+                             filtered_matrix, loosened,
+                             positions_and_velocities)
 from .multigrid import AggregationHierarchy
 from .sparse import BlockMatrix, BlockPattern, MatrixBuilder
 
@@ -469,36 +469,7 @@ class BaraffWitkin(Integrator):
             blk.add_to(builder, -h * h, -h)
         return builder.finish()
 
-    @staticmethod
-    def _filtered(matrix, free, pressed, normal, diagonal=None):
-        """The matrix CG really solves with: S A S + (I - S), S removing each vertex's
-        constrained directions (all three for a pinned vertex, the normal for a pressed one) —
-        what the preconditioner must approximate; a hierarchy built on A itself would move
-        constrained vertices with their aggregates and lose most of its power when many are
-        constrained (cloth landing on a collider). ``diagonal``: S's diagonal when S is one
-        (:func:`~.implicit_parts.diagonal_filter`; found here when not given)."""
-        constrained = ~free
-        constrained[pressed] = True
-        if not constrained.any():
-            return matrix
-        if diagonal is None:
-            diagonal = diagonal_filter(free, pressed, normal)
-        if diagonal is not None:
-            return filtered_diagonal(matrix, diagonal, constrained)
-        if not len(pressed) or (normal == normal[0]).all():  # pins only, or a flat ground
-            return filtered_one_normal(matrix, free, pressed,
-                                       normal[0] if len(pressed) else np.zeros(3), constrained)
-        p = matrix.pattern
-        s = filter_blocks(free, pressed, normal)
-        # only blocks in a constrained vertex's row or column change
-        row, col = np.nonzero(constrained[:, None] | constrained[p.neighbours])
-        data = matrix.data.copy()
-        blocks = data.reshape(p.n, 3, p.width, 3)
-        other = p.neighbours[row, col]
-        blocks[row, :, col, :] = np.matmul(np.matmul(s[row], blocks[row, :, col, :]), s[other])
-        fixed = np.nonzero(constrained)[0]
-        blocks[fixed, :, p.diagonal_slot[fixed] % p.width, :] += np.eye(3) - s[fixed]
-        return BlockMatrix(p, data)
+    _filtered = staticmethod(filtered_matrix)  # (the matrix CG solves: implicit_parts)
 
     def _preconditioner(self, matrix, free):
         """u -> approximately A^-1 u: one aggregation-multigrid V-cycle (:mod:`.multigrid`;

@@ -256,7 +256,7 @@ class BlockJacobi:
 
 
 def filtered_diagonal(matrix, diagonal, constrained):
-    """The implicit step's filtered matrix S A S + (I - S) (``BaraffWitkin._filtered``) for a
+    """The implicit step's filtered matrix S A S + (I - S) (:func:`filtered_matrix`) for a
     diagonal S (``diagonal`` (n, 3)): (S_r B S_c)_ij = d_r,i B_ij d_c,j, two passes over the
     matrix."""
     p = matrix.pattern
@@ -270,7 +270,7 @@ def filtered_diagonal(matrix, diagonal, constrained):
 
 
 def filtered_one_normal(matrix, free, pressed, n, constrained):
-    """``BaraffWitkin._filtered`` when every pressed vertex has the same normal ``n`` (3,): with
+    """:func:`filtered_matrix` when every pressed vertex has the same normal ``n`` (3,): with
     S = f I - p n n^T per vertex (f: free, p: pressed), S_r B S_c = f_r f_c B
     - f_c p_r n (n^T B) - f_r p_c (B n) n^T + p_r p_c (n^T B n) n n^T, a few passes over
     the whole matrix instead of two 3 x 3 products per block (a third of the time)."""
@@ -330,3 +330,34 @@ def loosened(first: tuple, constraints: VelocityFilter, released: np.ndarray) ->
                       constraints.normal[sliding])[released]
     block = s @ matrix.diagonal(released) @ s + (np.eye(3) - s)
     return blocks, rhs, matrix, precondition.with_fine(released, inverse3(block))
+
+
+def filtered_matrix(matrix, free, pressed, normal, diagonal=None):
+    """The matrix CG really solves with: S A S + (I - S), S removing each vertex's
+    constrained directions (all three for a pinned vertex, the normal for a pressed one) —
+    what the preconditioner must approximate; a hierarchy built on A itself would move
+    constrained vertices with their aggregates and lose most of its power when many are
+    constrained (cloth landing on a collider). ``diagonal``: S's diagonal when S is one
+    (:func:`diagonal_filter`; found here when not given)."""
+    constrained = ~free
+    constrained[pressed] = True
+    if not constrained.any():
+        return matrix
+    if diagonal is None:
+        diagonal = diagonal_filter(free, pressed, normal)
+    if diagonal is not None:
+        return filtered_diagonal(matrix, diagonal, constrained)
+    if not len(pressed) or (normal == normal[0]).all():  # pins only, or a flat ground
+        return filtered_one_normal(matrix, free, pressed,
+                                   normal[0] if len(pressed) else np.zeros(3), constrained)
+    p = matrix.pattern
+    s = filter_blocks(free, pressed, normal)
+    # only blocks in a constrained vertex's row or column change
+    row, col = np.nonzero(constrained[:, None] | constrained[p.neighbours])
+    data = matrix.data.copy()
+    blocks = data.reshape(p.n, 3, p.width, 3)
+    other = p.neighbours[row, col]
+    blocks[row, :, col, :] = np.matmul(np.matmul(s[row], blocks[row, :, col, :]), s[other])
+    fixed = np.nonzero(constrained)[0]
+    blocks[fixed, :, p.diagonal_slot[fixed] % p.width, :] += np.eye(3) - s[fixed]
+    return BlockMatrix(p, data)
