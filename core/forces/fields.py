@@ -49,6 +49,14 @@ class Gravity:
             np.multiply(p.mass, g, out=out[:, k])
         return out
 
+    def acceleration(self, n: int, out: np.ndarray | None = None) -> np.ndarray:
+        """(n, 3) g, the acceleration of a point that gravity alone pulls (into ``out``), by
+        columns as :meth:`force`."""
+        out = np.empty((n, 3)) if out is None else out
+        for k, g in enumerate(self.g):
+            out[:, k] = g
+        return out
+
 
 @dataclass(frozen=True)
 class Drag:

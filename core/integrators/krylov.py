@@ -80,6 +80,7 @@ def bicgstab(
 def projected_pcg(
     matvec: Product, b: np.ndarray, precondition: Product, project: Product, rtol: float,
     max_iterations: int, start: np.ndarray | None = None, scale: float | None = None,
+    start_product: np.ndarray | None = None,
 ) -> tuple[np.ndarray, int, float]:
     """Filtered preconditioned conjugate gradients (Baraff & Witkin 1998): solve ``A x = b`` on
     the directions ``project`` leaves free, for ``A`` symmetric positive definite there.
@@ -93,6 +94,9 @@ def projected_pcg(
             iterate lowers the A-norm of the error, so a capped solve is still usable).
         start: first guess (projected here), or None for zero; a guess with a larger
             r . M^-1 r than zero's is not used.
+        start_product: ``project(A start)`` when known (:func:`galerkin_start`'s), for a guess
+            known to be no worse than zero in the A-norm: used as it is, without a product
+            or the comparison with zero.
 
     Returns:
         ``(x, iterations, relative residual |r| / scale)``.
@@ -107,6 +111,8 @@ def projected_pcg(
     z = None
     if start is None:
         x, r = np.zeros_like(b), b.copy()
+    elif start_product is not None:
+        x, r = project(start), b - start_product
     else:
         x = project(start)
         r = b - project(matvec(x))
@@ -149,6 +155,12 @@ def projected_pcg(
 
 def best_start(matvec: Product, b: np.ndarray, project: Product,
                candidates: list[np.ndarray]) -> np.ndarray:
+    """:func:`galerkin_start`'s guess alone."""
+    return galerkin_start(matvec, b, project, candidates)[0]
+
+
+def galerkin_start(matvec: Product, b: np.ndarray, project: Product,
+                   candidates: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray | None]:
     """The combination of ``candidates`` (earlier solutions of systems like this one, newest
     first, each projected here) closest to the solution of ``A x = b`` in the A-norm — the
     Galerkin projection onto their span (Fischer 1998, for sequences of right-hand sides):
@@ -160,7 +172,12 @@ def best_start(matvec: Product, b: np.ndarray, project: Product,
     before, 2 u0 - u1 (the newest alone when there is one).
 
     Args: matvec, project: as :func:`projected_pcg`'s. b: the right-hand side (projected).
-    candidates: newest first, each of b's shape (not changed)."""
+    candidates: newest first, each of b's shape (not changed).
+
+    Returns ``(guess, project(A guess))``; the product (from the candidates' own, no further
+    product with ``A``) only for the Galerkin combination, which is never a worse start than
+    zero in the A-norm either (its error's squared A-norm is zero's less c^T U^T A U c), so
+    :func:`projected_pcg` may take it as it is (``start_product``); None for the fallback."""
     u = [project(np.array(c, dtype=np.float64)) for c in candidates]
     fallback = 2.0 * u[0] - u[1] if len(u) > 1 else u[0]
     au = [project(matvec(c)) for c in u]
@@ -170,13 +187,14 @@ def best_start(matvec: Product, b: np.ndarray, project: Product,
     try:
         np.linalg.cholesky(gram)  # positive definite: the candidates independent
         if np.linalg.cond(gram) > MAX_CONDITION:
-            return fallback
+            return fallback, None
         coefficient = np.linalg.solve(gram, rhs)
     except np.linalg.LinAlgError:
-        return fallback
+        return fallback, None
     if not np.all(np.isfinite(coefficient)):
-        return fallback
-    out = coefficient[0] * u[0]
-    for k, c in zip(coefficient[1:], u[1:]):
+        return fallback, None
+    out, product = coefficient[0] * u[0], coefficient[0] * au[0]
+    for k, c, a in zip(coefficient[1:], u[1:], au[1:]):
         out += k * c
-    return out
+        product += k * a
+    return out, product

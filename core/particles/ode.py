@@ -46,8 +46,11 @@ class ParticleOde:
     def acceleration(self, t: float, x: np.ndarray, v: np.ndarray,
                      out: np.ndarray | None = None) -> np.ndarray:
         """(n, 3) the accelerations at positions ``x`` and velocities ``v`` (into ``out``)."""
-        view = ParticleView(x, v, self.state.particle_mass, t)
         forces = self.forces
+        if len(forces) == 1 and isinstance(forces[0], Gravity) and self.constraints is None \
+                and not len(self.contact.contacts):  # g itself: no m g / m, no accumulator
+            return forces[0].acceleration(len(x), out)
+        view = ParticleView(x, v, self.state.particle_mass, t)
         if forces and isinstance(forces[0], Gravity):  # the accumulator starts as m g
             f = forces[0].force(view)
             forces = forces[1:]

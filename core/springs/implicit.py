@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..integrators import Integrator, StepReport
-from ..integrators.krylov import best_start, projected_pcg
+from ..integrators.krylov import galerkin_start, projected_pcg
 from ..transforms import inverse3, scale_rows
 from .contact_friction import beyond_cone, contact_filter, kinetic_stop, on_bodies, released
 from .implicit_parts import (BaraffWitkinSystem, BlockJacobi, Linearisation, MatrixFree,
@@ -357,12 +357,14 @@ class BaraffWitkin(Integrator):
         is relative to)``."""
         b = constraints.project(linear.rhs - (linear.apply_a(known) if np.any(known) else 0.0))
         scale = max(float(np.sqrt(np.sum(b * b))), floor)
+        product = None  # project(A start), where known
         if start is not None and len(start) > 1:
-            start = best_start(linear.apply_a, b, constraints.project, start)
+            start, product = galerkin_start(linear.apply_a, b, constraints.project, start)
         elif start is not None:
             start = start[0]
         return (*projected_pcg(linear.apply_a, b, linear.precondition, constraints.project,
-                               self.tolerance, self.max_iterations, start, scale), scale)
+                               self.tolerance, self.max_iterations, start, scale, product),
+                scale)
 
     def _apply_friction(self, system: BaraffWitkinSystem, v1: np.ndarray,
                         constraints: VelocityFilter, newton: NewtonResult, floor: float,
@@ -399,7 +401,7 @@ class BaraffWitkin(Integrator):
 
     # --- memory between steps ------------------------------------------------------------------
     def _first_guess(self, shape, t: float) -> list[np.ndarray] | None:
-        """Warm start for dv, as guesses for :func:`~physanim.core.integrators.krylov.best_start` to
+        """Warm start for dv, as guesses for :func:`~physanim.core.integrators.krylov.galerkin_start` to
         combine: the last steps' solutions (up to WARM_HISTORY) while none of them pressed a
         vertex on a collider (smooth motion changes dv smoothly: a hanging cloth swinging took
         6,909 CG iterations over the pinned benchmark from the last solution extrapolated along

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from physanim.core.integrators.krylov import best_start, projected_pcg
+from physanim.core.integrators.krylov import best_start, galerkin_start, projected_pcg
 
 
 def _system(seed: int = 0, n: int = 30):
@@ -66,3 +66,22 @@ def test_dependent_candidates_give_the_newest_extrapolated():
         expected = 2.0 * c - others[0]
         np.testing.assert_allclose(best_start(matvec, b, project, [c, *others]), expected,
                                    rtol=1e-12)
+        # (no product to hand on: CG judges the extrapolation against zero itself)
+        assert galerkin_start(matvec, b, project, [c, *others])[1] is None
+
+
+def test_galerkin_start_hands_on_its_product_and_cg_solves_from_it_as_from_the_guess():
+    """The product galerkin_start returns is project(A guess), made from the candidates'
+    own products; CG started with it reaches the solution as CG started from the guess
+    alone (which computes that product itself)."""
+    matvec, project, b, rng = _system(3)
+    exact = projected_pcg(matvec, b, lambda r: r.copy(), project, 1e-13, 500)[0]
+    candidates = [exact + 0.05 * k * rng.normal(size=exact.shape) for k in (1, 2, 3)]
+    guess, product = galerkin_start(matvec, b, project, candidates)
+    np.testing.assert_allclose(product, project(matvec(guess)), rtol=1e-12, atol=1e-12)
+    plain = projected_pcg(matvec, b, lambda r: r.copy(), project, 1e-10, 500, guess.copy())
+    handed = projected_pcg(matvec, b, lambda r: r.copy(), project, 1e-10, 500, guess.copy(),
+                           None, product)
+    np.testing.assert_allclose(handed[0], exact, atol=1e-8)
+    np.testing.assert_allclose(handed[0], plain[0], atol=1e-8)
+    assert handed[1] <= plain[1] + 1
