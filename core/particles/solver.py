@@ -45,6 +45,9 @@ FIRST_ORDER = ("EULER", "SYMPLECTIC_EULER", "IMPLICIT")  # integrators whose rod
 MAX_PARTICLES = 50_000_000  # hard limit that keeps a bake inside memory (~5 GB of state)
 _NONE = np.zeros(0, np.int64)  # no particle (read only)
 _NONE.flags.writeable = False
+_NO_DEATHS = (np.zeros((0, 3)), np.zeros((0, 3)))  # an emitter's dead (x, v) in a sub-step
+for _a in _NO_DEATHS:
+    _a.flags.writeable = False
 
 
 @dataclass
@@ -155,8 +158,8 @@ class ParticleSolver:
                 raise PhysanimError(detail, obj=e.name, frame=inputs.frame, kind="emitter") from exc
         h = inputs.frame_dt / self.substeps
         self._check_stiffness(state, inputs, h)
-        g = np.asarray(inputs.gravity, dtype=np.float64)
-        g_norm = math.sqrt(float(g @ g))
+        gravity = tuple(float(c) for c in inputs.gravity)
+        g = np.array(gravity)
         tied = any(c.kind == TIE for ef in inputs.emitters for c in ef.constraints)
         ties = TieFrame(inputs, h) if tied else None
         if ties is not None and ties.coupled and self.settings.integrator != "SYMPLECTIC_EULER":
@@ -168,12 +171,12 @@ class ParticleSolver:
         alone = ties is None and not len(state.link_a) and \
             not any(ef.constraints for ef in inputs.emitters) and \
             all(e.link is None for e in model.emitters)  # (springs may be born mid-frame)
-        return _FrameStep(state, inputs, paths, h, g, 2.0 * g_norm * h + 1e-4,
+        return _FrameStep(state, inputs, paths, h, g, 2.0 * math.hypot(*gravity) * h + 1e-4,
                           [self._sample(state, inputs, i) for i in range(model.emitter_count)],
                           FrameReport(per_emitter_births=[0] * model.emitter_count), ties,
                           conditions(self.settings.integrator, g, h, inputs, paths, alone),
                           separable(self.settings.integrator, alone, inputs),
-                          Gravity(tuple(g.tolist())) if g.any() else None)
+                          Gravity(gravity) if any(gravity) else None)
 
     @staticmethod
     def _check_stiffness(state: ParticleState, inputs: FrameInputs, h: float) -> None:
@@ -222,9 +225,9 @@ class ParticleSolver:
                               step.rest)
         else:  # every particle at rest: the step leaves them as they are
             step.report.integrator_steps += 1
-        deaths = self._age_kill(state, h, inputs)
-        step.report.deaths += sum(len(d[0]) for d in deaths)
-        checked -= sum(len(d[0]) for d in deaths)
+        deaths, died = self._age_kill(state, h, inputs)
+        step.report.deaths += died
+        checked -= died
         alive = state.particle_count
         self._emit(state, inputs, step.births, deaths, s0, s1, step.g, step.report)
         self._rest.born(state.particle_count - alive)
@@ -406,23 +409,24 @@ class ParticleSolver:
                "weaker forces/springs")
         return SimulationError(msg, obj=emitter, frame=inputs.frame, kind="emitter")
 
-    def _age_kill(self, state: ParticleState, h: float, inputs):
-        """Age every particle by h; remove the dead. Returns per emitter (x, v) of the dead.
-        A dying particle's values are checked here (the sub-step's check comes after the
-        deaths): one that went non-finite is a blow-up, not a death."""
+    def _age_kill(self, state: ParticleState, h: float, inputs) -> tuple[list, int]:
+        """Age every particle by h; remove the dead. Returns per emitter (x, v) of the dead,
+        and how many died. A dying particle's values are checked here (the sub-step's check
+        comes after the deaths): one that went non-finite is a blow-up, not a death."""
         state.particle_age = state.particle_age + h
         dead = state.particle_age >= state.particle_life
-        deaths = [(np.zeros((0, 3)), np.zeros((0, 3)))] * self.model.emitter_count
-        if dead.any():
-            x, v = state.particle_x[dead], state.particle_v[dead]
-            if not (np.isfinite(x).all() and np.isfinite(v).all()):
-                raise self._blame(state, inputs, "", state.particle_x, state.particle_v)
-            for e in np.unique(state.particle_emitter[dead]):
-                sel = dead & (state.particle_emitter == e)
-                deaths[int(e)] = (state.particle_x[sel], state.particle_v[sel])
-            state.keep(~dead)
-            self._rest.keep(~dead)
-        return deaths
+        deaths = [_NO_DEATHS] * self.model.emitter_count
+        if not dead.any():
+            return deaths, 0
+        x, v = state.particle_x[dead], state.particle_v[dead]
+        if not (np.isfinite(x).all() and np.isfinite(v).all()):
+            raise self._blame(state, inputs, "", state.particle_x, state.particle_v)
+        for e in np.unique(state.particle_emitter[dead]):
+            sel = dead & (state.particle_emitter == e)
+            deaths[int(e)] = (state.particle_x[sel], state.particle_v[sel])
+        state.keep(~dead)
+        self._rest.keep(~dead)
+        return deaths, len(x)
 
     def _emit(self, state, inputs, births, deaths, s0, s1, g, report) -> None:
         last = s1 >= 1.0
