@@ -50,6 +50,10 @@ else:  # the child process: this file run as a script
 MIN_POINTS = 20_000
 #: Seconds the child may take to start and import ``pxr`` before the bake writes without it.
 START_TIMEOUT = 30.0
+#: Seconds the child may go without saving a layer while the bake waits for its queue (a
+#: layer of a million points takes about a fifth of a second): beyond, it is taken for hung,
+#: killed, and the bake fails naming it — a farm job ends instead of waiting for ever.
+STALL_TIMEOUT = 120.0
 #: Children a bake runs for its layers at most (:func:`process_count`), unless the environment
 #: variable of that name sets how many.
 MAX_PROCESSES = 4
@@ -197,6 +201,7 @@ class UsdProcess:
         self._replies: queue.Queue[str | None] = queue.Queue()
         self._failure: str | None = None
         self._ready = False
+        self._queued = 0  # layers handed to the child and not yet saved
         self._proc = subprocess.Popen(
             [sys.executable, "-s", str(Path(__file__).resolve()), site], stdin=subprocess.PIPE,
             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, encoding="utf-8",
@@ -231,7 +236,9 @@ class UsdProcess:
                     reply = self._replies.get_nowait()
                 except queue.Empty:
                     return
-                if reply != "ok":
+                if reply == "saved":
+                    self._queued -= 1
+                elif reply != "ok":
                     self._failure = reply or "the USD writer process exited"
                     break
         raise OSError(self._failure.removeprefix("error: "))
@@ -244,21 +251,35 @@ class UsdProcess:
         try:
             self._proc.stdin.write(json.dumps([int(frame), str(npz), str(path)]) + "\n")
             self._proc.stdin.flush()
+            self._queued += 1
         except OSError:
             self._replies.put(None)
             self._raise_failure()
 
     def sync(self) -> None:
-        """Wait until every queued layer is saved; raises the first failure."""
+        """Wait until every queued layer is saved; raises the first failure, or an OSError
+        (the child killed) when it saves none for STALL_TIMEOUT seconds."""
         self._raise_failure()
         try:
             self._proc.stdin.write("sync\n")
             self._proc.stdin.flush()
         except OSError:
             self._replies.put(None)
-        reply = self._replies.get()
+        while (reply := self._reply()) == "saved":
+            self._queued -= 1
         if reply != "ok":
             self._failure = reply or "the USD writer process exited"
+            self._raise_failure()
+
+    def _reply(self) -> str | None:
+        """The child's next answer, waiting at most STALL_TIMEOUT seconds for it (else the
+        child is killed and the wait fails)."""
+        try:
+            return self._replies.get(timeout=STALL_TIMEOUT)
+        except queue.Empty:
+            self._proc.kill()
+            self._failure = (f"the USD writer process saved no layer in {STALL_TIMEOUT:g} s "
+                             f"({self._queued} waiting) and was stopped")
             self._raise_failure()
 
     def close(self, kill: bool = False) -> None:
@@ -274,7 +295,10 @@ class UsdProcess:
                 except OSError:
                     proc.kill()
         try:
-            proc.wait(timeout=None if not kill else 10)
+            if not kill and self._failure is None:  # it saves what is queued, then exits
+                while self._reply() is not None:
+                    pass
+            proc.wait(timeout=10)
         finally:
             for pipe in (proc.stdin, proc.stdout):
                 try:
@@ -351,7 +375,8 @@ def _save_layer(frame: int, npz: str, path: str, modules: tuple) -> None:
 
 def _serve(site: str) -> int:
     """The child: a line per layer (``[frame, npz, usdc]`` in JSON) or ``sync``; answers
-    ``ready`` once ``pxr`` imports, ``ok`` per ``sync``, ``error: ...`` and exits on a failure."""
+    ``ready`` once ``pxr`` imports, ``saved`` per layer, ``ok`` per ``sync``, ``error: ...``
+    and exits on a failure."""
     try:
         sys.path.append(site)
         from pxr import Sdf, Usd, UsdGeom, Vt
@@ -371,6 +396,7 @@ def _serve(site: str) -> int:
             print(f'error: USD points file "{path}" (frame {frame}) was not written: {exc}',
                   flush=True)
             return 1
+        print("saved", flush=True)  # (the bake knows it is still working)
     return 0
 
 

@@ -12,6 +12,7 @@ import os
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import bpy
@@ -614,3 +615,48 @@ def test_the_usd_process_names_a_layer_it_cannot_write(physanim_ext, tmp_path):
     writer.attach(process)
     writer.abort()
     assert process._proc.poll() is not None and not writer.partial_dir.exists()
+
+
+_HUNG_PXR = '''
+import time
+class _Stage:
+    @staticmethod
+    def CreateNew(path):
+        time.sleep(3600)  # a pxr that never finishes saving
+class Usd:
+    Stage = _Stage
+Sdf = UsdGeom = Vt = None
+'''
+
+
+def test_a_usd_process_that_hangs_fails_the_bake_instead_of_holding_it(physanim_ext, tmp_path,
+                                                                        monkeypatch):
+    """A child whose pxr never finishes a layer (a hung library, a dead network disk) is
+    killed once it has saved nothing for STALL_TIMEOUT seconds, and the wait for its queue —
+    at the bake's end, or when it is closed without one — fails naming it: a farm job ends
+    instead of waiting for ever, and the bake's files are thrown away as on any failure."""
+    usd_process = _addon(physanim_ext, "usd_process")
+    cache = sys.modules[f"{physanim_ext.__name__}.core.cache"]
+    site = tmp_path / "site"
+    (site / "pxr").mkdir(parents=True)
+    (site / "pxr" / "__init__.py").write_text(_HUNG_PXR)
+    monkeypatch.setattr(usd_process, "STALL_TIMEOUT", 1.5)
+    arrays = {"position": np.zeros((3, 3), np.float32), "id": np.arange(3)}
+    for ending in ("commit", "close"):
+        writer = cache.CacheWriter(tmp_path / "bake")
+        process = usd_process.UsdProcess(str(site))
+        writer.attach(process)
+        frame = writer.write_frame("points", 1, arrays)
+        writer.write_file("usd", "points_000001.usdc", process.save, (frame, 1))
+        start = time.monotonic()
+        with pytest.raises(OSError, match=r"saved no layer in 1\.5 s \(1 waiting\) and was stopped"):
+            if ending == "commit":
+                writer.commit({})
+            else:
+                while writer._pending:  # the layer handed to the child, not synced
+                    writer._pending.pop(0).result()
+                process.close()
+        assert time.monotonic() - start < 10.0
+        assert process._proc.poll() is not None  # killed
+        writer.abort()
+        assert not (tmp_path / "bake").exists() and not writer.partial_dir.exists()
