@@ -59,6 +59,20 @@ def spring_forces(l: np.ndarray, ldot: np.ndarray, rest, stiffness, damping):
     return f, u, length, safe
 
 
+class LastGeometry:
+    """The geometry a force computed last and the positions ``x`` it was computed at: a cache
+    of a pure function, which copies and pickles empty (a saved bake state holds none of it)."""
+
+    def __init__(self):
+        self.x = self.geometry = None
+
+    def __reduce__(self):
+        return type(self), ()
+
+    def __deepcopy__(self, memo):
+        return type(self)()
+
+
 @dataclass(frozen=True)
 class DampedSprings:
     """Damped springs between point pairs of one set (a spring mesh's edges, linked particles):
@@ -67,7 +81,8 @@ class DampedSprings:
 
     Args: i, j: (s,) point indices. rest: (s,) r [m]. stiffness, damping: ks [N/m] and kd
     [N s/m], per spring (s,) or one value for all (one set holds every family of a mesh with
-    its own constants).
+    its own constants). keep: keep the last positions' geometry (:meth:`geometry`; a set
+    asked several times at the same positions: a spring mesh's).
     """
 
     i: np.ndarray
@@ -75,6 +90,7 @@ class DampedSprings:
     rest: np.ndarray
     stiffness: np.ndarray
     damping: np.ndarray
+    keep: bool = False
 
     def __post_init__(self):
         count = len(self.i)
@@ -86,21 +102,34 @@ class DampedSprings:
         object.__setattr__(self, "pairs", np.stack([np.asarray(self.i, np.int64),
                                                     np.asarray(self.j, np.int64)], axis=1))
         object.__setattr__(self, "_flat", flat_index(np.concatenate([self.i, self.j])))
+        object.__setattr__(self, "_last", LastGeometry())
 
     def _l(self, a: np.ndarray) -> np.ndarray:
         return np.take(a, self.i, axis=0, mode="clip") - np.take(a, self.j, axis=0, mode="clip")
 
+    def geometry(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:func:`spring_geometry` of the springs at ``x``, from the last one while x is the
+        same: an implicit step asks at its start for the forces and the Jacobian, and the
+        energy at its end is the next step's start."""
+        if not self.__dict__.get("keep"):  # (a set saved before it could keep one: not)
+            return spring_geometry(self._l(x))
+        last = self._last
+        if last.x is None or not np.array_equal(last.x, x):
+            last.x, last.geometry = x.copy(), spring_geometry(self._l(x))
+        return last.geometry
+
     def apply(self, p: ParticleView, f_out: np.ndarray) -> None:
         if len(self.i) == 0:
             return
-        f, *_ = spring_forces(self._l(p.x), self._l(p.v), self.rest, self.stiffness,
-                              self.damping)
+        u, length, _ = self.geometry(p.x)
+        f = scale_rows(u, -(self.stiffness * (length - self.rest)
+                            + self.damping * dot_rows(self._l(p.v), u)))
         scatter_add(f_out, None, np.concatenate([f, -f]), self._flat)
 
     def linearize(self, p: ParticleView) -> LinearizedPairs:
         """Jacobian blocks at this state. The transverse stiffness (1 - r/|l|) is clamped at 0
         so a compressed spring never makes the implicit system indefinite (Choi & Ko)."""
-        u, _, safe = spring_geometry(self._l(p.x))
+        u, _, safe = self.geometry(p.x)
         transverse = np.maximum(0.0, 1.0 - self.rest / safe)
         # df/dx = -k [u u^T + t (I - u u^T)] = -k t I - k (1 - t) u u^T, df/dv = -kd u u^T
         return LinearizedPairs(self.pairs, u, -self.stiffness * transverse,
@@ -110,7 +139,7 @@ class DampedSprings:
         """0.5 sum ks (|l| - r)^2 [J]."""
         if len(self.i) == 0:
             return 0.0
-        _, length, _ = spring_geometry(self._l(x))
+        _, length, _ = self.geometry(x)
         stretch = length - self.rest
         return 0.5 * float(np.dot(self.stiffness, stretch * stretch))
 

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..forces import ParticleView
-from ..forces.springs import LinearizedVertices, flat_index, scatter_add
+from ..forces.springs import LastGeometry, LinearizedVertices, flat_index, scatter_add
 from ..transforms import dot_rows, scale_rows
 from . import topology
 
@@ -50,13 +50,21 @@ def dihedral_gradients(geometry: tuple) -> np.ndarray:
     :func:`topology.hinge_geometry`'s results (sharing its face normals)."""
     (x0, x1, x2, x3), e, length, n1, n2, _ = geometry
     safe = np.where(length > 1e-12, length, 1.0)
-    a1 = n1 / np.maximum(dot_rows(n1, n1), 1e-24)[:, None]
-    a2 = n2 / np.maximum(dot_rows(n2, n2), 1e-24)[:, None]
+    a1 = scale_rows(n1, 1.0 / np.maximum(dot_rows(n1, n1), 1e-24))
+    a2 = scale_rows(n2, 1.0 / np.maximum(dot_rows(n2, n2), 1e-24))
     grad = np.empty((len(length), 4, 3))
-    grad[:, 2] = -safe[:, None] * a1
-    grad[:, 3] = -safe[:, None] * a2
-    grad[:, 0] = -(dot_rows(x2 - x1, e) / safe)[:, None] * a1 - (dot_rows(x3 - x1, e) / safe)[:, None] * a2
-    grad[:, 1] = (dot_rows(x2 - x0, e) / safe)[:, None] * a1 + (dot_rows(x3 - x0, e) / safe)[:, None] * a2
+    scale_rows(a1, -safe, out=grad[:, 2])
+    scale_rows(a2, -safe, out=grad[:, 3])
+    # (by columns: numpy runs (h, 1) x (h, 3) broadcasts row by row, a third slower overall)
+    w20, w30 = dot_rows(x2 - x1, e) / safe, dot_rows(x3 - x1, e) / safe
+    w21, w31 = dot_rows(x2 - x0, e) / safe, dot_rows(x3 - x0, e) / safe
+    for k in range(3):
+        column = grad[:, 0, k]
+        np.multiply(a1[:, k], -w20, out=column)
+        column -= w30 * a2[:, k]
+        column = grad[:, 1, k]
+        np.multiply(a1[:, k], w21, out=column)
+        column += w31 * a2[:, k]
     return grad
 
 
@@ -164,18 +172,13 @@ class AngularSprings:
         return 0.5 * self.stiffness * float(np.vdot(turn, turn))
 
 
-class _LastGeometry:
-    """The hinge geometry :meth:`AngularSprings._geometry` computed last (a cache of a pure
-    function: copies and pickles empty, so a saved bake state holds none of it)."""
+class _LastGeometry(LastGeometry):
+    """The hinge geometry :meth:`AngularSprings._geometry` computed last, with its gradients
+    and fade (a cache: copies and pickles empty)."""
 
     def __init__(self):
-        self.x = self.geometry = self.grad = self.fade = None
-
-    def __reduce__(self):
-        return _LastGeometry, ()
-
-    def __deepcopy__(self, memo):
-        return _LastGeometry()
+        super().__init__()
+        self.grad = self.fade = None
 
 
 @dataclass(frozen=True)
