@@ -64,6 +64,7 @@ class _FrameStep:
     driven: np.ndarray | None = None  # indices of the bodies on their paths this frame
     joints: joint_step.JointStep | None = None
     model: RigidBodyModel | None = None  # the frame's: the joints with their keyed values
+    held: tuple = ()  # names of the bodies other systems gave impulses over the frame before
 
     @property
     def v(self) -> np.ndarray:
@@ -107,6 +108,7 @@ class RigidBodySolver:
         """Impulses other systems gave the bodies over the frame just ended
         (:func:`.reactions.absorb`)."""
         reactions_.absorb(self.model, state, reactions)
+        self._held = tuple(sorted({r.body for r in reactions}))
 
     def begin_frame(self, state: RigidBodyState, inputs: RigidFrameInputs, paths) -> _FrameStep:
         """Pose, find and prepare the frame's contacts."""
@@ -145,7 +147,8 @@ class RigidBodySolver:
         vel = np.concatenate([bodies.v, bodies.w], axis=1)
         step = _FrameStep(state, inputs, inputs.frame_dt / self.substeps, g, posed, rows, bodies,
                           np.concatenate([vel, np.zeros((len(framed), 6))]), inv_mass,
-                          RigidReport(), driven=kin)
+                          RigidReport(), driven=kin, held=getattr(self, "_held", ()))
+        self._held = ()
         bodies.excluded = np.union1d(model.joints.excluded_pairs(len(bodies)),
                                      _own_colliders(model.body_name, colliders[6], len(bodies)))
         fast = np.linalg.norm(bodies.v, axis=1) + np.linalg.norm(bodies.w, axis=1) * \
@@ -408,9 +411,22 @@ class RigidBodySolver:
         bad = self.bounds.violation(state.body_x, step.v[:self.model.body_count])
         if bad is not None:
             raise SimulationError(f"{bad[1]} — check the initial velocities, overlaps at the "
-                                  "start and gravity, or use more substeps",
+                                  f"start and gravity, or use more substeps{_held_hint(step)}",
                                   obj=self.model.body_name[bad[0]], frame=step.inputs.frame,
                                   kind="rigid body")
+
+
+def _held_hint(step: _FrameStep) -> str:
+    """What to try when bodies other systems hold blow up: those systems meet the bodies once
+    per sub-step of their own, after the bodies took their whole frame (a heavy body landing
+    on planks a rope holds drives them a frame's fall into the rope before it answers)."""
+    if not step.held:
+        return ""
+    many = len(step.held) > 1
+    named = f'"{step.held[0]}"' + (f" and {len(step.held) - 1} more hang" if many else " hangs")
+    return (f" — {named} on a spring mesh or particles, which hold {'them' if many else 'it'} "
+            "once per sub-step of their own: raise the Spring Mesh Substeps (Scene > PhysAnim, or the mesh's "
+            "Substeps) or the particles' Substeps")
 
 
 def _own_colliders(bodies: tuple, colliders: tuple, count: int) -> np.ndarray:
