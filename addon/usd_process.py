@@ -278,6 +278,10 @@ class UsdProcess:
             return self._replies.get(timeout=STALL_TIMEOUT)
         except queue.Empty:
             self._proc.kill()
+            try:
+                self._proc.wait(timeout=10)  # (gone: its exit collected)
+            except subprocess.TimeoutExpired:
+                pass
             self._failure = (f"the USD writer process saved no layer in {STALL_TIMEOUT:g} s "
                              f"({self._queued} waiting) and was stopped")
             self._raise_failure()
