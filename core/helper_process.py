@@ -32,9 +32,12 @@ from pathlib import Path
 START_TIMEOUT = 30.0
 #: Seconds the bake waits for an answer (for each part of it) before it takes the child for
 #: stuck — stopped, or waiting on something that will not come —, ends it and does the work
-#: itself: an answer takes milliseconds, its share of the bake's own work. (Not on Windows,
-#: whose pipes cannot be waited on with a time limit: there the bake waits.)
+#: itself: an answer takes milliseconds, its share of the bake's own work. (On Windows, whose
+#: pipes cannot be waited on with a time limit, a timer ends the child at the limit instead,
+#: which ends the wait.)
 ANSWER_TIMEOUT = 60.0
+#: Whether a pipe can be waited on with a time limit (``select``): not on Windows.
+_SELECT = os.name == "posix"
 #: Helpers alive at once at most (:func:`room`): each holds numpy and its task's data (about
 #: 40 MB), and a bake steps its meshes one after another, so more than the free cores gain
 #: nothing.
@@ -104,26 +107,45 @@ def _write(stream, message) -> None:
     stream.flush()
 
 
-def _read_fd(fd: int, timeout: float | None):
+def _read_fd(fd: int, timeout: float | None, stop=None):
     """The next message from the pipe ``fd`` (read directly: nothing is buffered ahead, so
     waiting on the pipe is waiting for the message); EOFError when the pipe ended,
-    TimeoutError when no part of it came within ``timeout`` seconds (None: no limit)."""
-    size, = _LENGTH.unpack(_read_bytes(fd, _LENGTH.size, timeout))
-    return pickle.loads(_read_bytes(fd, size, timeout))
+    TimeoutError when no part of it came within ``timeout`` seconds (None: no limit).
+    ``stop()`` ends the writer: where a pipe cannot be waited on with a limit (Windows), a
+    timer calls it at the limit, which ends the read (the pipe closes)."""
+    size, = _LENGTH.unpack(_read_bytes(fd, _LENGTH.size, timeout, stop))
+    return pickle.loads(_read_bytes(fd, size, timeout, stop))
 
 
-def _read_bytes(fd: int, size: int, timeout: float | None) -> bytes:
+def _read_bytes(fd: int, size: int, timeout: float | None, stop=None) -> bytes:
     parts, got = [], 0
     while got < size:
-        if timeout is not None and os.name == "posix" and \
-                not select.select([fd], [], [], timeout)[0]:
-            raise TimeoutError
-        chunk = os.read(fd, min(size - got, 1 << 20))
+        timer, fired = None, []
+        if timeout is not None and _SELECT:
+            if not select.select([fd], [], [], timeout)[0]:
+                raise TimeoutError
+        elif timeout is not None and stop is not None:
+            timer = threading.Timer(timeout, _expire, (fired, stop))
+            timer.daemon = True
+            timer.start()
+        try:
+            chunk = os.read(fd, min(size - got, 1 << 20))
+        finally:
+            if timer is not None:
+                timer.cancel()
+        if fired and not chunk:
+            raise TimeoutError  # (the timer ended the writer: the pipe closed)
         if not chunk:
             raise EOFError
         parts.append(chunk)
         got += len(chunk)
     return b"".join(parts)
+
+
+def _expire(fired: list, stop) -> None:
+    """(A timer) the read waited its limit: say so, and end the writer."""
+    fired.append(True)
+    stop()
 
 
 class Helper:
@@ -217,7 +239,8 @@ class Helper:
         of it for ANSWER_TIMEOUT seconds is ended (HelperError), as one that exited."""
         while True:
             try:
-                number, value = _read_fd(self._proc.stdout.fileno(), ANSWER_TIMEOUT)
+                number, value = _read_fd(self._proc.stdout.fileno(), ANSWER_TIMEOUT,
+                                         self._proc.kill)
             except TimeoutError as exc:
                 self.close()
                 raise HelperError("the helper process gave no answer within "

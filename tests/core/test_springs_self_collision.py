@@ -525,11 +525,14 @@ def test_a_helper_process_that_dies_is_replaced_by_the_bake_itself(monkeypatch):
     assert all(np.array_equal(a, b) for a, b in zip(alone, helped))
 
 
-def test_a_helper_process_that_stops_answering_is_ended_and_replaced(monkeypatch):
+@pytest.mark.parametrize("select", [True, False], ids=["select", "timer"])
+def test_a_helper_process_that_stops_answering_is_ended_and_replaced(monkeypatch, select):
     """The helper stopped mid-bake (alive, its pipe open, never answering: a hung child): the
     bake waits ANSWER_TIMEOUT for the next answer, ends the child and finds every pair itself
     from then on — the heap the same to the bit, the child gone, no wait after that one. (Run
-    on a thread: without the limit the bake would wait for good.)"""
+    on a thread: without the limit the bake would wait for good.) Both ways of limiting the
+    wait: ``select`` on the pipe, and where pipes have none (Windows) a timer that ends the
+    child at the limit."""
     import threading
     import time
 
@@ -537,13 +540,14 @@ def test_a_helper_process_that_stops_answering_is_ended_and_replaced(monkeypatch
 
     alone, _, _ = _heap_with_helper(monkeypatch, "0")
     monkeypatch.setattr(helper_process, "ANSWER_TIMEOUT", 0.5)
+    monkeypatch.setattr(helper_process, "_SELECT", select)
     out, waits = [], []
     wait = helper_process._read_bytes
 
-    def timed(fd, size, timeout):
+    def timed(fd, size, timeout, stop=None):
         start = time.perf_counter()
         try:
-            return wait(fd, size, timeout)
+            return wait(fd, size, timeout, stop)
         finally:
             if timeout is not None:  # (answers, not the child's start)
                 waits.append(time.perf_counter() - start)
