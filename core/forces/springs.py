@@ -47,14 +47,16 @@ def spring_geometry(l: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return divide_rows(l, safe), length, safe
 
 
-def spring_forces(l: np.ndarray, ldot: np.ndarray, rest, stiffness, damping):
+def spring_forces(l: np.ndarray | None, ldot: np.ndarray, rest, stiffness, damping,
+                  geometry: tuple | None = None):
     """Witkin & Baraff's damped spring, the one formula every spring here uses: the force on
     the first end, f = -[ks (|l| - r) + kd (l_dot . l)/|l|] l/|l| (the second end gets -f).
 
     Args: l, ldot: (s, 3) x_a - x_b and v_a - v_b. rest, stiffness, damping: (s,) or scalars.
+    geometry: :func:`spring_geometry` of l when known (then l is not read).
     Returns: (f (s, 3), u, |l|, safe |l|) as :func:`spring_geometry`.
     """
-    u, length, safe = spring_geometry(l)
+    u, length, safe = spring_geometry(l) if geometry is None else geometry
     f = scale_rows(u, -(stiffness * (length - rest) + damping * dot_rows(ldot, u)))
     return f, u, length, safe
 
@@ -121,9 +123,8 @@ class DampedSprings:
     def apply(self, p: ParticleView, f_out: np.ndarray) -> None:
         if len(self.i) == 0:
             return
-        u, length, _ = self.geometry(p.x)
-        f = scale_rows(u, -(self.stiffness * (length - self.rest)
-                            + self.damping * dot_rows(self._l(p.v), u)))
+        f, *_ = spring_forces(None, self._l(p.v), self.rest, self.stiffness, self.damping,
+                              self.geometry(p.x))
         scatter_add(f_out, None, np.concatenate([f, -f]), self._flat)
 
     def linearize(self, p: ParticleView) -> LinearizedPairs:

@@ -7,7 +7,7 @@ or assemble it sparse (the spring meshes' Baraff-Witkin stepper).
 - :func:`projected_pcg`: symmetric positive definite ``A`` with some directions prescribed
   (Baraff & Witkin's filtered conjugate gradients): preconditioned CG on the unknowns a
   projection leaves free.
-- :func:`best_start`: its first guess from the solutions of earlier systems of a sequence (the
+- :func:`galerkin_start`: its first guess from the solutions of earlier systems of a sequence (the
   steps of a simulation): their combination closest to the new solution (Fischer 1998).
 """
 from __future__ import annotations
@@ -21,7 +21,7 @@ from ..errors import SimulationError
 from .base import non_finite
 
 Product = Callable[[np.ndarray], np.ndarray]
-MAX_CONDITION = 1e10  # of best_start's k x k system: beyond, its coefficients are rounding
+MAX_CONDITION = 1e10  # of galerkin_start's k x k system: beyond, its coefficients are rounding
 
 
 def bicgstab(
@@ -151,12 +151,6 @@ def projected_pcg(
         p += z
         rz = rz_new
     return x, max_iterations, residual
-
-
-def best_start(matvec: Product, b: np.ndarray, project: Product,
-               candidates: list[np.ndarray]) -> np.ndarray:
-    """:func:`galerkin_start`'s guess alone."""
-    return galerkin_start(matvec, b, project, candidates)[0]
 
 
 def galerkin_start(matvec: Product, b: np.ndarray, project: Product,
