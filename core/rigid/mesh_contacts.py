@@ -1,24 +1,26 @@
 """Contacts with triangle meshes: Mesh colliders (a bowl, terrain, Suzanne: open or closed) and
 concave Mesh bodies (a ring, a torus knot: closed meshes that move).
 
-Two directions meet in each pair with a mesh, both through the mesh's hierarchy (built once
+Three kinds of points meet in each pair with a mesh, through the mesh's hierarchy (built once
 in the mesh's own frame: a rigid mesh never needs a refit) or, for a convex partner, its exact
 signed distance:
 
 * a convex body's contact points — a box's or hull's corners, a sphere's centre, a capsule's
   axis ends, with their radius — against the mesh's closest surface points;
-* a Mesh body's vertices against its partner: a convex shape's signed distance (sphere, box,
-  capsule, hull planes), another mesh's closest surface points (a Mesh body's or a Mesh
-  collider's), and a Mesh collider's vertices against a Mesh body the same way.
+* a mesh's vertices against its partner: a convex shape's signed distance (sphere, box,
+  capsule, hull planes), another mesh's closest surface points (a Mesh body's against a Mesh
+  body or collider, a Mesh collider's against a Mesh body);
+* a mesh's edges against a convex partner: the point along an edge deepest in the shape,
+  where that lies between the edge's ends (a ridge under a box's face, a box's edge across a
+  mesh edge, a capsule lying across a crest: no vertex of either is there).
 
 A point closer than its pair's margin becomes a contact along the partner's surface normal at
 the closest point. An open Mesh collider has no inside: its surface faces the side the other
 body's centre of mass is on, whatever the winding; a Mesh body, and a watertight Mesh collider
 wound outward, is closed and its outside is outside (a ring around a peg has its centre of mass
-inside the peg). Each pair keeps up to 3 places it touches at, each with at most 4 points (the widest
-support with the deepest point). What
-lies between vertices is not seen: a mesh ridge poking into a box's face between its corners,
-or two edges crossing between their ends (dense meshes leave small gaps).
+inside the peg). Each pair keeps up to 3 places it touches at, each with at most 4 points (the
+widest support with the deepest point). Between two meshes only vertices are seen: two of
+their edges crossing between their ends are not (dense meshes leave small gaps).
 """
 from __future__ import annotations
 
@@ -30,21 +32,24 @@ from ..transforms import cross
 from ..collision.build import build_bvh
 from ..collision.distance import closest_points
 from ..collision.mesh import TriangleMesh
-from .collide import (BOX_CORNERS, FEATURES, HALF_SPACE, SPECULATIVE, Found, approach,
-                      reduce_manifolds)
+from .collide import (BOX_CORNERS, FEATURES, HALF_SPACE, SPECULATIVE, SUPPORT_TOLERANCE, Found,
+                      approach, reduce_manifolds)
 from .model import BOX, CAPSULE, HULL, MESH, SPHERE
 
 
 SITES = 3  # places a pair with a mesh keeps apart, each with up to 4 points (:func:`_sites`)
 SITE_FRACTION = 0.5  # a site's reach: this fraction of the smaller body's bound radius
+EDGE_STEPS = 12  # cutting-plane steps for an edge's deepest point (:func:`_deepest_along`)
+EDGE_TOLERANCE = 1e-6  # [m] how close its distance is to the least one when it stops
+EDGE_END = 1e-3  # an edge's deepest point this near its ends is its end's (vertex) contact
 
 
 @dataclass(frozen=True)
 class MeshShape:
     """A mesh in its body's frame (from the body's x, unscaled): hierarchy, bounds (lo, hi
     (3,), grown by the thickness), vertices (v, 3), whether it is closed (its outside is
-    outside: a Mesh body, a watertight Mesh collider) and whether it is a rigid body's (a
-    collider's size says nothing about where it touches)."""
+    outside: a Mesh body, a watertight Mesh collider), whether it is a rigid body's (a
+    collider's size says nothing about where it touches) and its edges (:class:`MeshEdges`)."""
 
     bvh: object
     lo: np.ndarray
@@ -52,11 +57,41 @@ class MeshShape:
     vertices: np.ndarray
     closed: bool
     body: bool = False
+    edges: MeshEdges | None = None
 
     @property
     def radius(self) -> float:
         """[m] a sphere about the frame's origin holding the mesh (and its thickness)."""
         return float(np.linalg.norm(np.maximum(np.abs(self.lo), np.abs(self.hi))))
+
+
+@dataclass(frozen=True)
+class MeshEdges:
+    """A mesh's edges, each once: (e, 2) vertex pairs, the longest one's length [m], and for
+    each vertex the edges that end there (``around[start[v]:start[v + 1]]``)."""
+
+    pairs: np.ndarray
+    longest: float
+    start: np.ndarray
+    around: np.ndarray
+
+    @classmethod
+    def of(cls, vertices: np.ndarray, triangles: np.ndarray) -> MeshEdges:
+        t = np.asarray(triangles, np.int64).reshape(-1, 3)
+        both = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+        pairs = np.unique(np.sort(both, axis=1), axis=0)
+        length = np.linalg.norm(vertices[pairs[:, 1]] - vertices[pairs[:, 0]], axis=1)
+        ends = pairs.ravel()
+        order = np.argsort(ends, kind="stable")
+        start = np.searchsorted(ends[order], np.arange(len(vertices) + 1))
+        return cls(pairs, float(length.max(initial=0.0)), start, order // 2)
+
+    def touching(self, vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(which (k,), edge (k,)): the edges ending at each of ``vertices``."""
+        count = self.start[vertices + 1] - self.start[vertices]
+        which = np.repeat(np.arange(len(vertices)), count)
+        at = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
+        return which, self.around[np.repeat(self.start[vertices], count) + at]
 
 
 class MeshCache:
@@ -71,7 +106,8 @@ class MeshCache:
         known = self._known.get(name)
         if known is None or known[0] != key:
             mesh = TriangleMesh(vertices, triangles, name=name)
-            known = (key, build_bvh(mesh, "aabb"), watertight(vertices, triangles))
+            known = (key, build_bvh(mesh, "aabb"), watertight(vertices, triangles),
+                     MeshEdges.of(vertices, triangles))
             self._known[name] = known
         return known
 
@@ -83,9 +119,9 @@ class MeshCache:
         """A mesh's :class:`MeshShape`; a Mesh collider that is watertight and wound outward
         is closed too (a peg: a ring around it has its centre inside it)."""
         verts = np.asarray(vertices, dtype=np.float64)
-        _, bvh, tight = self._entry(name, verts, np.asarray(triangles, np.int64))
+        _, bvh, tight, edges = self._entry(name, verts, np.asarray(triangles, np.int64))
         return MeshShape(bvh, verts.min(axis=0) - thickness, verts.max(axis=0) + thickness,
-                         verts, body or tight, body)
+                         verts, body or tight, body, edges)
 
 
 def watertight(vertices: np.ndarray, triangles: np.ndarray) -> bool:
@@ -190,11 +226,11 @@ def _convex_on_mesh(bodies, rot, reach, g: int, mesh: MeshShape, near) -> _Point
                     SPECULATIVE + reach[owner] + reach[g])
 
 
-def _vertices_on(bodies, rot, reach, g: int, mesh: MeshShape, near) -> list[_Points]:
-    """Mesh g's vertices against the bodies ``near``: meshes (g a Mesh body or collider) by
-    their hierarchy, convex shapes (g a Mesh body) by their signed distance."""
+def _vertices_on(bodies, rot, reach, g: int, mesh: MeshShape, near,
+                 world: np.ndarray) -> list[_Points]:
+    """Mesh g's vertices (``world``: world positions) against the bodies ``near``: meshes (g
+    a Mesh body or collider) by their hierarchy, convex shapes by their signed distance."""
     out = []
-    world = bodies.x[g] + mesh.vertices @ rot[g].T
     for o in near[bodies.shape[near] == MESH]:
         other = bodies.meshes[int(o)]
         margin = SPECULATIVE + reach[g] + reach[o]
@@ -214,6 +250,103 @@ def _vertices_on(bodies, rot, reach, g: int, mesh: MeshShape, near) -> list[_Poi
         out.append(_Points(np.full(int(keep.sum()), g), convex[o][keep], v[keep],
                            world[v][keep], n_out[keep], sd[keep]))
     return out
+
+
+def _edges_on(bodies, rot, reach, g: int, mesh: MeshShape, near,
+              world: np.ndarray) -> _Points | None:
+    """Mesh g's edges (``world``: its vertices, world) against the convex bodies ``near``:
+    where an edge passes into a shape between its ends — a ridge under a box's face, a box's
+    edge across a mesh edge, a capsule lying across a crest — the point along it deepest in
+    the shape, which neither the shape's corners nor the mesh's vertices reach
+    (:func:`_deepest_along`)."""
+    convex = near[bodies.shape[near] != MESH]
+    edges = mesh.edges
+    if not len(convex) or edges is None or not len(edges.pairs):
+        return None
+    margin = SPECULATIVE + reach[g] + reach[convex]
+    ball = bodies.bound[convex] + margin
+    # an edge passing within ``ball`` of a centre has an end within ball + its length
+    o, v = within(world, bodies.x[convex], ball + edges.longest)
+    which, e = edges.touching(v)
+    count = len(edges.pairs)
+    key = np.unique(o[which] * count + e)
+    o, e = key // count, key % count
+    p0 = world[edges.pairs[e, 0]]
+    d = world[edges.pairs[e, 1]] - p0
+    c = bodies.x[convex[o]]
+    t = np.clip(np.einsum("ki,ki->k", c - p0, d) /
+                np.maximum(np.einsum("ki,ki->k", d, d), 1e-300), 0.0, 1.0)
+    close = np.linalg.norm(p0 + t[:, None] * d - c, axis=1) <= ball[o]
+    o, e, p0, d = o[close], e[close], p0[close], d[close]
+    limit = margin[o] + bodies.radius[g]  # (a Mesh collider's thickness)
+    t, sd, n_out = _deepest_along(bodies, rot, convex[o], p0, d, limit)
+    keep = (sd < limit) & (t > EDGE_END) & (t < 1.0 - EDGE_END)
+    return _Points(np.full(int(keep.sum()), g), convex[o][keep], len(world) + e[keep],
+                   p0[keep] + t[keep, None] * d[keep], n_out[keep],
+                   sd[keep] - bodies.radius[g])
+
+
+def _deepest_along(bodies, rot, rows: np.ndarray, p0: np.ndarray, d: np.ndarray,
+                   limit: np.ndarray):
+    """(t, signed distance, the shape's outward normal there) at the point p0 + t d, t in
+    [0, 1], where each segment goes deepest into the convex shape of body ``rows``; +inf
+    distance where that is at an end (the end's own test covers it) or surely not under
+    ``limit`` (k,). A convex shape's signed distance is convex along a line, and its slope
+    there is the shape's normal along d: from the ends' values and slopes the two tangent
+    lines meet at a lower bound of the least value; the distance there (Kelley's cutting
+    planes) replaces the end whose side the slope says the least value is not on, until the
+    value found is within EDGE_TOLERANCE of the bound — one step for a box, whose distance
+    is piecewise linear, a few for round shapes."""
+    k = len(rows)
+    f, n = convex_distance(bodies, rot, np.concatenate([rows, rows]), np.concatenate([p0, p0 + d]))
+    fa, fb = f[:k].copy(), f[k:].copy()
+    sa, sb = np.einsum("ki,ki->k", n[:k], d), np.einsum("ki,ki->k", n[k:], d)
+    a, b = np.zeros(k), np.ones(k)
+    best_t, best_f, best_n = np.zeros(k), np.full(k, np.inf), np.zeros((k, 3))
+    live = np.nonzero((sa < 0.0) & (sb > 0.0))[0]  # falling at the start, rising at the end
+    for _ in range(EDGE_STEPS):
+        if not len(live):
+            break
+        ta, tb = a[live], b[live]
+        t = (fb[live] - fa[live] + sa[live] * ta - sb[live] * tb) / (sa[live] - sb[live])
+        low = fa[live] + sa[live] * (t - ta)
+        t = np.clip(t, ta + 1e-9, tb - 1e-9)
+        ft, nt = convex_distance(bodies, rot, rows[live], p0[live] + t[:, None] * d[live])
+        st = np.einsum("ki,ki->k", nt, d[live])
+        better = ft < best_f[live]
+        hit = live[better]
+        best_t[hit], best_f[hit], best_n[hit] = t[better], ft[better], nt[better]
+        left = st < 0.0  # still falling: the least value lies beyond t
+        on = live[left]
+        a[on], fa[on], sa[on] = t[left], ft[left], st[left]
+        on = live[~left]
+        b[on], fb[on], sb[on] = t[~left], ft[~left], st[~left]
+        live = live[(ft - low > EDGE_TOLERANCE) & (low < limit[live])]
+    found = np.nonzero(best_f < limit)[0]
+    if len(found):
+        best_n[found] = _normal_across(bodies, rot, rows[found], p0[found], d[found],
+                                       best_t[found], best_n[found])
+    return best_t, best_f, best_n
+
+
+def _normal_across(bodies, rot, rows, p0, d, t, n):
+    """The contact normal where a segment goes deepest into a shape, at t: where two faces
+    meet there (the segment crossing a box's edge, a kink of the distance along it) the
+    shape's normal jumps from one face's to the other's, and the normal that pushes the
+    segment out is the blend of the two square to it (for two crossing edges, their common
+    perpendicular); elsewhere the shape's normal ``n`` there."""
+    k = len(rows)
+    step = EDGE_TOLERANCE / np.maximum(np.linalg.norm(d, axis=1), 1e-300)
+    ta, tb = np.maximum(t - step, 0.0), np.minimum(t + step, 1.0)
+    _, side = convex_distance(bodies, rot, np.concatenate([rows, rows]),
+                              np.concatenate([p0 + ta[:, None] * d, p0 + tb[:, None] * d]))
+    na, nb = side[:k], side[k:]
+    sa, sb = np.einsum("ki,ki->k", na, d), np.einsum("ki,ki->k", nb, d)
+    kink = (sa < 0.0) & (sb > 0.0)
+    blend = (sb[:, None] * na - sa[:, None] * nb) / np.where(kink, sb - sa, 1.0)[:, None]
+    size = np.linalg.norm(blend, axis=1)
+    use = kink & (size > 1e-9)
+    return np.where(use[:, None], blend / np.where(use, size, 1.0)[:, None], n)
 
 
 def within(points: np.ndarray, centres: np.ndarray, radii: np.ndarray):
@@ -290,25 +423,34 @@ def _unit_into(d: np.ndarray, sd, n, sel, add) -> None:
 def mesh_contacts(bodies, rot: np.ndarray, reach: np.ndarray, interval: float) -> Found:
     """Contacts of every pair with a mesh (Mesh colliders and Mesh bodies) and a dynamic side,
     at most 4 per pair (ranked by the least separation expected within ``interval`` [s])."""
-    parts = []
+    parts, edges = [], []
     for g, mesh in bodies.meshes.items():
         near = _near(bodies, rot, reach, g, mesh)
         if len(near):
+            world = bodies.x[g] + mesh.vertices @ rot[g].T
             parts.append(_convex_on_mesh(bodies, rot, reach, g, mesh, near))
-            parts += _vertices_on(bodies, rot, reach, g, mesh, near)
+            parts += _vertices_on(bodies, rot, reach, g, mesh, near, world)
+            edges.append(_edges_on(bodies, rot, reach, g, mesh, near, world))
     parts = [p for p in parts if p is not None and len(p.owner)]
-    if not parts:
+    edges = [p for p in edges if p is not None and len(p.owner)]
+    if not parts and not edges:
         return Found.join([])
-    owner, other, feature, p, n_out, sep = (np.concatenate([getattr(q, f) for q in parts])
+    owner, other, feature, p, n_out, sep = (np.concatenate([getattr(q, f) for q in parts + edges])
                                             for f in ("owner", "other", "feature", "p",
                                                       "normal", "separation"))
+    on_edge = np.arange(len(owner)) >= sum(len(q.owner) for q in parts)
     point = p - 0.5 * sep[:, None] * n_out
     n = len(bodies)
     pair = np.minimum(owner, other) * n + np.maximum(owner, other)
     rank = np.minimum(sep, sep + interval * approach(bodies, owner, other, point, n_out))
     size = bodies.bound.copy()
     size[[g for g, m in bodies.meshes.items() if not m.body]] = np.inf  # colliders: no size
-    site = _sites(pair, point, rank, SITE_FRACTION * np.minimum(size[owner], size[other]))
+    place = SITE_FRACTION * np.minimum(size[owner], size[other])
+    if on_edge.any():  # an edge's point where a vertex or corner already holds the place: left out
+        new = ~_covered(pair, point, rank, on_edge, place)
+        owner, other, feature, point, n_out, sep, pair, rank, place = (
+            a[new] for a in (owner, other, feature, point, n_out, sep, pair, rank, place))
+    site = _sites(pair, point, rank, place)
     sel = reduce_manifolds(pair * SITES + site, point, rank)
     owner, other, n_out = owner[sel], other[sel], n_out[sel]
     # one manifold per pair, every point from its lower row a to its higher row b (both
@@ -317,6 +459,30 @@ def mesh_contacts(bodies, rot: np.ndarray, reach: np.ndarray, interval: float) -
     key = (pair[sel] * 2 + flip) * FEATURES + feature[sel] % FEATURES
     return Found(np.where(flip, other, owner), np.where(flip, owner, other), point[sel],
                  np.where(flip[:, None], n_out, -n_out), sep[sel], key)
+
+
+def _covered(pair, point, rank, on_edge, reach) -> np.ndarray:
+    """(k,) the edge points (``on_edge``) that a vertex or corner point of the same pair
+    within ``reach`` [m] of it, and at most SUPPORT_TOLERANCE less deep (by ``rank``),
+    already holds: an edge adds what the vertices miss (a crest under a face), not more points
+    where they touch already (a box in a bowl, whose corners meet the bowl beside the edges
+    under its rim)."""
+    out = np.zeros(len(pair), bool)
+    e, v = np.nonzero(on_edge)[0], np.nonzero(~on_edge)[0]
+    if not len(e) or not len(v):
+        return out
+    order = v[np.argsort(pair[v], kind="stable")]
+    keys = pair[order]
+    lo = np.searchsorted(keys, pair[e], "left")
+    count = np.searchsorted(keys, pair[e], "right") - lo
+    which = np.repeat(np.arange(len(e)), count)
+    near = order[np.repeat(lo, count) + np.arange(int(count.sum())) -
+                 np.repeat(np.cumsum(count) - count, count)]
+    mine = e[which]
+    held = (np.linalg.norm(point[near] - point[mine], axis=1) <= reach[mine]) & \
+        (rank[near] <= rank[mine] + SUPPORT_TOLERANCE)
+    out[np.unique(mine[held])] = True
+    return out
 
 
 def _sites(pair: np.ndarray, point: np.ndarray, rank: np.ndarray, reach: np.ndarray):

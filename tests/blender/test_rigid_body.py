@@ -83,7 +83,9 @@ def _refused_keeping_keys(ob, before: list, match: str) -> None:
 
 def test_cube_falls_into_a_default_mesh_collider_and_rests_on_it(physanim_ext, tmp_path):
     """Suzanne as an Automatic collider is a Mesh collider: a cube dropped on her rests on her
-    head, not in it."""
+    head, not in it — also where her edges cross under the cube's face and edges, between
+    her vertices and its corners (an edge of her head went 7 cm into it before edges were
+    tested)."""
     _scene(tmp_path)
     bpy.ops.mesh.primitive_monkey_add(location=(0.0, 0.0, 1.0))
     monkey = bpy.context.object
@@ -94,6 +96,21 @@ def test_cube_falls_into_a_default_mesh_collider_and_rests_on_it(physanim_ext, t
     z = _world(cube, FRAME_END)[2, 3]
     assert 1.0 < z < 3.0  # stopped by the head (its top is near z = 2)
     assert abs(_world(cube, FRAME_END - 1)[2, 3] - z) < 0.01  # resting or nearly
+    assert _deepest_edge_in_cube(monkey, cube) < 0.005
+
+
+def _deepest_edge_in_cube(mesh_object, cube) -> float:
+    """[m] how far the edges of ``mesh_object`` reach into ``cube`` (a default cube, scaled
+    evenly) at the current frame, sampled at 101 points along each edge; 0 when none does."""
+    me = mesh_object.data
+    verts = np.array([mesh_object.matrix_world @ v.co for v in me.vertices])
+    ends = np.array([tuple(e.vertices) for e in me.edges])
+    t = np.linspace(0.0, 1.0, 101)[None, :, None]
+    points = (verts[ends[:, 0], None] * (1.0 - t) + verts[ends[:, 1], None] * t).reshape(-1, 3)
+    inverse = np.array(cube.matrix_world.inverted())
+    local = points @ inverse[:3, :3].T + inverse[:3, 3]  # the default cube: -1..1 on each axis
+    scale = float(cube.matrix_world.to_scale()[0])
+    return max(0.0, float((1.0 - np.abs(local)).min(axis=1).max()) * scale)
 
 
 def test_default_cube_falls_and_rests_on_a_default_plane(physanim_ext, tmp_path):
