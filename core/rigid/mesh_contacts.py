@@ -34,6 +34,7 @@ from ..collision.distance import closest_points
 from ..collision.mesh import TriangleMesh
 from .collide import (BOX_CORNERS, FEATURES, HALF_SPACE, SPECULATIVE, SUPPORT_TOLERANCE, Found,
                       approach, reduce_manifolds)
+from .mesh_parts import MeshEdges, VertexCells
 from .model import BOX, CAPSULE, HULL, MESH, SPHERE
 
 
@@ -49,7 +50,8 @@ class MeshShape:
     """A mesh in its body's frame (from the body's x, unscaled): hierarchy, bounds (lo, hi
     (3,), grown by the thickness), vertices (v, 3), whether it is closed (its outside is
     outside: a Mesh body, a watertight Mesh collider), whether it is a rigid body's (a
-    collider's size says nothing about where it touches) and its edges (:class:`MeshEdges`)."""
+    collider's size says nothing about where it touches), its edges and its vertices by cells
+    (:mod:`.mesh_parts`)."""
 
     bvh: object
     lo: np.ndarray
@@ -58,6 +60,7 @@ class MeshShape:
     closed: bool
     body: bool = False
     edges: MeshEdges | None = None
+    cells: VertexCells | None = None
 
     @property
     def radius(self) -> float:
@@ -65,63 +68,43 @@ class MeshShape:
         return float(np.linalg.norm(np.maximum(np.abs(self.lo), np.abs(self.hi))))
 
 
-@dataclass(frozen=True)
-class MeshEdges:
-    """A mesh's edges, each once: (e, 2) vertex pairs, the longest one's length [m], and for
-    each vertex the edges that end there (``around[start[v]:start[v + 1]]``)."""
-
-    pairs: np.ndarray
-    longest: float
-    start: np.ndarray
-    around: np.ndarray
-
-    @classmethod
-    def of(cls, vertices: np.ndarray, triangles: np.ndarray) -> MeshEdges:
-        t = np.asarray(triangles, np.int64).reshape(-1, 3)
-        both = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
-        pairs = np.unique(np.sort(both, axis=1), axis=0)
-        length = np.linalg.norm(vertices[pairs[:, 1]] - vertices[pairs[:, 0]], axis=1)
-        ends = pairs.ravel()
-        order = np.argsort(ends, kind="stable")
-        start = np.searchsorted(ends[order], np.arange(len(vertices) + 1))
-        return cls(pairs, float(length.max(initial=0.0)), start, order // 2)
-
-    def touching(self, vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(which (k,), edge (k,)): the edges ending at each of ``vertices``."""
-        count = self.start[vertices + 1] - self.start[vertices]
-        which = np.repeat(np.arange(len(vertices)), count)
-        at = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
-        return which, self.around[np.repeat(self.start[vertices], count) + at]
-
-
 class MeshCache:
     """Hierarchies of the meshes of a solver (Mesh colliders, Mesh bodies), kept between frames
     while a mesh's (scaled, local) vertices stay the same. One per solver."""
 
     def __init__(self):
-        self._known: dict[str, tuple[bytes, object]] = {}
+        self._known: dict[str, tuple] = {}
 
     def _entry(self, name: str, vertices: np.ndarray, triangles: np.ndarray):
-        key = vertices.tobytes() + triangles.tobytes()
+        """(vertices, triangles, hierarchy, closed, edges, cells) of the mesh, built again when
+        its vertices or triangles are not those of last time (compared by value: a frame's
+        inputs are new arrays)."""
         known = self._known.get(name)
-        if known is None or known[0] != key:
+        if known is None or not (_same(known[0], vertices) and _same(known[1], triangles)):
             mesh = TriangleMesh(vertices, triangles, name=name)
-            known = (key, build_bvh(mesh, "aabb"), watertight(vertices, triangles),
-                     MeshEdges.of(vertices, triangles))
+            known = (vertices, triangles, build_bvh(mesh, "aabb"),
+                     watertight(vertices, triangles), MeshEdges.of(vertices, triangles),
+                     VertexCells(vertices))
             self._known[name] = known
         return known
 
     def bvh(self, name: str, vertices: np.ndarray, triangles: np.ndarray):
-        return self._entry(name, vertices, triangles)[1]
+        return self._entry(name, vertices, triangles)[2]
 
     def shape(self, name: str, vertices, triangles, thickness: float = 0.0,
               body: bool = False) -> MeshShape:
         """A mesh's :class:`MeshShape`; a Mesh collider that is watertight and wound outward
         is closed too (a peg: a ring around it has its centre inside it)."""
         verts = np.asarray(vertices, dtype=np.float64)
-        _, bvh, tight, edges = self._entry(name, verts, np.asarray(triangles, np.int64))
-        return MeshShape(bvh, verts.min(axis=0) - thickness, verts.max(axis=0) + thickness,
-                         verts, body or tight, body, edges)
+        verts, _, bvh, tight, edges, cells = self._entry(name, verts,
+                                                         np.asarray(triangles, np.int64))
+        lo, hi = cells.bounds()
+        return MeshShape(bvh, lo - thickness, hi + thickness, verts, body or tight, body, edges,
+                         cells)
+
+
+def _same(a: np.ndarray, b: np.ndarray) -> bool:
+    return a is b or (a.shape == b.shape and a.dtype == b.dtype and np.array_equal(a, b))
 
 
 def watertight(vertices: np.ndarray, triangles: np.ndarray) -> bool:
@@ -226,12 +209,25 @@ def _convex_on_mesh(bodies, rot, reach, g: int, mesh: MeshShape, near) -> _Point
                     SPECULATIVE + reach[owner] + reach[g])
 
 
-def _vertices_on(bodies, rot, reach, g: int, mesh: MeshShape, near,
-                 world: np.ndarray) -> list[_Points]:
-    """Mesh g's vertices (``world``: world positions) against the bodies ``near``: meshes (g
-    a Mesh body or collider) by their hierarchy, convex shapes by their signed distance."""
+def _world(bodies, rot, g: int, mesh: MeshShape, rows=slice(None)) -> np.ndarray:
+    """World positions of mesh g's vertices ``rows``."""
+    return bodies.x[g] + mesh.vertices[rows] @ rot[g].T
+
+
+def _close_vertices(bodies, rot, g: int, mesh: MeshShape, rows, radii):
+    """(k, v) pairs: mesh g's vertices v within radii[k] of the centres of bodies rows[k],
+    read from the mesh's cells (in its own frame: the others are not looked at)."""
+    local = (bodies.x[rows] - bodies.x[g]) @ rot[g]  # R^T (x - x_g)
+    return mesh.cells.near(local, radii)
+
+
+def _vertices_on(bodies, rot, reach, g: int, mesh: MeshShape, near) -> list[_Points]:
+    """Mesh g's vertices against the bodies ``near``: meshes (g a Mesh body or collider) by
+    their hierarchy, convex shapes by their signed distance."""
     out = []
-    for o in near[bodies.shape[near] == MESH]:
+    meshes = near[bodies.shape[near] == MESH]
+    world = _world(bodies, rot, g, mesh) if len(meshes) else None
+    for o in meshes:
         other = bodies.meshes[int(o)]
         margin = SPECULATIVE + reach[g] + reach[o]
         local = (world - bodies.x[o]) @ rot[o]
@@ -243,18 +239,18 @@ def _vertices_on(bodies, rot, reach, g: int, mesh: MeshShape, near,
     convex = near[bodies.shape[near] != MESH]
     if len(convex):
         margin = SPECULATIVE + reach[g] + reach[convex]
-        o, v = within(world, bodies.x[convex], bodies.bound[convex] + margin)
-        sd, n_out = convex_distance(bodies, rot, convex[o], world[v])
+        o, v = _close_vertices(bodies, rot, g, mesh, convex, bodies.bound[convex] + margin)
+        at = _world(bodies, rot, g, mesh, v)
+        sd, n_out = convex_distance(bodies, rot, convex[o], at)
         sd -= bodies.radius[g]  # a Mesh collider's thickness
         keep = sd < margin[o]
         out.append(_Points(np.full(int(keep.sum()), g), convex[o][keep], v[keep],
-                           world[v][keep], n_out[keep], sd[keep]))
+                           at[keep], n_out[keep], sd[keep]))
     return out
 
 
-def _edges_on(bodies, rot, reach, g: int, mesh: MeshShape, near,
-              world: np.ndarray) -> _Points | None:
-    """Mesh g's edges (``world``: its vertices, world) against the convex bodies ``near``:
+def _edges_on(bodies, rot, reach, g: int, mesh: MeshShape, near) -> _Points | None:
+    """Mesh g's edges against the convex bodies ``near``:
     where an edge passes into a shape between its ends — a ridge under a box's face, a box's
     edge across a mesh edge, a capsule lying across a crest — the point along it deepest in
     the shape, which neither the shape's corners nor the mesh's vertices reach
@@ -266,13 +262,14 @@ def _edges_on(bodies, rot, reach, g: int, mesh: MeshShape, near,
     margin = SPECULATIVE + reach[g] + reach[convex]
     ball = bodies.bound[convex] + margin
     # an edge passing within ``ball`` of a centre has an end within ball + its length
-    o, v = within(world, bodies.x[convex], ball + edges.longest)
+    o, v = _close_vertices(bodies, rot, g, mesh, convex, ball + edges.longest)
     which, e = edges.touching(v)
     count = len(edges.pairs)
     key = np.unique(o[which] * count + e)
     o, e = key // count, key % count
-    p0 = world[edges.pairs[e, 0]]
-    d = world[edges.pairs[e, 1]] - p0
+    ends = _world(bodies, rot, g, mesh, edges.pairs[e].ravel()).reshape(-1, 2, 3)
+    p0 = ends[:, 0]
+    d = ends[:, 1] - p0
     c = bodies.x[convex[o]]
     t = np.clip(np.einsum("ki,ki->k", c - p0, d) /
                 np.maximum(np.einsum("ki,ki->k", d, d), 1e-300), 0.0, 1.0)
@@ -281,7 +278,7 @@ def _edges_on(bodies, rot, reach, g: int, mesh: MeshShape, near,
     limit = margin[o] + bodies.radius[g]  # (a Mesh collider's thickness)
     t, sd, n_out = _deepest_along(bodies, rot, convex[o], p0, d, limit)
     keep = (sd < limit) & (t > EDGE_END) & (t < 1.0 - EDGE_END)
-    return _Points(np.full(int(keep.sum()), g), convex[o][keep], len(world) + e[keep],
+    return _Points(np.full(int(keep.sum()), g), convex[o][keep], len(mesh.vertices) + e[keep],
                    p0[keep] + t[keep, None] * d[keep], n_out[keep],
                    sd[keep] - bodies.radius[g])
 
@@ -349,30 +346,6 @@ def _normal_across(bodies, rot, rows, p0, d, t, n):
     return np.where(use[:, None], blend / np.where(use, size, 1.0)[:, None], n)
 
 
-def within(points: np.ndarray, centres: np.ndarray, radii: np.ndarray):
-    """(k, v) index pairs: points[v] (V, 3) closer than radii[k] to centres[k] (K, 3), found
-    through a hash of cells as wide as the largest radius (27 cells around each centre)."""
-    cell = max(float(radii.max()), 1e-9)
-    prime = np.array([73856093, 19349663, 83492791], np.int64)
-
-    def hashed(ijk):
-        h = ijk * prime
-        return h[..., 0] ^ h[..., 1] ^ h[..., 2]
-    keys = hashed(np.floor(points / cell).astype(np.int64))
-    order = np.argsort(keys, kind="stable")
-    sorted_keys = keys[order]
-    around = np.array([(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1)])
-    ask = hashed(np.floor(centres / cell).astype(np.int64)[:, None] + around).ravel()
-    lo, hi = np.searchsorted(sorted_keys, ask, "left"), np.searchsorted(sorted_keys, ask, "right")
-    count = hi - lo
-    body = np.repeat(np.arange(len(ask)) // len(around), count)
-    at = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
-    vertex = order[np.repeat(lo, count) + at]
-    close = np.linalg.norm(points[vertex] - centres[body], axis=1) < radii[body]
-    pair = np.unique(body[close] * len(points) + vertex[close])  # hashes may repeat cells
-    return pair // len(points), pair % len(points)
-
-
 def convex_distance(bodies, rot, rows: np.ndarray, p: np.ndarray):
     """Signed distance [m] (k,) of world points p (k, 3) to the convex shapes of bodies
     ``rows`` (k,) (sphere, box, capsule, hull), and the shapes' outward unit normals (k, 3)
@@ -427,10 +400,9 @@ def mesh_contacts(bodies, rot: np.ndarray, reach: np.ndarray, interval: float) -
     for g, mesh in bodies.meshes.items():
         near = _near(bodies, rot, reach, g, mesh)
         if len(near):
-            world = bodies.x[g] + mesh.vertices @ rot[g].T
             parts.append(_convex_on_mesh(bodies, rot, reach, g, mesh, near))
-            parts += _vertices_on(bodies, rot, reach, g, mesh, near, world)
-            edges.append(_edges_on(bodies, rot, reach, g, mesh, near, world))
+            parts += _vertices_on(bodies, rot, reach, g, mesh, near)
+            edges.append(_edges_on(bodies, rot, reach, g, mesh, near))
     parts = [p for p in parts if p is not None and len(p.owner)]
     edges = [p for p in edges if p is not None and len(p.owner)]
     if not parts and not edges:
