@@ -87,10 +87,10 @@ def build(scene) -> None:
         _long_body(scene, k, kind, y, offset, wood[kind == "Plank"])
 
 
-def _ridge_depth(ob) -> float:
-    """[m] how deep the ridge (sampled every centimetre) reaches into the convex body ``ob``
-    now: the least over its faces' planes of how far inside each ridge point is, the most over
-    the points; 0 when it does not."""
+def _ridge_inside(ob) -> np.ndarray:
+    """(points, faces): how far inside each face plane of the convex body ``ob`` (now) each
+    point of the ridge (sampled every centimetre) is; a point is in the body where it is
+    inside every plane."""
     verts = _common.evaluated_vertices(ob)
     tris = _common.triangles(ob)
     a, b, c = (verts[tris[:, k]] for k in range(3))
@@ -98,8 +98,17 @@ def _ridge_depth(ob) -> float:
     normal /= np.linalg.norm(normal, axis=1)[:, None]
     ridge = np.stack([np.zeros(601), np.linspace(-LENGTH / 2, LENGTH / 2, 601),
                       np.full(601, RIDGE)], 1)
-    inside = np.einsum("fi,fi->f", normal, a)[None] - ridge @ normal.T  # (points, faces)
-    return max(0.0, float(inside.min(axis=1).max()))
+    return np.einsum("fi,fi->f", normal, a)[None] - ridge @ normal.T
+
+
+def _ridge_depth(ob) -> float:
+    """[m] how deep the ridge reaches into ``ob`` now (0 when it does not)."""
+    return max(0.0, float(_ridge_inside(ob).min(axis=1).max()))
+
+
+def _ridge_gap(ob) -> float:
+    """[m] how far the ridge passes from ``ob`` now (0 when it touches or enters it)."""
+    return max(0.0, float(-_ridge_inside(ob).min(axis=1).max()))
 
 
 def check(scene) -> list[str]:
@@ -120,22 +129,8 @@ def check(scene) -> list[str]:
     for ob in bodies:
         at = np.array(ob.matrix_world.translation)
         speed = np.linalg.norm(at - before[ob.name]) * scene.render.fps
-        on = _ridge_depth_or_gap(ob)
+        on = _ridge_gap(ob)
         if speed > REST or on > 0.02:
             problems.append(f'"{ob.name}" is not resting on the ridge ({speed:.2f} m/s, '
                             f"{on * 1000:.0f} mm off it)")
     return problems
-
-
-def _ridge_depth_or_gap(ob) -> float:
-    """[m] how far the ridge passes from the convex body ``ob`` (0 when it touches or enters
-    it): the least, over the ridge's points, of the most any face plane has the point outside."""
-    verts = _common.evaluated_vertices(ob)
-    tris = _common.triangles(ob)
-    a, b, c = (verts[tris[:, k]] for k in range(3))
-    normal = np.cross(b - a, c - a)
-    normal /= np.linalg.norm(normal, axis=1)[:, None]
-    ridge = np.stack([np.zeros(601), np.linspace(-LENGTH / 2, LENGTH / 2, 601),
-                      np.full(601, RIDGE)], 1)
-    outside = ridge @ normal.T - np.einsum("fi,fi->f", normal, a)[None]
-    return max(0.0, float(outside.max(axis=1).min()))
