@@ -286,9 +286,9 @@ def _edges_on(bodies, rot, reach, g: int, mesh: MeshShape, near) -> _Points | No
 def _deepest_along(bodies, rot, rows: np.ndarray, p0: np.ndarray, d: np.ndarray,
                    limit: np.ndarray):
     """(t, signed distance, the shape's outward normal there) at the point p0 + t d, t in
-    [0, 1], where each segment goes deepest into the convex shape of body ``rows``; +inf
-    distance where that is at an end (the end's own test covers it) or surely not under
-    ``limit`` (k,). A convex shape's signed distance is convex along a line, and its slope
+    [0, 1], where each segment goes deepest into the convex shape of body ``rows``; a
+    distance of +inf where that is at an end (the end's own test covers it), and one not under
+    ``limit`` (k,) where it surely is not. A convex shape's signed distance is convex along a line, and its slope
     there is the shape's normal along d: from the ends' values and slopes the two tangent
     lines meet at a lower bound of the least value; the distance there (Kelley's cutting
     planes) replaces the end whose side the slope says the least value is not on, until the

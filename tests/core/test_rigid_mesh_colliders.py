@@ -4,6 +4,9 @@ from __future__ import annotations
 import numpy as np
 
 from physanim.core.contact import ColliderFrame
+from physanim.core.rigid import RigidBodySettings
+from physanim.core.rigid import quaternion as quat
+from physanim.core.rigid.mass import capsule_mass
 from physanim.tests.core.rigid_helpers import DT, box, run, sphere, world
 
 RADIUS = 2.0  # [m] the bowl's
@@ -62,14 +65,13 @@ def _ridge() -> ColliderFrame:
 
 
 def _turn(axis, angle) -> tuple:
-    a = np.asarray(axis, float) / np.linalg.norm(axis)
-    return (np.cos(angle / 2), *(np.sin(angle / 2) * a))
+    """The unit quaternion turning by ``angle`` [rad] about the unit ``axis``."""
+    return tuple(quat.from_rotation_vector(angle * np.asarray(axis, float)).tolist())
 
 
 def _crest_in_box(x, q, half: float) -> float:
     """[m] how deep the crest line reaches into a cube of ``half`` at pose (x, q) (sampled
     every 5 mm; 0 when it does not)."""
-    from physanim.core.rigid import quaternion as quat
     crest = np.stack([np.zeros(2001), np.linspace(-5.0, 5.0, 2001), np.full(2001, CREST)], 1)
     local = (crest - x) @ quat.to_matrix(np.asarray(q)[None])[0]
     inside = half - np.abs(local)  # per axis; in the box where all three are positive
@@ -79,8 +81,6 @@ def _crest_in_box(x, q, half: float) -> float:
 def test_a_capsule_at_its_defaults_lying_across_a_ridge_rests_on_the_crest():
     """Its axis ends reach past the crest to the slopes: only the crest, between the mesh's
     vertices, holds it (before edges were tested it fell through the ridge)."""
-    from physanim.core.rigid import RigidBodySettings
-    from physanim.core.rigid.mass import capsule_mass
     radius, half = 0.1, 0.5
     capsule = RigidBodySettings("Log", "CAPSULE", capsule_mass(radius, half, mass=1.0),
                                 radius=radius, half_extents=(0.0, 0.0, half),
